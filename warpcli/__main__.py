@@ -1,0 +1,5 @@
+"""``python -m warpcli``: the ``warp`` command."""
+
+from warpcli.cli import run
+
+run()

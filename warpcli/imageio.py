@@ -1,0 +1,205 @@
+"""Image I/O stage: OpenImageIO read/write keeping pixel type, channels and metadata."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import ImageInputError, ImageIOError
+
+# numpy dtype -> OpenImageIO type name.
+_OIIO_TYPES = {
+    np.dtype(np.uint8): "uint8",
+    np.dtype(np.int8): "int8",
+    np.dtype(np.uint16): "uint16",
+    np.dtype(np.int16): "int16",
+    np.dtype(np.uint32): "uint32",
+    np.dtype(np.int32): "int32",
+    np.dtype(np.float16): "half",
+    np.dtype(np.float32): "float",
+    np.dtype(np.float64): "double",
+}
+
+# Attributes that describe the file rather than the picture, or that OpenImageIO
+# manages itself: they are not carried over to the output.
+_DROP_PREFIXES = ("oiio:", "png:", "jpeg:", "tiff:", "openexr:", "Exif:PixelXDimension", "Exif:PixelYDimension")
+_KEEP = ("oiio:ColorSpace",)
+
+
+@dataclass(frozen=True)
+class RasterImage:
+    """Pixels with the channel names and metadata of the file they came from.
+
+    Attributes
+    ----------
+    pixels : (H, W, C) ndarray
+        In the file's own pixel type (uint8, uint16, float16, float32, ...).
+    channel_names : tuple of str
+    alpha_channel : int or None
+    attributes : tuple of (name, type name, value)
+        Metadata to carry over to a derived image.
+    """
+
+    pixels: NDArray
+    channel_names: tuple[str, ...] = ()
+    alpha_channel: int | None = None
+    attributes: tuple = field(default=(), repr=False)
+
+    def __post_init__(self) -> None:
+        if self.pixels.ndim != 3:
+            raise ValueError(f"pixels must be (H, W, C), got shape {self.pixels.shape}")
+        if self.channel_names and len(self.channel_names) != self.pixels.shape[2]:
+            raise ValueError(
+                f"{len(self.channel_names)} channel names for {self.pixels.shape[2]} channels"
+            )
+
+    @property
+    def width(self) -> int:
+        return self.pixels.shape[1]
+
+    @property
+    def height(self) -> int:
+        return self.pixels.shape[0]
+
+
+def read_image(path: str | os.PathLike[str]) -> RasterImage:
+    """Read an image file in its own pixel type.
+
+    Raises
+    ------
+    ImageInputError
+        If the file is missing or is not an image OpenImageIO can read.
+    """
+    import OpenImageIO as oiio
+
+    name = os.fspath(path)
+    if not os.path.exists(name):
+        raise ImageInputError(f"{name}: no such file")
+    if os.path.isdir(name):
+        raise ImageInputError(f"{name}: is a directory, not an image")
+    inp = oiio.ImageInput.open(name)
+    if inp is None:
+        raise ImageInputError(f"{name}: cannot read image: {_oiio_error(oiio)}")
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image(oiio.UNKNOWN)
+        if pixels is None:
+            raise ImageInputError(f"{name}: cannot read image: {inp.geterror() or _oiio_error(oiio)}")
+    finally:
+        inp.close()
+    pixels = np.asarray(pixels)
+    if pixels.ndim == 2:
+        pixels = pixels[:, :, None]
+    attrs = tuple(
+        (a.name, str(a.type), a.value)
+        for a in spec.extra_attribs
+        if a.name in _KEEP or not a.name.startswith(_DROP_PREFIXES)
+    )
+    alpha = spec.alpha_channel if spec.alpha_channel >= 0 else None
+    return RasterImage(np.ascontiguousarray(pixels), tuple(spec.channelnames), alpha, attrs)
+
+
+def check_output_path(path: str | os.PathLike[str], inputs: tuple[str | os.PathLike[str], ...] = ()) -> None:
+    """Check before any work that an output can be written at ``path``.
+
+    Raises
+    ------
+    ImageInputError
+        If the format is unknown, the directory is missing, or ``path`` is one
+        of ``inputs`` (an input is never overwritten).
+    """
+    import OpenImageIO as oiio
+
+    name = os.fspath(path)
+    for other in inputs:
+        if _same_file(name, os.fspath(other)):
+            raise ImageInputError(f"{name}: output would overwrite the input {os.fspath(other)}")
+    directory = os.path.dirname(os.path.abspath(name))
+    if not os.path.isdir(directory):
+        raise ImageInputError(f"{name}: output directory {directory} does not exist")
+    if os.path.isdir(name):
+        raise ImageInputError(f"{name}: is a directory")
+    out = oiio.ImageOutput.create(name)
+    if out is None:
+        _oiio_error(oiio)
+        ext = os.path.splitext(name)[1] or "(none)"
+        raise ImageInputError(f"{name}: unknown output image format for extension {ext}")
+
+
+def write_image(path: str | os.PathLike[str], image: RasterImage) -> None:
+    """Write an image atomically: to a temporary file beside ``path``, then rename.
+
+    An interrupted or failed write leaves no partial file at ``path``.
+
+    Raises
+    ------
+    ImageIOError
+        If OpenImageIO cannot write the file.
+    """
+    import OpenImageIO as oiio
+
+    name = os.fspath(path)
+    check_output_path(name)
+    directory = os.path.dirname(os.path.abspath(name))
+    base, ext = os.path.splitext(os.path.basename(name))
+    fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=f".tmp{ext}", dir=directory)
+    os.close(fd)
+    try:
+        _write(oiio, tmp, image, shown_name=name)
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, name)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
+    px = np.ascontiguousarray(image.pixels)
+    h, w, nc = px.shape
+    try:
+        type_name = _OIIO_TYPES[px.dtype]
+    except KeyError:
+        raise ImageIOError(f"{shown_name}: unsupported pixel type {px.dtype}") from None
+    spec = oiio.ImageSpec(w, h, nc, type_name)
+    if image.channel_names:
+        spec.channelnames = tuple(image.channel_names)
+    spec.alpha_channel = -1 if image.alpha_channel is None else int(image.alpha_channel)
+    for attr_name, attr_type, value in image.attributes:
+        try:
+            spec.attribute(attr_name, oiio.TypeDesc(attr_type), value)
+        except (TypeError, ValueError, RuntimeError):
+            continue  # metadata OpenImageIO cannot round-trip is dropped, not fatal
+    out = oiio.ImageOutput.create(filename)
+    if out is None:
+        raise ImageIOError(f"{shown_name}: cannot write: {_oiio_error(oiio)}")
+    try:
+        if not out.open(filename, spec):
+            raise ImageIOError(f"{shown_name}: cannot write: {out.geterror() or _oiio_error(oiio)}")
+        if not out.write_image(px):
+            raise ImageIOError(f"{shown_name}: cannot write: {out.geterror() or _oiio_error(oiio)}")
+    finally:
+        out.close()
+
+
+def _oiio_error(oiio) -> str:
+    """OpenImageIO's pending global error message, on one line."""
+    msg = oiio.geterror() or "unknown error"
+    return " ".join(msg.split())
+
+
+def _same_file(a: str, b: str) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask

@@ -1,0 +1,175 @@
+"""Point location in triangle meshes: a uniform bucket grid, fully vectorized."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+#: A point counts as inside a triangle when all its barycentric coordinates
+#: are at least -BARY_TOL: points on shared edges are found, and points on the
+#: polygon's boundary are inside.
+BARY_TOL = 1e-10
+
+# Queries are processed in blocks of this many points to bound memory.
+_BLOCK = 1 << 20
+
+
+class TriangleLocator:
+    """Find, for many points at once, the triangle containing each point.
+
+    Triangles are binned by bounding box into a uniform grid of about one cell
+    per triangle (stored as CSR arrays). A query looks up its cell and tests
+    that cell's triangles in turn, all queries advancing together, so the cost
+    is a few vectorized passes, never a Python loop over points or triangles.
+    Ties (a point on an edge shared by two triangles) go to the triangle with
+    the smaller index, so results are deterministic.
+
+    Parameters
+    ----------
+    vertices : (N, 2) array_like of float
+    triangles : (M, 3) array_like of int
+    """
+
+    def __init__(self, vertices: ArrayLike, triangles: ArrayLike) -> None:
+        v = np.asarray(vertices, dtype=np.float64)
+        t = np.asarray(triangles, dtype=np.int64)
+        self.vertices = v
+        self.triangles = t
+        a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+        det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = np.where(det != 0, 1.0 / det, np.nan)
+        # l1 = dx*k0 + dy*k1, l2 = dx*k2 + dy*k3 with (dx, dy) = p - a;
+        # a degenerate triangle gets NaN coefficients and never matches.
+        self._coef = np.stack(
+            [
+                a[:, 0],
+                a[:, 1],
+                (c[:, 1] - a[:, 1]) * inv,
+                -(c[:, 0] - a[:, 0]) * inv,
+                -(b[:, 1] - a[:, 1]) * inv,
+                (b[:, 0] - a[:, 0]) * inv,
+            ],
+            axis=1,
+        )
+        lo = v.min(axis=0)
+        hi = v.max(axis=0)
+        span = np.maximum(hi - lo, 1e-300)
+        cell = math.sqrt(float(span[0] * span[1]) / max(len(t), 1))
+        cell = max(cell, float(span.max()) / 4096.0)
+        self._lo = lo
+        self._cell = cell
+        self._shape = (int(span[1] // cell) + 1, int(span[0] // cell) + 1)  # rows (y), cols (x)
+        tmin = np.minimum(np.minimum(a, b), c)
+        tmax = np.maximum(np.maximum(a, b), c)
+        c0 = self._cell_xy(tmin)
+        c1 = self._cell_xy(tmax)
+        nx = c1[:, 0] - c0[:, 0] + 1
+        ny = c1[:, 1] - c0[:, 1] + 1
+        counts = nx * ny
+        tri_rep = np.repeat(np.arange(len(t)), counts)
+        start = np.cumsum(counts) - counts
+        k = np.arange(tri_rep.size) - np.repeat(start, counts)
+        nxr = nx[tri_rep]
+        cx = c0[tri_rep, 0] + k % nxr
+        cy = c0[tri_rep, 1] + k // nxr
+        cell_id = cy * self._shape[1] + cx
+        order = np.argsort(cell_id, kind="stable")  # stable: triangle order within a cell
+        self._tri_ids = tri_rep[order]
+        ncell = self._shape[0] * self._shape[1]
+        self._indptr = np.zeros(ncell + 1, dtype=np.int64)
+        np.cumsum(np.bincount(cell_id, minlength=ncell), out=self._indptr[1:])
+
+    def _cell_xy(self, p: NDArray[np.float64]) -> NDArray[np.int64]:
+        ij = np.floor((p - self._lo) / self._cell).astype(np.int64)
+        ij[:, 0] = np.clip(ij[:, 0], 0, self._shape[1] - 1)
+        ij[:, 1] = np.clip(ij[:, 1], 0, self._shape[0] - 1)
+        return ij
+
+    def locate(self, points: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """Containing triangle and barycentric coordinates of each point.
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+
+        Returns
+        -------
+        tri : (K,) ndarray of int64
+            Index of the containing triangle, -1 where none contains the point.
+        bary : (K, 3) ndarray of float
+            Barycentric coordinates in that triangle (NaN where ``tri`` is -1).
+        """
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        tri = np.full(len(p), -1, dtype=np.int64)
+        bary = np.full((len(p), 3), np.nan)
+        for s in range(0, len(p), _BLOCK):
+            tri[s : s + _BLOCK], bary[s : s + _BLOCK] = self._locate_block(p[s : s + _BLOCK])
+        return tri, bary
+
+    def _locate_block(self, p: NDArray[np.float64]):
+        tri = np.full(len(p), -1, dtype=np.int64)
+        bary = np.full((len(p), 3), np.nan)
+        ij = np.floor((p - self._lo) / self._cell)
+        ok = (
+            np.isfinite(ij).all(axis=1)
+            & (ij[:, 0] >= 0)
+            & (ij[:, 1] >= 0)
+            & (ij[:, 0] < self._shape[1])
+            & (ij[:, 1] < self._shape[0])
+        )
+        pending = np.flatnonzero(ok)
+        cid = ij[pending, 1].astype(np.int64) * self._shape[1] + ij[pending, 0].astype(np.int64)
+        first = self._indptr[cid]
+        left = self._indptr[cid + 1] - first
+        keep = left > 0
+        pending, first, left = pending[keep], first[keep], left[keep]
+        while pending.size:
+            cand = self._tri_ids[first]
+            co = self._coef[cand]
+            dx = p[pending, 0] - co[:, 0]
+            dy = p[pending, 1] - co[:, 1]
+            l1 = dx * co[:, 2] + dy * co[:, 3]
+            l2 = dx * co[:, 4] + dy * co[:, 5]
+            l0 = 1.0 - l1 - l2
+            inside = (l0 >= -BARY_TOL) & (l1 >= -BARY_TOL) & (l2 >= -BARY_TOL)
+            hit = pending[inside]
+            tri[hit] = cand[inside]
+            bary[hit, 0] = l0[inside]
+            bary[hit, 1] = l1[inside]
+            bary[hit, 2] = l2[inside]
+            more = ~inside & (left > 1)
+            pending, first, left = pending[more], first[more] + 1, left[more] - 1
+        return tri, bary
+
+    def interpolate(self, values: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
+        """Piecewise-linear interpolation of per-vertex ``values`` at ``points``.
+
+        Returns
+        -------
+        (K, D) ndarray of float
+            NaN rows for points outside every triangle.
+        """
+        vals = np.asarray(values, dtype=np.float64)
+        tri, bary = self.locate(points)
+        return barycentric_combine(vals, self.triangles, tri, bary)
+
+
+def barycentric_combine(
+    values: NDArray[np.float64],
+    triangles: NDArray[np.integer],
+    tri: NDArray[np.int64],
+    bary: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """``sum_k bary[:, k] * values[triangles[tri, k]]``, NaN where ``tri`` is -1."""
+    vals = values.reshape(len(values), -1)
+    out = np.full((len(tri), vals.shape[1]), np.nan)
+    found = tri >= 0
+    t = triangles[tri[found]]
+    b = bary[found]
+    out[found] = (
+        b[:, 0:1] * vals[t[:, 0]] + b[:, 1:2] * vals[t[:, 1]] + b[:, 2:3] * vals[t[:, 2]]
+    )
+    return out

@@ -1,0 +1,205 @@
+"""Mapping stage: the composed bijection f = phi1^-1 o phi0 and its inverse."""
+
+from __future__ import annotations
+
+import time
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import FoldOverError
+from .harmonic import HarmonicMap, solve_harmonic
+from .locate import TriangleLocator, barycentric_combine
+from .mesh import auto_max_area, mesh_polygon
+from .polygon import Polygon, check_pair
+from .theta import regular_polygon
+
+class BijectiveMap:
+    """The smooth bijective map between two polygons, discretized by FEM.
+
+    ``forward`` takes source points to the target, ``inverse`` takes target
+    points back to the source (eq. (2): f = phi1^-1 o phi0, and
+    f^-1 = phi0^-1 o phi1). Both are piecewise-linear compositions of the
+    two discrete harmonic maps onto the convex polygon Theta.
+
+    Build one with `BijectiveMap.between`.
+
+    Parameters
+    ----------
+    src, dst : Polygon
+    phi0 : HarmonicMap
+        Source mesh onto Theta.
+    phi1 : HarmonicMap
+        Target mesh onto Theta.
+    """
+
+    def __init__(self, src: Polygon, dst: Polygon, phi0: HarmonicMap, phi1: HarmonicMap) -> None:
+        check_pair(src, dst)
+        self.src = src
+        self.dst = dst
+        self.phi0 = phi0
+        self.phi1 = phi1
+        self.theta = phi0.theta
+
+    @classmethod
+    def between(
+        cls,
+        src: Polygon,
+        dst: Polygon,
+        *,
+        max_area: float | None = None,
+        check: bool = True,
+        timings: dict[str, float] | None = None,
+    ) -> BijectiveMap:
+        """Mesh both polygons, solve both harmonic maps onto a regular n-gon.
+
+        Parameters
+        ----------
+        src, dst : Polygon
+            Corresponding polygons (vertex i of ``src`` goes to vertex i of ``dst``).
+        max_area : float or None
+            Largest triangle area of both meshes, in square pixels of the
+            image each polygon lives in; None picks `auto_max_area` for each.
+        check : bool
+            Raise `FoldOverError` if either discrete map flips a triangle.
+        timings : dict or None
+            If given, receives the seconds spent in ``"mesh"`` and ``"solve"``.
+
+        Returns
+        -------
+        BijectiveMap
+        """
+        check_pair(src, dst)
+        theta = regular_polygon(src.n)
+        clock = time.perf_counter
+        t0 = clock()
+        meshes = [
+            mesh_polygon(p, auto_max_area(p) if max_area is None else float(max_area)) for p in (src, dst)
+        ]
+        t1 = clock()
+        phi0, phi1 = (solve_harmonic(m, theta) for m in meshes)
+        if timings is not None:
+            timings["mesh"] = t1 - t0
+            timings["solve"] = clock() - t1
+        result = cls(src, dst, phi0, phi1)
+        if check:
+            result.check_bijective()
+        return result
+
+    def flipped_triangles(self) -> int:
+        """Number of triangles flipped or degenerate in either discrete map."""
+        return int(self.phi0.flipped().sum() + self.phi1.flipped().sum())
+
+    def check_bijective(self) -> None:
+        """Raise `FoldOverError` unless both discrete maps are one-to-one."""
+        f0 = int(self.phi0.flipped().sum())
+        f1 = int(self.phi1.flipped().sum())
+        if f0 or f1:
+            raise FoldOverError(
+                f"the discrete harmonic maps flip {f0} triangle(s) of the {self.src.name} mesh and "
+                f"{f1} of the {self.dst.name} mesh; the warp would fold the image over itself"
+            )
+
+    @property
+    def orientation_preserving(self) -> bool:
+        """False when the polygons run in opposite directions: f is then a mirror image."""
+        return (self.src.signed_area > 0) == (self.dst.signed_area > 0)
+
+    @cached_property
+    def _src_locator(self) -> TriangleLocator:
+        return TriangleLocator(self.phi0.mesh.vertices, self.phi0.mesh.triangles)
+
+    @cached_property
+    def _dst_locator(self) -> TriangleLocator:
+        return TriangleLocator(self.phi1.mesh.vertices, self.phi1.mesh.triangles)
+
+    @cached_property
+    def _theta0_locator(self) -> TriangleLocator:
+        return TriangleLocator(self.phi0.values, self.phi0.mesh.triangles)
+
+    @cached_property
+    def _theta1_locator(self) -> TriangleLocator:
+        return TriangleLocator(self.phi1.values, self.phi1.mesh.triangles)
+
+    def forward(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Map source points to the target.
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+            Points in the source image's coordinates.
+
+        Returns
+        -------
+        (K, 2) ndarray of float
+            Their images in the target's coordinates; NaN for points outside
+            the source polygon.
+        """
+        theta = self.to_theta_src(points)
+        return self._from_theta(theta, self._theta1_locator, self.phi1, self.dst)
+
+    def inverse(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Map target points back to the source.
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+            Points in the target (output) image's coordinates.
+
+        Returns
+        -------
+        (K, 2) ndarray of float
+            Their pre-images in the source's coordinates; NaN for points
+            outside the target polygon.
+        """
+        theta = self.to_theta_dst(points)
+        return self._from_theta(theta, self._theta0_locator, self.phi0, self.src)
+
+    def to_theta_src(self, points: ArrayLike) -> NDArray[np.float64]:
+        """phi0: source points to Theta (NaN outside the source polygon)."""
+        return self._src_locator.interpolate(self.phi0.values, _points(points))
+
+    def to_theta_dst(self, points: ArrayLike) -> NDArray[np.float64]:
+        """phi1: target points to Theta (NaN outside the target polygon)."""
+        return self._dst_locator.interpolate(self.phi1.values, _points(points))
+
+    def _from_theta(
+        self, theta: NDArray[np.float64], locator: TriangleLocator, phi: HarmonicMap, poly: Polygon
+    ) -> NDArray[np.float64]:
+        """phi^-1: points of Theta back to the polygon phi is defined on."""
+        tri, bary = locator.locate(theta)
+        out = barycentric_combine(phi.mesh.vertices, phi.mesh.triangles, tri, bary)
+        # A point of Theta's boundary can miss the image triangles by a
+        # rounding error; the boundary map is known exactly, so invert it there.
+        lost = np.flatnonzero((tri < 0) & np.isfinite(theta).all(axis=1))
+        if lost.size:
+            out[lost] = theta_boundary_to_polygon(theta[lost], self.theta, poly.points)
+        return out
+
+
+def theta_boundary_to_polygon(
+    q: NDArray[np.float64], theta: NDArray[np.float64], poly: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Project points onto Theta's boundary and carry them to the polygon's boundary.
+
+    The boundary data is piecewise linear, so the point at parameter t of
+    Theta's edge i goes to the point at parameter t of the polygon's edge i.
+    """
+    n = len(theta)
+    a = theta
+    d = np.roll(theta, -1, axis=0) - theta
+    rel = q[:, None, :] - a[None, :, :]
+    t = np.clip(np.einsum("kij,ij->ki", rel, d) / np.einsum("ij,ij->i", d, d), 0.0, 1.0)
+    near = a[None] + t[..., None] * d[None]
+    dist = ((q[:, None, :] - near) ** 2).sum(axis=2)
+    e = np.argmin(dist, axis=1)
+    te = t[np.arange(len(q)), e][:, None]
+    return (1.0 - te) * poly[e] + te * poly[(e + 1) % n]
+
+
+def _points(points: ArrayLike) -> NDArray[np.float64]:
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise ValueError(f"points must be a (K, 2) array, got shape {p.shape}")
+    return p
