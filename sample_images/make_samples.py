@@ -1,10 +1,10 @@
-"""Regenerate the sample images and polygon pairs in this folder.
+"""Regenerate the sample images, polygon pairs and the README figure in this folder.
 
-    python sample_images/make_samples.py
+    pip install '.[test]' && python sample_images/make_samples.py
 
 grid.png is drawn here; chelsea.png is copied from scikit-image's data
-(CC0, photographer Stefan van der Walt). The polygons are written out so that
-each vertex pair is easy to read and edit.
+(CC0, photographer Stefan van der Walt). before_after.png is made by running
+the installed ``warp`` on the samples.
 """
 
 from __future__ import annotations
@@ -63,10 +63,67 @@ def write_png(name: str, pixels: np.ndarray) -> None:
     out.close()
 
 
+def outline(pixels: np.ndarray, points: list, colour=(255, 40, 160)) -> np.ndarray:
+    """Draw a polygon's outline (3 px) onto a copy of an RGB image."""
+    from skimage.draw import line
+
+    out = pixels.copy()
+    # Pixel (r, c) has its centre at (c + 0.5, r + 0.5).
+    rc = np.round(np.asarray(points)[:, ::-1] - 0.5).astype(int)
+    for a, b in zip(rc, np.roll(rc, -1, axis=0)):
+        rr, cc = line(a[0], a[1], b[0], b[1])
+        for dr, dc in ((0, 0), (1, 0), (0, 1), (-1, 0), (0, -1)):  # 3 px wide
+            r, c = rr + dr, cc + dc
+            keep = (r >= 0) & (r < out.shape[0]) & (c >= 0) & (c < out.shape[1])
+            out[r[keep], c[keep]] = colour
+    return out
+
+
+def read_rgb(path: str) -> np.ndarray:
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(path)
+    px = inp.read_image(oiio.UINT8)
+    inp.close()
+    return px[:, :, :3]
+
+
+def readme_figure() -> None:
+    """before_after.png: each sample with its source polygon, then the warp result."""
+    import subprocess
+    import sys
+    import tempfile
+
+    rows = []
+    pairs = [("grid.png", "grid_L.json", "grid_hexagon.json"), ("chelsea.png", "chelsea_ring.json", "chelsea_star.json")]
+    with tempfile.TemporaryDirectory() as tmp:
+        for image, src, dst in pairs:
+            out = os.path.join(tmp, "out.png")
+            subprocess.run(
+                [sys.executable, "-m", "warpcli", os.path.join(HERE, image), "--src", os.path.join(HERE, src),
+                 "--dst", os.path.join(HERE, dst), "-q", out],
+                check=True,
+            )
+            load = lambda name: json.load(open(os.path.join(HERE, name)))["points"]  # noqa: E731
+            before = outline(read_rgb(os.path.join(HERE, image)), load(src))
+            after = outline(read_rgb(out), load(dst))
+            scale = 300 / before.shape[0]
+            rows.append(np.concatenate([_resize(before, scale), np.full((300, 8, 3), 255, np.uint8), _resize(after, scale)], axis=1))
+    width = max(r.shape[1] for r in rows)
+    rows = [np.pad(r, ((0, 8), (0, width - r.shape[1]), (0, 0)), constant_values=255) for r in rows]
+    write_png("before_after.png", np.concatenate(rows, axis=0)[:-8])
+
+
+def _resize(px: np.ndarray, scale: float) -> np.ndarray:
+    h, w = px.shape[:2]
+    r = np.minimum((np.arange(round(h * scale)) / scale).astype(int), h - 1)
+    c = np.minimum((np.arange(round(w * scale)) / scale).astype(int), w - 1)
+    return px[r][:, c]
+
+
 def main() -> None:
     write_png("grid.png", grid_image())
-    # An L-shaped source goes onto a 6-pointed... no: onto a plain hexagon-like
-    # convex target, and back: both directions show the concave corner.
+    # An L-shaped source (one reflex corner) goes onto a regular hexagon.
     write_json(
         "grid_L.json",
         [[40.5, 40.5], [300.5, 40.5], [300.5, 260.5], [470.5, 260.5], [470.5, 470.5], [40.5, 470.5]],
@@ -84,6 +141,7 @@ def main() -> None:
     # Chelsea (451x300): a 12-gon around the cat goes onto a 6-pointed star.
     write_json("chelsea_ring.json", ring(12, 225.5, 150, 215, 145, -math.pi / 2), "ellipse-like 12-gon in chelsea.png (451x300)")
     write_json("chelsea_star.json", star(6, 225.5, 150, 70, 148, -math.pi / 2), "6-pointed star (12 vertices)")
+    readme_figure()
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
 """``python -m warpcli``: the ``warp`` command."""
 
-from warpcli.cli import run
+if __name__ == "__main__":
+    from warpcli.cli import run
 
-run()
+    run()

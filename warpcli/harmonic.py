@@ -37,9 +37,8 @@ class HarmonicMap:
     def flipped(self) -> NDArray[np.bool_]:
         """Per triangle: whether its image is degenerate or has the wrong orientation.
 
-        The expected orientation of the images is that of the mesh's triangles
-        times that of the polygon relative to Theta's, so a mirror image (a
-        polygon oriented against Theta) is not counted as flipped.
+        A polygon oriented against Theta gives a mirror image, which is not
+        counted as flipped.
         """
         return flipped_triangles(self.mesh, self.values, self.theta)
 
@@ -47,13 +46,14 @@ class HarmonicMap:
 def flipped_triangles(
     mesh: TriMesh, values: NDArray[np.float64], theta: NDArray[np.float64]
 ) -> NDArray[np.bool_]:
-    """Triangles whose image under a map onto ``theta`` is flipped or degenerate."""
-    src = triangle_areas(mesh.vertices, mesh.triangles)
+    """Triangles whose image under a map onto ``theta`` is flipped or degenerate.
+
+    Mesh triangles are oriented like their polygon, and the boundary goes onto
+    Theta's boundary in vertex order, so a one-to-one map gives every image
+    triangle Theta's orientation, whichever way the polygon runs.
+    """
     img = triangle_areas(values, mesh.triangles)
-    # The map sends the polygon's boundary orientation to Theta's.
-    poly_sign = np.sign(src.sum())
-    theta_sign = np.sign(_shoelace(theta))
-    return img * poly_sign * theta_sign <= 0
+    return img * np.sign(_shoelace(theta)) <= 0
 
 
 def _shoelace(p: NDArray[np.float64]) -> float:

@@ -112,16 +112,21 @@ class TriangleLocator:
     def _locate_block(self, p: NDArray[np.float64]):
         tri = np.full(len(p), -1, dtype=np.int64)
         bary = np.full((len(p), 3), np.nan)
-        ij = np.floor((p - self._lo) / self._cell)
+        # A point on the mesh's bounding box may sit an ulp outside it: points
+        # within a small tolerance of the grid are clamped into it.
+        g = (p - self._lo) / self._cell
+        tol = 1e-9 * max(self._shape)
         ok = (
-            np.isfinite(ij).all(axis=1)
-            & (ij[:, 0] >= 0)
-            & (ij[:, 1] >= 0)
-            & (ij[:, 0] < self._shape[1])
-            & (ij[:, 1] < self._shape[0])
+            np.isfinite(g).all(axis=1)
+            & (g[:, 0] >= -tol)
+            & (g[:, 1] >= -tol)
+            & (g[:, 0] <= self._shape[1] + tol)
+            & (g[:, 1] <= self._shape[0] + tol)
         )
         pending = np.flatnonzero(ok)
-        cid = ij[pending, 1].astype(np.int64) * self._shape[1] + ij[pending, 0].astype(np.int64)
+        ix = np.clip(np.floor(g[pending, 0]).astype(np.int64), 0, self._shape[1] - 1)
+        iy = np.clip(np.floor(g[pending, 1]).astype(np.int64), 0, self._shape[0] - 1)
+        cid = iy * self._shape[1] + ix
         first = self._indptr[cid]
         left = self._indptr[cid + 1] - first
         keep = left > 0

@@ -1,0 +1,94 @@
+"""Test geometry built in code: named polygons and small utilities."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+
+def star(n: int = 6, cx: float = 64.0, cy: float = 64.0, r_in: float = 25.0, r_out: float = 58.0, phase: float = 0.0):
+    """A 2n-vertex star (concave): outer points at even indices."""
+    k = np.arange(2 * n)
+    r = np.where(k % 2 == 0, r_out, r_in)
+    a = phase + np.pi * k / n
+    return np.stack([cx + r * np.cos(a), cy + r * np.sin(a)], axis=1)
+
+
+def regular(n: int, cx: float = 64.0, cy: float = 64.0, r: float = 58.0, phase: float = 0.0):
+    a = phase + 2 * np.pi * np.arange(n) / n
+    return np.stack([cx + r * np.cos(a), cy + r * np.sin(a)], axis=1)
+
+
+def l_shape(x0: float = 8.0, y0: float = 8.0, size: float = 112.0, notch: float = 0.5):
+    """An L: a square with its top-right quadrant removed (one reflex vertex)."""
+    s, m = size, size * notch
+    return np.array(
+        [[x0, y0], [x0 + m, y0], [x0 + m, y0 + m], [x0 + s, y0 + m], [x0 + s, y0 + s], [x0, y0 + s]],
+        dtype=float,
+    )
+
+
+def comb(teeth: int = 4, x0: float = 8.0, y0: float = 8.0, width: float = 112.0, height: float = 112.0, depth: float = 0.6):
+    """A comb: a bar along the bottom with ``teeth`` teeth pointing up."""
+    pts = []
+    tw = width / (2 * teeth - 1)
+    top = y0
+    base = y0 + height * depth
+    for k in range(teeth):
+        xa = x0 + 2 * k * tw
+        pts += [[xa, top], [xa + tw, top], [xa + tw, base]]
+        if k < teeth - 1:
+            pts += [[xa + 2 * tw, base]]
+    pts += [[x0 + width, y0 + height], [x0, y0 + height]]
+    return np.array(pts, dtype=float)
+
+
+def spiral(turns: float = 1.5, cx: float = 64.0, cy: float = 64.0, r0: float = 10.0, r1: float = 58.0, width: float = 10.0, samples: int = 40):
+    """A thick spiral arm: outer curve out, inner curve back (strongly non-star-shaped)."""
+    t = np.linspace(0.0, 1.0, samples)
+    ang = 2 * math.pi * turns * t
+    r = r0 + (r1 - r0) * t
+    outer = np.stack([cx + (r + width / 2) * np.cos(ang), cy + (r + width / 2) * np.sin(ang)], axis=1)
+    inner = np.stack([cx + (r - width / 2) * np.cos(ang), cy + (r - width / 2) * np.sin(ang)], axis=1)
+    return np.concatenate([outer, inner[::-1]])
+
+
+def similarity(points, scale: float = 1.0, angle: float = 0.0, shift=(0.0, 0.0), center=(64.0, 64.0)):
+    """Apply x -> s R (x - c) + c + shift."""
+    c = np.asarray(center, dtype=float)
+    rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    return (np.asarray(points, dtype=float) - c) @ rot.T * scale + c + np.asarray(shift, dtype=float)
+
+
+def write_polygon(path, points) -> str:
+    with open(path, "w") as fh:
+        json.dump(np.asarray(points, dtype=float).tolist(), fh)
+    return str(path)
+
+
+def write_png(path, pixels) -> str:
+    import OpenImageIO as oiio
+
+    px = np.ascontiguousarray(pixels)
+    if px.ndim == 2:
+        px = px[:, :, None]
+    h, w, c = px.shape
+    types = {np.dtype(np.uint8): "uint8", np.dtype(np.uint16): "uint16", np.dtype(np.float32): "float", np.dtype(np.float16): "half"}
+    out = oiio.ImageOutput.create(str(path))
+    assert out is not None, oiio.geterror()
+    assert out.open(str(path), oiio.ImageSpec(w, h, c, types[px.dtype]))
+    assert out.write_image(px)
+    out.close()
+    return str(path)
+
+
+def read_pixels(path):
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    assert inp is not None, oiio.geterror()
+    px = inp.read_image(oiio.UNKNOWN)
+    inp.close()
+    return px if px.ndim == 3 else px[:, :, None]

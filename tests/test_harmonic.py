@@ -1,0 +1,77 @@
+"""Tests of warpcli.harmonic: the cotangent Laplacian and the Dirichlet solve."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers import comb, l_shape, regular, spiral, star
+from warpcli.harmonic import boundary_values, cotan_laplacian, solve_harmonic
+from warpcli.mesh import mesh_polygon
+from warpcli.polygon import Polygon
+from warpcli.theta import regular_polygon
+
+SHAPES = {"star": star(), "L": l_shape(), "comb": comb(), "spiral": spiral()}
+
+
+def test_laplacian_of_right_triangle_by_hand():
+    # Right angle at vertex 0, 45 degrees at 1 and 2: cot 45 = 1, cot 90 = 0.
+    v = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    k = cotan_laplacian(v, np.array([[0, 1, 2]])).toarray()
+    expected = np.array([[1.0, -0.5, -0.5], [-0.5, 0.5, 0.0], [-0.5, 0.0, 0.5]])
+    np.testing.assert_allclose(k, expected, atol=1e-15)
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_laplacian_symmetric_zero_row_sums_nonnegative_interior_weights(name):
+    mesh = mesh_polygon(Polygon(SHAPES[name]), 4.0)
+    k = cotan_laplacian(mesh.vertices, mesh.triangles)
+    assert abs(k - k.T).max() < 1e-12
+    assert np.abs(np.asarray(k.sum(axis=1))).max() < 1e-10
+    # Constrained Delaunay, no interior constraints: every edge with an
+    # interior endpoint has cot a + cot b >= 0, i.e. K_ij <= 0.
+    is_b = np.zeros(mesh.n_vertices, bool)
+    is_b[mesh.boundary] = True
+    coo = k.tocoo()
+    off = coo.row != coo.col
+    interior_edge = off & ~(is_b[coo.row] & is_b[coo.col])
+    assert coo.data[interior_edge].max() <= 1e-12
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_boundary_interpolated_and_no_flips(name):
+    poly = Polygon(SHAPES[name])
+    theta = regular_polygon(poly.n)
+    phi = solve_harmonic(mesh_polygon(poly, 4.0), theta)
+    np.testing.assert_allclose(phi.values[phi.mesh.boundary], boundary_values(phi.mesh, theta), atol=0)
+    corners = phi.mesh.boundary[phi.mesh.boundary_t == 0]
+    np.testing.assert_allclose(phi.values[corners], theta[phi.mesh.boundary_edge[phi.mesh.boundary_t == 0]], atol=1e-15)
+    assert not phi.flipped().any()
+
+
+def test_linear_functions_are_reproduced_exactly():
+    """P1 FEM reproduces linear data: a triangle goes onto Theta affinely."""
+    tri = Polygon([[10.0, 12.0], [90.0, 30.0], [40.0, 100.0]])
+    theta = regular_polygon(3)
+    phi = solve_harmonic(mesh_polygon(tri, 3.0), theta)
+    # The affine map sending the polygon's vertices to Theta's.
+    src = np.hstack([tri.points, np.ones((3, 1))])
+    coef = np.linalg.solve(src, theta)
+    expected = np.hstack([phi.mesh.vertices, np.ones((phi.mesh.n_vertices, 1))]) @ coef
+    np.testing.assert_allclose(phi.values, expected, atol=1e-12)
+
+
+def test_interior_values_are_discrete_harmonic():
+    poly = Polygon(star())
+    phi = solve_harmonic(mesh_polygon(poly, 4.0), regular_polygon(poly.n))
+    k = cotan_laplacian(phi.mesh.vertices, phi.mesh.triangles)
+    residual = k @ phi.values
+    interior = np.setdiff1d(np.arange(phi.mesh.n_vertices), phi.mesh.boundary)
+    assert np.abs(residual[interior]).max() < 1e-10
+
+
+def test_mirrored_polygon_maps_without_flips():
+    """A polygon oriented against Theta gives an orientation-reversing map, not a flip."""
+    poly = Polygon(regular(7)[::-1])
+    phi = solve_harmonic(mesh_polygon(poly, 4.0), regular_polygon(7))
+    assert not phi.flipped().any()

@@ -1,0 +1,160 @@
+"""Tests of warpcli.mapping: the composed map and its inverse, against exact mathematics."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from helpers import comb, l_shape, regular, similarity, spiral, star
+from warpcli.mapping import BijectiveMap
+from warpcli.polygon import Polygon
+
+SHAPES = {"star": star(), "L": l_shape(), "comb": comb(), "spiral": spiral()}
+RNG_SEED = 20261120
+
+
+
+def _contains(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Even-odd rule point-in-polygon test, vectorized over points."""
+    x, y = points[:, 0:1], points[:, 1:2]
+    a = poly
+    b = np.roll(poly, -1, axis=0)
+    crosses = (a[:, 1] > y) != (b[:, 1] > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xint = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+    return (crosses & (x < xint)).sum(axis=1) % 2 == 1
+
+
+def inside_points(poly: Polygon, count: int, seed: int = RNG_SEED) -> np.ndarray:
+    """Random points strictly inside ``poly`` (rejection sampling, seeded)."""
+    rng = np.random.default_rng(seed)
+    lo = poly.points.min(axis=0)
+    hi = poly.points.max(axis=0)
+    out = []
+    while sum(len(o) for o in out) < count:
+        p = rng.uniform(lo, hi, size=(4 * count, 2))
+        out.append(p[_contains(p, poly.points)])
+    return np.concatenate(out)[:count]
+
+
+def affine_from(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """The 3x2 matrix M with [p, 1] @ M = affine image of p, from 3 point pairs."""
+    return np.linalg.solve(np.hstack([src, np.ones((3, 1))]), dst)
+
+
+def test_triangle_to_triangle_is_exactly_affine():
+    src = Polygon([[5.0, 7.0], [120.0, 20.0], [30.0, 110.0]])
+    dst = Polygon([[60.0, 2.0], [118.0, 90.0], [4.0, 60.0]])
+    f = BijectiveMap.between(src, dst)
+    m = affine_from(src.points, dst.points)
+    p = inside_points(src, 2000)
+    fwd = f.forward(p)
+    np.testing.assert_allclose(fwd, np.hstack([p, np.ones((len(p), 1))]) @ m, atol=1e-6)
+    q = inside_points(dst, 2000)
+    minv = affine_from(dst.points, src.points)
+    np.testing.assert_allclose(f.inverse(q), np.hstack([q, np.ones((len(q), 1))]) @ minv, atol=1e-6)
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_identical_polygons_give_the_identity(name):
+    poly = Polygon(SHAPES[name])
+    f = BijectiveMap.between(poly, poly)
+    p = inside_points(poly, 3000)
+    np.testing.assert_allclose(f.inverse(p), p, atol=1e-9)
+    np.testing.assert_allclose(f.forward(p), p, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["star", "L", "comb"])
+@pytest.mark.parametrize(
+    "scale,angle,shift", [(1.0, 0.7, (3.0, -2.0)), (0.6, -0.4, (10.0, 5.0)), (1.5, 2.0, (-20.0, 8.0))]
+)
+def test_similar_polygons_give_the_similarity(name, scale, angle, shift):
+    src = Polygon(SHAPES[name])
+    dst = Polygon(similarity(src.points, scale, angle, shift))
+    f = BijectiveMap.between(src, dst)
+    p = inside_points(src, 3000)
+    err = np.hypot(*(f.forward(p) - similarity(p, scale, angle, shift)).T)
+    # FEM accuracy: the two meshes are not similar, so the two discrete maps
+    # differ by their discretization error (largest at reflex corners).
+    assert np.mean(err) < 0.02
+    assert np.max(err) < 0.3
+
+
+def test_mirrored_target_gives_the_reflection():
+    src = Polygon(star())
+    mirrored = src.points * [-1.0, 1.0] + [128.0, 0.0]  # x -> 128 - x
+    dst = Polygon(mirrored)
+    assert np.sign(dst.signed_area) != np.sign(src.signed_area)
+    f = BijectiveMap.between(src, dst)
+    assert not f.orientation_preserving
+    assert f.flipped_triangles() == 0
+    p = inside_points(src, 3000)
+    err = np.hypot(*(f.forward(p) - (p * [-1.0, 1.0] + [128.0, 0.0])).T)
+    assert err.mean() < 0.02 and err.max() < 0.3
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_target_edges_are_pulled_back_onto_source_edges(name):
+    src = Polygon(SHAPES[name])
+    dst = Polygon(star(n=len(src.points) // 2) if len(src.points) % 2 == 0 else regular(len(src.points)))
+    f = BijectiveMap.between(src, dst)
+    n = src.n
+    t = np.linspace(0.0, 1.0, 37)[:-1]
+    for i in range(n):
+        a1, b1 = dst.points[i], dst.points[(i + 1) % n]
+        a0, b0 = src.points[i], src.points[(i + 1) % n]
+        on_dst = (1 - t)[:, None] * a1 + t[:, None] * b1
+        on_src = (1 - t)[:, None] * a0 + t[:, None] * b0
+        # The boundary map is linear per edge on both sides: parameter t on
+        # target edge i comes from parameter t on source edge i.
+        np.testing.assert_allclose(f.inverse(on_dst), on_src, atol=1e-7)
+        np.testing.assert_allclose(f.forward(on_src), on_dst, atol=1e-7)
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_no_flips_and_round_trips_on_concave_shapes(name):
+    src = Polygon(SHAPES[name])
+    n = src.n
+    dst = Polygon(regular(n, r=50.0, phase=0.3))
+    f = BijectiveMap.between(src, dst)
+    assert f.flipped_triangles() == 0
+    g = BijectiveMap.between(dst, src)
+    assert g.flipped_triangles() == 0
+    p = inside_points(src, 3000)
+    np.testing.assert_allclose(f.inverse(f.forward(p)), p, atol=1e-8)
+    q = inside_points(dst, 3000)
+    np.testing.assert_allclose(f.forward(f.inverse(q)), q, atol=1e-8)
+
+
+def test_points_outside_are_nan():
+    src = Polygon(l_shape())
+    f = BijectiveMap.between(src, src)
+    out = f.inverse(np.array([[100.0, 20.0], [-5.0, -5.0], [60.0, 60.0]]))
+    assert np.isnan(out[0]).all() and np.isnan(out[1]).all()
+    assert np.isfinite(out[2]).all()
+
+
+def test_composed_map_keeps_orientation_everywhere():
+    """The Jacobian of f^-1 has the expected sign at random points.
+
+    The tiny triangle (h = 1e-6 px) lies inside one linear piece of both
+    piecewise-linear maps, so the orientation of its vertices' images is the
+    sign of the composed map's Jacobian there (a larger triangle straddling a
+    crease of a PL homeomorphism may legitimately come out reversed).
+    """
+    src = Polygon(star())
+    dst = Polygon(spiral(samples=6))
+    f = BijectiveMap.between(src, dst)
+    # Small triangles around random points: the map must keep their orientation.
+    q = inside_points(dst, 2000)
+    h = 1e-6
+    tri = np.stack([q, q + [h, 0.0], q + [0.0, h]], axis=1)
+    ok = _contains(tri.reshape(-1, 2), dst.points).reshape(-1, 3).all(axis=1)
+    pre = f.inverse(tri[ok].reshape(-1, 2)).reshape(-1, 3, 2)
+    d1 = pre[:, 1] - pre[:, 0]
+    d2 = pre[:, 2] - pre[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    expected = math.copysign(1.0, src.signed_area * dst.signed_area)
+    assert np.all(det * expected > 0)

@@ -1,0 +1,82 @@
+"""Tests of warpcli.mesh: graded quality CDT meshes and boundary bookkeeping."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers import comb, l_shape, spiral, star
+from warpcli.errors import PolygonError
+from warpcli.mesh import MAX_TRIANGLES, auto_max_area, mesh_polygon, triangle_areas
+from warpcli.polygon import Polygon
+
+SHAPES = {"star": star(), "L": l_shape(), "comb": comb(), "spiral": spiral()}
+
+
+@pytest.mark.parametrize("name", SHAPES)
+@pytest.mark.parametrize("orient", [1, -1])
+def test_mesh_covers_polygon_with_consistent_orientation(name, orient):
+    poly = Polygon(SHAPES[name][::orient])
+    mesh = mesh_polygon(poly, 2.0)
+    areas = triangle_areas(mesh.vertices, mesh.triangles)
+    assert np.all(np.sign(areas) == np.sign(poly.signed_area))
+    assert abs(areas.sum() - poly.signed_area) < 1e-9 * abs(poly.signed_area)
+    assert np.abs(areas).max() <= 2.0 * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_boundary_nodes_lie_on_their_edges_at_their_parameters(name):
+    poly = Polygon(SHAPES[name])
+    mesh = mesh_polygon(poly, 4.0)
+    p = poly.points
+    e = mesh.boundary_edge
+    t = mesh.boundary_t[:, None]
+    expected = (1 - t) * p[e] + t * p[(e + 1) % poly.n]
+    np.testing.assert_allclose(mesh.vertices[mesh.boundary], expected, atol=1e-9)
+    assert np.all((mesh.boundary_t >= 0) & (mesh.boundary_t < 1))
+    # Every polygon vertex is a mesh node with t = 0 on its own edge.
+    corners = mesh.boundary_t == 0
+    assert sorted(e[corners].tolist()) == list(range(poly.n))
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_boundary_of_mesh_is_the_boundary_nodes(name):
+    poly = Polygon(SHAPES[name])
+    mesh = mesh_polygon(poly, 4.0)
+    edges = np.sort(np.concatenate([mesh.triangles[:, [0, 1]], mesh.triangles[:, [1, 2]], mesh.triangles[:, [2, 0]]]), axis=1)
+    uniq, count = np.unique(edges, axis=0, return_counts=True)
+    outline = np.unique(uniq[count == 1])
+    assert np.array_equal(outline, np.sort(mesh.boundary))
+
+
+def test_mesh_is_graded_towards_reflex_vertices():
+    poly = Polygon(l_shape())
+    (reflex,) = poly.reflex_vertices()
+    mesh = mesh_polygon(poly, 16.0)
+    tri = mesh.triangles
+    centroid = mesh.vertices[tri].mean(axis=1)
+    dist = np.hypot(*(centroid - poly.points[reflex]).T)
+    area = np.abs(triangle_areas(mesh.vertices, tri))
+    assert area[dist < 1.0].max() < area[dist > 20].mean() / 20
+
+
+def test_meshing_is_deterministic():
+    poly = Polygon(star())
+    a = mesh_polygon(poly, 2.0)
+    b = mesh_polygon(poly, 2.0)
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.triangles, b.triangles)
+
+
+def test_too_large_polygon_is_refused_before_meshing():
+    big = Polygon([[0, 0], [1e7, 0], [1e7, 1e7], [0, 1e7]], name="big.json")
+    with pytest.raises(PolygonError, match=r"big.json: .*more than the limit") as info:
+        mesh_polygon(big, 1.0)
+    assert f"{MAX_TRIANGLES:,}" in str(info.value)
+
+
+def test_auto_area_is_at_least_one_pixel_and_fits_the_limit():
+    small = Polygon(star(r_in=5, r_out=10))
+    assert auto_max_area(small) == 1.0
+    huge = Polygon([[0, 0], [1e6, 0], [1e6, 1e6], [0, 1e6]])
+    a = auto_max_area(huge)
+    assert 2.0 * abs(huge.signed_area) / a <= MAX_TRIANGLES
