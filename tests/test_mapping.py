@@ -158,3 +158,15 @@ def test_composed_map_keeps_orientation_everywhere():
     det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
     expected = math.copysign(1.0, src.signed_area * dst.signed_area)
     assert np.all(det * expected > 0)
+
+
+@pytest.mark.parametrize("name", ["star", "comb"])
+def test_inverse_grid_equals_inverse_at_pixel_centres(name):
+    from warpcli.pipeline import pixel_centres
+
+    src = Polygon(SHAPES[name])
+    dst = Polygon(regular(src.n, r=60.0, phase=0.1))
+    f = BijectiveMap.between(src, dst)
+    grid = f.inverse_grid(130, 120)
+    direct = f.inverse(pixel_centres(130, 120)).reshape(120, 130, 2)
+    np.testing.assert_array_equal(grid, direct)

@@ -1,45 +1,48 @@
-"""warpcli: smooth bijective image warping between polygons (Schneider & Hormann 2015)."""
+"""warpcli: smooth bijective image warping between polygons (Schneider & Hormann 2015).
+
+The public names below are imported on first use, so that ``import warpcli``
+(and ``warp --help``) stays instant.
+"""
 
 from __future__ import annotations
 
+import importlib
+
 __version__ = "0.1.0"
 
-from .errors import (
-    FoldOverError,
-    ImageInputError,
-    ImageIOError,
-    InputError,
-    MeshingError,
-    PolygonError,
-    WarpError,
-)
-from .harmonic import HarmonicMap, solve_harmonic
-from .imageio import RasterImage, read_image, write_image
-from .mapping import BijectiveMap
-from .mesh import TriMesh, mesh_polygon
-from .pipeline import WarpResult, warp_file, warp_image
-from .polygon import Polygon, read_polygon
+_EXPORTS = {
+    "BijectiveMap": "mapping",
+    "FoldOverError": "errors",
+    "HarmonicMap": "harmonic",
+    "ImageIOError": "errors",
+    "ImageInputError": "errors",
+    "InputError": "errors",
+    "MeshingError": "errors",
+    "Polygon": "polygon",
+    "PolygonError": "errors",
+    "RasterImage": "imageio",
+    "TriMesh": "mesh",
+    "WarpError": "errors",
+    "WarpResult": "pipeline",
+    "mesh_polygon": "mesh",
+    "read_image": "imageio",
+    "read_polygon": "polygon",
+    "solve_harmonic": "harmonic",
+    "warp_file": "pipeline",
+    "warp_image": "pipeline",
+    "write_image": "imageio",
+}
 
-__all__ = [
-    "BijectiveMap",
-    "FoldOverError",
-    "HarmonicMap",
-    "ImageIOError",
-    "ImageInputError",
-    "InputError",
-    "MeshingError",
-    "Polygon",
-    "PolygonError",
-    "RasterImage",
-    "TriMesh",
-    "WarpError",
-    "WarpResult",
-    "__version__",
-    "mesh_polygon",
-    "read_image",
-    "read_polygon",
-    "solve_harmonic",
-    "warp_file",
-    "warp_image",
-    "write_image",
-]
+__all__ = sorted([*_EXPORTS, "__version__"])
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'warpcli' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return __all__

@@ -32,32 +32,17 @@ class TriangleLocator:
     triangles : (M, 3) array_like of int
     """
 
-    def __init__(self, vertices: ArrayLike, triangles: ArrayLike) -> None:
+    def __init__(self, vertices: ArrayLike, triangles: ArrayLike, cells_per_triangle: float = 1.0) -> None:
         v = np.asarray(vertices, dtype=np.float64)
         t = np.asarray(triangles, dtype=np.int64)
         self.vertices = v
         self.triangles = t
+        self._coef = _affine_coefficients(v, t)
         a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
-        det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = np.where(det != 0, 1.0 / det, np.nan)
-        # l1 = dx*k0 + dy*k1, l2 = dx*k2 + dy*k3 with (dx, dy) = p - a;
-        # a degenerate triangle gets NaN coefficients and never matches.
-        self._coef = np.stack(
-            [
-                a[:, 0],
-                a[:, 1],
-                (c[:, 1] - a[:, 1]) * inv,
-                -(c[:, 0] - a[:, 0]) * inv,
-                -(b[:, 1] - a[:, 1]) * inv,
-                (b[:, 0] - a[:, 0]) * inv,
-            ],
-            axis=1,
-        )
         lo = v.min(axis=0)
         hi = v.max(axis=0)
         span = np.maximum(hi - lo, 1e-300)
-        cell = math.sqrt(float(span[0] * span[1]) / max(len(t), 1))
+        cell = math.sqrt(float(span[0] * span[1]) / max(len(t) * cells_per_triangle, 1))
         cell = max(cell, float(span.max()) / 4096.0)
         self._lo = lo
         self._cell = cell
@@ -178,3 +163,104 @@ def barycentric_combine(
         b[:, 0:1] * vals[t[:, 0]] + b[:, 1:2] * vals[t[:, 1]] + b[:, 2:3] * vals[t[:, 2]]
     )
     return out
+
+
+def _affine_coefficients(v: NDArray[np.float64], t: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Per triangle ``(ax, ay, k0, k1, k2, k3)``: l1 = dx*k0 + dy*k1, l2 = dx*k2 + dy*k3.
+
+    (dx, dy) = p - a; degenerate triangles get NaN coefficients, so no point
+    is ever inside them.
+    """
+    a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(det != 0, 1.0 / det, np.nan)
+    return np.stack(
+        [
+            a[:, 0],
+            a[:, 1],
+            (c[:, 1] - a[:, 1]) * inv,
+            -(c[:, 0] - a[:, 0]) * inv,
+            -(b[:, 1] - a[:, 1]) * inv,
+            (b[:, 0] - a[:, 0]) * inv,
+        ],
+        axis=1,
+    )
+
+
+def scan_convert(
+    vertices: ArrayLike, triangles: ArrayLike, width: int, height: int
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Locate every pixel centre of a ``width`` x ``height`` grid in a triangle mesh.
+
+    Pixel ``(r, c)`` has its centre at ``(c + 0.5, r + 0.5)``. Each triangle
+    enumerates the pixel centres of its bounding box and keeps those inside,
+    so the cost is proportional to the pixels covered, with no search. A
+    centre on an edge shared by two triangles goes to the smaller triangle
+    index, as in `TriangleLocator.locate`.
+
+    Returns
+    -------
+    tri : (height * width,) ndarray of int64
+        Containing triangle per pixel (row-major), -1 outside the mesh.
+    bary : (height * width, 3) ndarray of float
+        Barycentric coordinates (NaN outside the mesh).
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    coef = _affine_coefficients(v, t)
+    corners = v[t]  # (M, 3, 2)
+    lo = corners.min(axis=1)
+    hi = corners.max(axis=1)
+    # Columns whose centre c + 0.5 lies in [xmin, xmax], slightly widened so
+    # that centres on an edge within the barycentric tolerance are tested.
+    pad = 1e-9 * max(width, height)
+    c0 = np.maximum(np.ceil(lo[:, 0] - 0.5 - pad), 0).astype(np.int64)
+    c1 = np.minimum(np.floor(hi[:, 0] - 0.5 + pad), width - 1).astype(np.int64)
+    r0 = np.maximum(np.ceil(lo[:, 1] - 0.5 - pad), 0).astype(np.int64)
+    r1 = np.minimum(np.floor(hi[:, 1] - 0.5 + pad), height - 1).astype(np.int64)
+    nx = np.maximum(c1 - c0 + 1, 0)
+    ny = np.maximum(r1 - r0 + 1, 0)
+    counts = nx * ny
+    npix = width * height
+    best = np.full(npix, np.iinfo(np.int64).max, dtype=np.int64)
+    hits_tri = []
+    hits_pix = []
+    hits_bary = []
+    # Triangles in chunks of at most ~_BLOCK candidate pixels, to bound memory.
+    ends = np.searchsorted(np.cumsum(counts), np.arange(_BLOCK, counts.sum() + _BLOCK, _BLOCK), side="right")
+    start = 0
+    for end in np.unique(np.append(ends, len(t))):
+        if end <= start:
+            continue
+        sl = slice(start, end)
+        start = end
+        cnt = counts[sl]
+        if cnt.sum() == 0:
+            continue
+        tri = np.repeat(np.arange(sl.start, sl.stop), cnt)
+        first = np.cumsum(cnt) - cnt
+        k = np.arange(tri.size) - np.repeat(first, cnt)
+        w = nx[tri]
+        col = c0[tri] + k % w
+        row = r0[tri] + k // w
+        co = coef[tri]
+        dx = col + 0.5 - co[:, 0]
+        dy = row + 0.5 - co[:, 1]
+        l1 = dx * co[:, 2] + dy * co[:, 3]
+        l2 = dx * co[:, 4] + dy * co[:, 5]
+        l0 = 1.0 - l1 - l2
+        inside = (l0 >= -BARY_TOL) & (l1 >= -BARY_TOL) & (l2 >= -BARY_TOL)
+        pix = row[inside] * width + col[inside]
+        tri = tri[inside]
+        np.minimum.at(best, pix, tri)
+        hits_tri.append(tri)
+        hits_pix.append(pix)
+        hits_bary.append(np.stack([l0[inside], l1[inside], l2[inside]], axis=1))
+    out_tri = np.full(npix, -1, dtype=np.int64)
+    out_bary = np.full((npix, 3), np.nan)
+    for tri, pix, bary in zip(hits_tri, hits_pix, hits_bary):
+        win = best[pix] == tri
+        out_tri[pix[win]] = tri[win]
+        out_bary[pix[win]] = bary[win]
+    return out_tri, out_bary

@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import FoldOverError
 from .harmonic import HarmonicMap, solve_harmonic
-from .locate import TriangleLocator, barycentric_combine
+from .locate import TriangleLocator, barycentric_combine, scan_convert
 from .mesh import auto_max_area, mesh_polygon
 from .polygon import Polygon, check_pair
 from .theta import regular_polygon
@@ -155,6 +155,23 @@ class BijectiveMap:
         """
         theta = self.to_theta_dst(points)
         return self._from_theta(theta, self._theta0_locator, self.phi0, self.src)
+
+    def inverse_grid(self, width: int, height: int) -> NDArray[np.float64]:
+        """`inverse` at every pixel centre of a ``width`` x ``height`` output image.
+
+        The same values as ``inverse(pixel_centres(width, height))``, but the
+        target mesh is scan-converted onto the pixel grid instead of searched.
+
+        Returns
+        -------
+        (height, width, 2) ndarray of float
+            Source point of each output pixel centre; NaN outside the target.
+        """
+        mesh = self.phi1.mesh
+        tri, bary = scan_convert(mesh.vertices, mesh.triangles, width, height)
+        theta = barycentric_combine(self.phi1.values, mesh.triangles, tri, bary)
+        out = self._from_theta(theta, self._theta0_locator, self.phi0, self.src)
+        return out.reshape(height, width, 2)
 
     def to_theta_src(self, points: ArrayLike) -> NDArray[np.float64]:
         """phi0: source points to Theta (NaN outside the source polygon)."""

@@ -125,7 +125,7 @@ def warp_image(
         fmap = BijectiveMap.between(src, dst, max_area=max_area, timings=timings)
     clock = time.perf_counter
     t0 = clock()
-    inverse = fmap.inverse(pixel_centres(width, height)).reshape(height, width, 2)
+    inverse = fmap.inverse_grid(width, height)
     t1 = clock()
     out = resample(img, inverse, interp=interp, background=bg, alpha_channel=alpha_channel)
     timings["compose"] = t1 - t0
