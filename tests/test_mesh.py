@@ -7,7 +7,7 @@ import pytest
 
 from helpers import comb, l_shape, spiral, star
 from warpcli.errors import PolygonError
-from warpcli.mesh import MAX_TRIANGLES, auto_max_area, mesh_polygon, triangle_areas
+from warpcli.mesh import AUTO_MAX_TRIANGLES, MAX_TRIANGLES, auto_max_area, mesh_polygon, triangle_areas
 from warpcli.polygon import Polygon
 
 SHAPES = {"star": star(), "L": l_shape(), "comb": comb(), "spiral": spiral()}
@@ -79,4 +79,10 @@ def test_auto_area_is_at_least_one_pixel_and_fits_the_limit():
     assert auto_max_area(small) == 1.0
     huge = Polygon([[0, 0], [1e6, 0], [1e6, 1e6], [0, 1e6]])
     a = auto_max_area(huge)
-    assert 2.0 * abs(huge.signed_area) / a <= MAX_TRIANGLES
+    assert 2.0 * abs(huge.signed_area) / a <= AUTO_MAX_TRIANGLES * (1 + 1e-12)
+
+
+def test_auto_density_meshes_a_huge_polygon_quickly():
+    huge = Polygon([[0, 0], [1e7, 0], [1e7, 1e7], [0, 1e7]])
+    mesh = mesh_polygon(huge, auto_max_area(huge))
+    assert mesh.n_triangles <= AUTO_MAX_TRIANGLES

@@ -11,10 +11,14 @@ from numpy.typing import NDArray
 from .errors import MeshingError, PolygonError
 from .polygon import Polygon
 
-#: Refuse to build meshes larger than this many triangles (about 100 bytes each
-#: in `triangle`, several hundred through the solve): a guard against a polygon
-#: far larger than its image exhausting memory.
-MAX_TRIANGLES = 30_000_000
+#: Refuse to build a mesh of more than this many triangles when the user sets
+#: the density: its direct solve would take many minutes and several GB.
+MAX_TRIANGLES = 4_000_000
+
+#: The automatic density never asks for more triangles than this per mesh; a
+#: polygon far larger than any image gets a coarser mesh instead (its harmonic
+#: map is correspondingly smooth at the scale of a pixel).
+AUTO_MAX_TRIANGLES = 1_000_000
 
 #: The default mesh density: the largest triangle area is the polygon's size
 #: sqrt(area) divided by this, but never below one square pixel. The FEM error
@@ -89,10 +93,10 @@ def auto_max_area(polygon: Polygon) -> float:
     """The default largest triangle area for ``polygon``, in square pixels.
 
     ``sqrt(area) / AUTO_AREA_DIVISOR``, at least 1, and large enough that the
-    mesh stays within ``MAX_TRIANGLES``.
+    mesh stays within ``AUTO_MAX_TRIANGLES``.
     """
     area = abs(polygon.signed_area)
-    return max(1.0, math.sqrt(area) / AUTO_AREA_DIVISOR, 4.0 * area / MAX_TRIANGLES)
+    return max(1.0, math.sqrt(area) / AUTO_AREA_DIVISOR, 2.0 * area / AUTO_MAX_TRIANGLES)
 
 
 def mesh_polygon(polygon: Polygon, max_area: float, *, grade: bool = True) -> TriMesh:

@@ -12,6 +12,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import PolygonError
 
+#: Largest coordinate magnitude accepted, in pixels: far beyond any image, and
+#: small enough that areas and orientation tests cannot overflow.
+COORD_LIMIT = 1e9
+
 # Pairs of edges are tested in blocks of this many, so that the O(n^2) test of
 # a polygon with thousands of vertices stays within a few tens of megabytes.
 _PAIR_BLOCK = 1 << 20
@@ -118,6 +122,8 @@ def read_polygon(path: str | os.PathLike[str]) -> Polygon:
         raise PolygonError(
             f"{name}: invalid JSON at line {err.lineno}, column {err.colno}: {err.msg}"
         ) from err
+    except RecursionError as err:
+        raise PolygonError(f"{name}: invalid JSON: nested too deeply") from err
     if isinstance(doc, dict):
         if "points" not in doc:
             raise PolygonError(f'{name}: JSON object has no "points" member')
@@ -157,12 +163,27 @@ def _as_points(data: ArrayLike, name: str) -> NDArray[np.float64]:
                     raise PolygonError(
                         f"{name}: vertex {i} has a non-numeric coordinate: {_short(value)}"
                     )
+                # JSON integers are unbounded; one beyond a float's range
+                # would overflow the conversion below.
+                if isinstance(value, int) and abs(value) > COORD_LIMIT:
+                    raise PolygonError(_out_of_range(name, i, value))
         pts = np.array(data, dtype=np.float64).reshape(-1, 2)
     bad = np.flatnonzero(~np.isfinite(pts).all(axis=1))
     if bad.size:
         i = int(bad[0])
         raise PolygonError(f"{name}: vertex {i} has a non-finite coordinate: {pts[i].tolist()}")
+    big = np.flatnonzero((np.abs(pts) > COORD_LIMIT).any(axis=1))
+    if big.size:
+        i = int(big[0])
+        raise PolygonError(_out_of_range(name, i, float(pts[i][np.argmax(np.abs(pts[i]))])))
     return pts
+
+
+def _out_of_range(name: str, i: int, value: float) -> str:
+    return (
+        f"{name}: vertex {i} has a coordinate out of range: {_short(value)} "
+        f"(coordinates must be within +-{COORD_LIMIT:.0e} pixels)"
+    )
 
 
 def validate_points(pts: NDArray[np.float64], name: str) -> None:
@@ -174,6 +195,10 @@ def validate_points(pts: NDArray[np.float64], name: str) -> None:
     area = signed_area(pts)
     span = float(np.ptp(pts, axis=0).max())
     if abs(area) <= 1e-12 * span * span:
+        # Collinear vertices have zero area; so do the equal and opposite
+        # lobes of a symmetric bow-tie, which is better named by its crossing.
+        if not _collinear(pts):
+            _check_crossings(pts, name)
         raise PolygonError(f"{name}: polygon has zero area")
     _check_crossings(pts, name)
 
@@ -188,6 +213,14 @@ def _check_repeats(pts: NDArray[np.float64], name: str) -> None:
         raise PolygonError(
             f"{name}: vertices {i} and {j} are repeated at {_fmt_point(pts[i])}{hint}"
         )
+
+
+def _collinear(pts: NDArray[np.float64]) -> bool:
+    """Whether all points lie on one line (up to rounding)."""
+    d = pts - pts[0]
+    far = d[np.argmax(np.hypot(d[:, 0], d[:, 1]))]
+    cross = np.abs(d[:, 0] * far[1] - d[:, 1] * far[0])
+    return bool(cross.max() <= 1e-12 * float(far @ far))
 
 
 def _orient(ax, ay, bx, by, cx, cy):
@@ -275,9 +308,11 @@ def _fmt_point(p) -> str:
 
 
 def _fmt_num(v: float) -> str:
-    return f"{float(v):.6g}" if float(v) != int(v) or abs(v) >= 1e15 else f"{float(v):.1f}"
+    """Six significant digits, always with a decimal point or exponent: 2.0, 0.666667, 1e+08."""
+    text = f"{float(v):.6g}"
+    return text if any(ch in text for ch in ".en") else text + ".0"
 
 
 def _short(value: object) -> str:
-    text = json.dumps(value) if not isinstance(value, float) else repr(value)
+    text = repr(value) if isinstance(value, float) else json.dumps(value)
     return text if len(text) <= 40 else text[:37] + "..."

@@ -1,0 +1,471 @@
+"""End-to-end tests of the ``warp`` command: through CliRunner and through main()."""
+
+from __future__ import annotations
+
+import logging
+import os
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from helpers import read_pixels, write_png, write_polygon
+from warpcli import __version__
+from warpcli.cli import main, warp
+from warpcli.mesh import MAX_TRIANGLES
+
+SRC = [[8.0, 8.0], [56.0, 8.0], [56.0, 56.0], [8.0, 56.0]]
+DST = [[4.0, 10.0], [60.0, 6.0], [50.0, 58.0], [10.0, 50.0]]
+
+
+@pytest.fixture(autouse=True)
+def _restore_warpcli_logger():
+    """warp installs a handler on the stream of the moment; don't leak it to other tests."""
+    log = logging.getLogger("warpcli")
+    saved = (log.handlers[:], log.level, log.propagate)
+    yield
+    log.handlers[:], log.level, log.propagate = saved
+
+
+@pytest.fixture
+def files(tmp_path):
+    """A 64x64 RGB uint8 image and two 4-gons in tmp_path; OUTPUT not yet written."""
+    pixels = np.random.default_rng(7).integers(0, 256, (64, 64, 3), dtype=np.uint8)
+    return SimpleNamespace(
+        dir=tmp_path,
+        pixels=pixels,
+        image=write_png(tmp_path / "in.png", pixels),
+        src=write_polygon(tmp_path / "src.json", SRC),
+        dst=write_polygon(tmp_path / "dst.json", DST),
+        out=str(tmp_path / "out.png"),
+    )
+
+
+def argv(f, *extra, image=None, out=None, src=None, dst=None):
+    return [
+        image or f.image,
+        out or f.out,
+        "--src",
+        src or f.src,
+        "--dst",
+        dst or f.dst,
+        *extra,
+    ]
+
+
+def invoke(*args):
+    return CliRunner().invoke(warp, list(args), catch_exceptions=False)
+
+
+# --- success -----------------------------------------------------------------
+
+
+def test_warp_writes_output_like_the_input_and_prints_nothing(files):
+    result = invoke(*argv(files))
+    assert result.exit_code == 0, result.output
+    assert result.stdout == ""
+    assert result.stderr == ""
+    out = read_pixels(files.out)
+    assert out.shape == files.pixels.shape
+    assert out.dtype == files.pixels.dtype
+    # Inside DST the picture came from the input, outside it is the background.
+    assert out[32, 32].any()
+    assert (out[0, 0] == 0).all()
+    assert sorted(os.listdir(files.dir)) == ["dst.json", "in.png", "out.png", "src.json"]
+
+
+def test_main_returns_zero_and_prints_nothing(files, capsys):
+    assert main(argv(files)) == 0
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err == ""
+    assert read_pixels(files.out).shape == (64, 64, 3)
+
+
+@pytest.mark.parametrize("size", ["40x30", "40X30"])
+def test_size_sets_the_output_size(files, size):
+    result = invoke(*argv(files, "--size", size))
+    assert result.exit_code == 0, result.output
+    out = read_pixels(files.out)
+    assert out.shape == (30, 40, 3)  # (height, width, channels)
+    assert out.dtype == np.uint8
+
+
+def test_quiet_prints_nothing_at_all(files):
+    result = invoke(*argv(files, "-q"))
+    assert result.exit_code == 0
+    assert result.output == ""
+    assert result.stdout == ""
+    assert result.stderr == ""
+    assert os.path.exists(files.out)
+
+
+def test_quiet_still_reports_errors(files, capsys):
+    missing = str(files.dir / "missing.json")
+    assert main(argv(files, "-q", src=missing)) == 2
+    captured = capsys.readouterr()
+    assert captured.err.startswith(f"warp: error: {missing}: ")
+
+
+def test_verbose_reports_timings_on_stderr_only(files):
+    result = invoke(*argv(files, "-v"))
+    assert result.exit_code == 0
+    assert result.stdout == ""
+    lines = result.stderr.splitlines()
+    assert any(line.startswith("warp: mesh ") for line in lines)
+    assert any(line.startswith("warp: resample ") for line in lines)
+
+
+def test_version(capsys):
+    result = invoke("--version")
+    assert result.exit_code == 0
+    assert result.stdout.strip() == f"warp, version {__version__}"
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"warp, version {__version__}"
+
+
+def assert_full_help(text):
+    assert text.startswith("Usage: warp [OPTIONS] INPUT OUTPUT")
+    assert "Example:" in text
+    assert "warp face.png --src face.json --dst smile.json warped.png" in text
+    assert "Exit status:" in text
+    for code in ("0  success", "1  failure", "2  bad input"):
+        assert code in text
+    assert "[nearest|linear|cubic]" in text
+
+
+@pytest.mark.parametrize("flag", ["--help", "-h"])
+def test_help_shows_an_example_and_the_exit_codes(flag, capsys):
+    result = invoke(flag)
+    assert result.exit_code == 0
+    assert result.stderr == ""
+    assert_full_help(result.stdout)
+    assert main([flag]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == ""
+    assert_full_help(captured.out)
+
+
+def test_interp_offers_exactly_three_filters():
+    (param,) = [p for p in warp.params if p.name == "interp"]
+    assert tuple(param.type.choices) == ("nearest", "linear", "cubic")
+
+
+@pytest.mark.parametrize("interp", ["nearest", "linear", "cubic"])
+def test_interp_accepts_each_filter(files, interp):
+    result = invoke(*argv(files, "--interp", interp))
+    assert result.exit_code == 0, result.output
+    assert read_pixels(files.out).shape == (64, 64, 3)
+
+
+@pytest.mark.parametrize("interp", ["bilinear", "NEAREST", "lanczos", ""])
+def test_interp_rejects_anything_else(files, interp):
+    result = invoke(*argv(files, "--interp", interp))
+    assert result.exit_code == 2
+    assert "--interp" in result.stderr
+    assert not os.path.exists(files.out)
+
+
+def test_nearest_identity_warp_reproduces_the_pixels_inside(files):
+    result = invoke(*argv(files, "--interp", "nearest", dst=files.src))
+    assert result.exit_code == 0
+    out = read_pixels(files.out)
+    # Pixel centres strictly inside SRC (8..56) map to themselves.
+    np.testing.assert_array_equal(out[9:55, 9:55], files.pixels[9:55, 9:55])
+
+
+def test_existing_output_is_replaced_atomically(files):
+    with open(files.out, "wb") as fh:
+        fh.write(b"old contents, not an image")
+    old_inode = os.stat(files.out).st_ino
+    with open(files.out, "rb") as reader:  # a reader that opened the old file ...
+        assert main(argv(files)) == 0
+        # ... still sees the whole old file: the new one was renamed over it,
+        # not written into it.
+        assert reader.read() == b"old contents, not an image"
+    assert os.stat(files.out).st_ino != old_inode
+    out = read_pixels(files.out)
+    assert out.shape == (64, 64, 3)
+    assert out.dtype == np.uint8
+    assert sorted(os.listdir(files.dir)) == ["dst.json", "in.png", "out.png", "src.json"]
+
+
+def test_failed_run_leaves_an_existing_output_untouched(files, capsys):
+    with open(files.out, "wb") as fh:
+        fh.write(b"previous result")
+    bad = write_polygon(files.dir / "two.json", SRC[:2])
+    assert main(argv(files, src=bad)) == 2
+    with open(files.out, "rb") as fh:
+        assert fh.read() == b"previous result"
+
+
+def test_same_run_twice_gives_identical_files(files):
+    args = argv(files, "--interp", "cubic", "--size", "48x40", "--background", "0.2,0.4,0.6")
+    assert invoke(*args).exit_code == 0
+    with open(files.out, "rb") as fh:
+        first = fh.read()
+    os.unlink(files.out)
+    assert invoke(*args).exit_code == 0
+    with open(files.out, "rb") as fh:
+        second = fh.read()
+    assert first == second
+
+
+# --- bad input: exit 2, one line on stderr, no output ------------------------
+
+
+def write_text(path, text: str) -> str:
+    path.write_text(text)
+    return str(path)
+
+
+def _missing_polygon(f):
+    p = str(f.dir / "missing.json")
+    return argv(f, src=p), [p, "cannot read polygon file", "No such file"]
+
+
+def _invalid_json(f):
+    p = write_text(f.dir / "bad.json", "[[8, 8], [56, 8],\n [56, 56] [8, 56]]")
+    return argv(f, dst=p), [p, "invalid JSON at line 2, column 11"]
+
+
+def _too_few_vertices(f):
+    p = write_polygon(f.dir / "two.json", SRC[:2])
+    return argv(f, src=p), [p, "at least 3 vertices, got 2"]
+
+
+def _vertex_counts_differ(f):
+    p = write_polygon(f.dir / "tri.json", DST[:3])
+    return argv(f, dst=p), [f"{p}: polygon has 3 vertices but {f.src} has 4"]
+
+
+def _non_finite(f):
+    p = write_text(f.dir / "nan.json", "[[8, 8], [NaN, 8], [56, 56], [8, 56]]")
+    return argv(f, src=p), [p, "vertex 1 has a non-finite coordinate"]
+
+
+def _infinite(f):
+    p = write_text(f.dir / "inf.json", "[[8, 8], [56, 8], [56, -Infinity], [8, 56]]")
+    return argv(f, dst=p), [p, "vertex 2 has a non-finite coordinate"]
+
+
+def _non_numeric(f):
+    p = write_text(f.dir / "str.json", '[[8, 8], ["56", 8], [56, 56], [8, 56]]')
+    return argv(f, src=p), [p, 'vertex 1 has a non-numeric coordinate: "56"']
+
+
+def _repeated(f):
+    p = write_polygon(f.dir / "closed.json", SRC + [SRC[0]])
+    return argv(f, src=p), [p, "vertices 0 and 4 are repeated at (8.0, 8.0)", "closes itself"]
+
+
+def _zero_area(f):
+    p = write_polygon(f.dir / "line.json", [[8, 8], [20, 20], [32, 32], [44, 44]])
+    return argv(f, src=p), [p, "zero area"]
+
+
+def _self_intersecting(f):
+    # Edge 0 (y = x) and edge 2 (y = 60 - 1.5 x) meet at (24, 24).
+    p = write_polygon(f.dir / "bow.json", [[0, 0], [40, 40], [40, 0], [0, 60]])
+    return argv(f, dst=p), [p, "self-intersecting", "edges 0 and 2 cross at (24.0, 24.0)"]
+
+
+def _image_missing(f):
+    p = str(f.dir / "missing.png")
+    return argv(f, image=p), [p, "no such file"]
+
+
+def _image_not_an_image(f):
+    p = write_text(f.dir / "text.png", "this is not a PNG\n")
+    return argv(f, image=p), [p, "cannot read image"]
+
+
+def _image_is_a_directory(f):
+    (f.dir / "dir.png").mkdir()
+    p = str(f.dir / "dir.png")
+    return argv(f, image=p), [p, "directory"]
+
+
+def _unknown_output_format(f):
+    p = str(f.dir / "out.xyz")
+    return argv(f, out=p), [p, "unknown output image format", ".xyz"]
+
+
+def _output_directory_missing(f):
+    p = str(f.dir / "no-such-dir" / "out.png")
+    return argv(f, out=p), [p, "does not exist"]
+
+
+def _output_is_a_directory(f):
+    (f.dir / "out-dir.png").mkdir()
+    p = str(f.dir / "out-dir.png")
+    return argv(f, out=p), [p, "is a directory"]
+
+
+def _bad_size(value):
+    def case(f):
+        return argv(f, "--size", value), ["--size", repr(value)]
+
+    return case
+
+
+def _bad_background(value):
+    def case(f):
+        return argv(f, "--background", value), ["--background", repr(value)]
+
+    return case
+
+
+def _background_channel_count(f):
+    return argv(f, "--background", "0.5,0.5"), ["background has 2 values but the image has 3 channels"]
+
+
+def _bad_max_area(value):
+    def case(f):
+        return argv(f, "--max-area", value), ["--max-area", repr(value)]
+
+    return case
+
+
+def _missing_src_option(f):
+    return [f.image, f.out, "--dst", f.dst], ["--src"]
+
+
+BAD_INPUTS = {
+    "missing-polygon": _missing_polygon,
+    "invalid-json": _invalid_json,
+    "too-few-vertices": _too_few_vertices,
+    "vertex-counts-differ": _vertex_counts_differ,
+    "nan": _non_finite,
+    "infinity": _infinite,
+    "non-numeric": _non_numeric,
+    "repeated-vertex": _repeated,
+    "zero-area": _zero_area,
+    "self-intersecting": _self_intersecting,
+    "image-missing": _image_missing,
+    "image-not-an-image": _image_not_an_image,
+    "image-is-a-directory": _image_is_a_directory,
+    "unknown-output-format": _unknown_output_format,
+    "output-directory-missing": _output_directory_missing,
+    "output-is-a-directory": _output_is_a_directory,
+    "size-no-x": _bad_size("40"),
+    "size-zero": _bad_size("0x30"),
+    "size-words": _bad_size("widexhigh"),
+    "size-three": _bad_size("4x3x2"),
+    "background-word": _bad_background("black"),
+    "background-nan": _bad_background("nan"),
+    "background-inf": _bad_background("1,inf,0"),
+    "background-channels": _background_channel_count,
+    "max-area-zero": _bad_max_area("0"),
+    "max-area-negative": _bad_max_area("-1"),
+    "max-area-nan": _bad_max_area("nan"),
+    "max-area-inf": _bad_max_area("inf"),
+    "max-area-word": _bad_max_area("fine"),
+    "interp": lambda f: (argv(f, "--interp", "bicubic"), ["--interp", "bicubic"]),
+    "missing-src-option": _missing_src_option,
+}
+
+
+def assert_one_line_error(captured, expected):
+    assert captured.out == ""
+    assert captured.err.endswith("\n")
+    lines = captured.err.splitlines()
+    assert len(lines) == 1, captured.err
+    assert lines[0].startswith("warp: error: ")
+    assert "Traceback" not in captured.err
+    for text in expected:
+        assert text in lines[0]
+
+
+@pytest.mark.parametrize("case", BAD_INPUTS.values(), ids=BAD_INPUTS.keys())
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(files, capsys, case):
+    args, expected = case(files)
+    out = args[1]
+    before = sorted(os.listdir(files.dir))
+    status = main(args)
+    captured = capsys.readouterr()
+    assert status == 2
+    assert_one_line_error(captured, expected)
+    assert not os.path.exists(out) or os.path.isdir(out)
+    assert sorted(os.listdir(files.dir)) == before  # no output, no temporary file
+
+
+def test_coordinate_too_large_for_a_float_is_bad_input(files, capsys):
+    p = write_text(files.dir / "huge.json", "[[8, 8], [1" + "0" * 400 + ", 8], [56, 56], [8, 56]]")
+    before = sorted(os.listdir(files.dir))
+    assert main(argv(files, src=p)) == 2
+    assert_one_line_error(capsys.readouterr(), [p, "vertex 1"])
+    assert sorted(os.listdir(files.dir)) == before
+
+
+@pytest.mark.parametrize(
+    "out",
+    [
+        lambda f: f.image,
+        # os.path.join, not pathlib, which would drop the "." itself.
+        lambda f: os.path.join(f.dir, ".", "in.png"),
+        lambda f: os.path.join(f.dir, "sub", "..", "in.png"),
+    ],
+    ids=["same", "dot", "dotdot"],
+)
+def test_output_equal_to_the_input_is_refused(files, capsys, out):
+    (files.dir / "sub").mkdir()
+    with open(files.image, "rb") as fh:
+        original = fh.read()
+    before = sorted(os.listdir(files.dir))
+    target = out(files)
+    assert main(argv(files, out=target)) == 2
+    assert_one_line_error(capsys.readouterr(), [target, "would overwrite the input", files.image])
+    with open(files.image, "rb") as fh:
+        assert fh.read() == original
+    assert sorted(os.listdir(files.dir)) == before
+
+
+@pytest.mark.parametrize("which", ["src", "dst"])
+def test_output_equal_to_a_polygon_file_is_refused(files, capsys, which):
+    poly = getattr(files, which)
+    with open(poly, "rb") as fh:
+        original = fh.read()
+    before = sorted(os.listdir(files.dir))
+    assert main(argv(files, out=poly)) == 2
+    assert_one_line_error(capsys.readouterr(), [poly, "would overwrite the input"])
+    with open(poly, "rb") as fh:
+        assert fh.read() == original
+    assert sorted(os.listdir(files.dir)) == before
+
+
+def test_polygon_file_named_like_an_image_is_not_overwritten(files, capsys):
+    # The format check alone would let this through: only the same-file check stops it.
+    poly = write_polygon(files.dir / "poly.png", DST)
+    with open(poly, "rb") as fh:
+        original = fh.read()
+    assert main(argv(files, out=poly, dst=poly)) == 2
+    assert_one_line_error(capsys.readouterr(), [poly, "would overwrite the input"])
+    with open(poly, "rb") as fh:
+        assert fh.read() == original
+
+
+def test_huge_polygon_at_pixel_density_is_refused_without_meshing(files):
+    side = 1e7
+    assert 2 * side * side > MAX_TRIANGLES  # the request is far over the limit
+    big = write_polygon(files.dir / "big.json", [[0, 0], [side, 0], [side, side], [0, side]])
+    # A separate process, so that a regression that tries to mesh is killed
+    # by the timeout instead of hanging the test run.
+    proc = subprocess.run(
+        [sys.executable, "-m", "warpcli", *argv(files, "--max-area", "1", src=big, dst=big)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith(f"warp: error: {big}: ")
+    assert f"{MAX_TRIANGLES:,}" in lines[0]
+    assert "Traceback" not in proc.stderr
+    assert not os.path.exists(files.out)
+    assert sorted(os.listdir(files.dir)) == ["big.json", "dst.json", "in.png", "src.json"]

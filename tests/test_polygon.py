@@ -1,0 +1,404 @@
+"""Tests of warpcli.polygon: reading polygon files, validation, orientation."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+
+import numpy as np
+import pytest
+from hypothesis import assume, given
+from hypothesis import strategies as st
+
+from helpers import l_shape, regular, star
+from warpcli.errors import InputError, PolygonError
+from warpcli.polygon import Polygon, check_pair, read_polygon, signed_area
+
+SQUARE = [[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]
+
+# An asymmetric bow-tie, so that its signed area does not cancel (400, not 0).
+# Edge 0 runs along y = x from (0, 0) to (40, 40); edge 2 runs from (40, 0) to
+# (0, 60), on y = 60 - 1.5 x. They meet where x = 60 - 1.5 x: at (24, 24),
+# t = 0.6 along edge 0. Edges 1 (x = 40) and 3 (x = 0) are parallel.
+BOW_TIE = [[0, 0], [40, 40], [40, 0], [0, 60]]
+
+
+def write_text(path, text: str | bytes) -> str:
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text)
+    return str(path)
+
+
+def polygon_error(points, name="p.json") -> str:
+    """The message of the PolygonError that Polygon(points) raises."""
+    with pytest.raises(PolygonError) as info:
+        Polygon(points, name=name)
+    return str(info.value)
+
+
+# --- reading -----------------------------------------------------------------
+
+
+def test_reads_an_array_of_pairs(tmp_path):
+    path = write_text(tmp_path / "tri.json", "[[0, 0], [4.5, 0], [0, 3]]")
+    poly = read_polygon(path)
+    assert poly.points.tolist() == [[0.0, 0.0], [4.5, 0.0], [0.0, 3.0]]
+    assert poly.points.dtype == np.float64
+    assert poly.name == path
+    assert poly.n == 3
+
+
+def test_reads_an_object_with_a_points_member(tmp_path):
+    doc = {"name": "ignored", "points": SQUARE, "comment": [1, 2, 3]}
+    path = write_text(tmp_path / "sq.json", json.dumps(doc, indent=2))
+    poly = read_polygon(tmp_path / "sq.json")  # a Path works too; the name is its text
+    assert poly.points.tolist() == SQUARE
+    assert poly.name == path
+
+
+def test_both_forms_give_the_same_polygon(tmp_path):
+    a = read_polygon(write_text(tmp_path / "a.json", json.dumps(SQUARE)))
+    b = read_polygon(write_text(tmp_path / "b.json", json.dumps({"points": SQUARE})))
+    np.testing.assert_array_equal(a.points, b.points)
+
+
+def test_points_are_read_only():
+    poly = Polygon(SQUARE)
+    with pytest.raises(ValueError):
+        poly.points[0, 0] = 1.0
+    assert poly.points[0, 0] == 0.0
+
+
+def test_polygon_error_is_an_input_error_and_a_value_error():
+    # The CLI maps InputError to exit status 2; library callers may catch ValueError.
+    assert issubclass(PolygonError, InputError)
+    assert issubclass(PolygonError, ValueError)
+
+
+# --- unreadable files --------------------------------------------------------
+
+
+def test_missing_file(tmp_path):
+    path = str(tmp_path / "nope.json")
+    with pytest.raises(PolygonError, match="cannot read polygon file") as info:
+        read_polygon(path)
+    assert str(info.value).startswith(f"{path}: ")
+    assert "No such file" in str(info.value)
+
+
+def test_directory_is_not_a_polygon_file(tmp_path):
+    (tmp_path / "dir.json").mkdir()
+    path = str(tmp_path / "dir.json")
+    with pytest.raises(PolygonError, match="cannot read polygon file") as info:
+        read_polygon(path)
+    assert str(info.value).startswith(f"{path}: ")
+    assert "directory" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "text, where",
+    [
+        ("[\n  [0, 0],\n  [1, 2],,\n]", "line 3, column 10: Expecting value"),
+        ("[[8, 8], [56, 8],\n [56, 56] [8, 56]]", "line 2, column 11: Expecting ',' delimiter"),
+        ("", "line 1, column 1: Expecting value"),
+        ("[[0, 0], [1, 0], [0, 1]", "line 1, column 24"),
+    ],
+    ids=["double-comma", "missing-comma", "empty", "unclosed"],
+)
+def test_invalid_json_gives_line_and_column(tmp_path, text, where):
+    path = write_text(tmp_path / "bad.json", text)
+    with pytest.raises(PolygonError, match="invalid JSON") as info:
+        read_polygon(path)
+    assert str(info.value).startswith(f"{path}: invalid JSON at ")
+    assert where in str(info.value)
+
+
+def test_invalid_utf8(tmp_path):
+    path = write_text(tmp_path / "bin.json", b"[[0, 0]\xff]")
+    with pytest.raises(PolygonError, match=r"invalid UTF-8 at byte 7") as info:
+        read_polygon(path)
+    assert str(info.value).startswith(f"{path}: ")
+
+
+# --- wrong structure ---------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "text, problem",
+    [
+        ('{"vertices": [[0, 0], [1, 0], [0, 1]]}', 'JSON object has no "points" member'),
+        ("{}", 'JSON object has no "points" member'),
+        ("42", "expected an array of [x, y] pairs"),
+        ('"[[0, 0], [1, 0], [0, 1]]"', "expected an array of [x, y] pairs"),
+        ('{"points": {"0": [0, 0]}}', "expected an array of [x, y] pairs"),
+        ("[[0, 0], [1, 0, 2], [0, 1]]", "vertex 1 is not an [x, y] pair: [1, 0, 2]"),
+        ("[[0, 0], [1], [0, 1]]", "vertex 1 is not an [x, y] pair: [1]"),
+        ("[[0, 0], [1, 0], 7, [0, 1]]", "vertex 2 is not an [x, y] pair: 7"),
+        ('[[0, 0], [1, 0], {"x": 0, "y": 1}]', 'vertex 2 is not an [x, y] pair: {"x": 0, "y": 1}'),
+        ("[0, 0, 1, 0, 0, 1]", "vertex 0 is not an [x, y] pair: 0"),
+    ],
+    ids=[
+        "object-without-points",
+        "empty-object",
+        "number",
+        "string",
+        "points-not-array",
+        "triple",
+        "single",
+        "scalar-entry",
+        "object-entry",
+        "flat-list",
+    ],
+)
+def test_wrong_structure(tmp_path, text, problem):
+    path = write_text(tmp_path / "shape.json", text)
+    with pytest.raises(PolygonError, match=re.escape(problem)) as info:
+        read_polygon(path)
+    assert str(info.value) == f"{path}: {problem}"
+
+
+@pytest.mark.parametrize("points, n", [([], 0), ([[0, 0]], 1), ([[0, 0], [1, 1]], 2)])
+def test_fewer_than_three_vertices(tmp_path, points, n):
+    path = write_text(tmp_path / "few.json", json.dumps(points))
+    with pytest.raises(PolygonError, match="at least 3 vertices") as info:
+        read_polygon(path)
+    assert str(info.value) == f"{path}: a polygon needs at least 3 vertices, got {n}"
+
+
+@pytest.mark.parametrize(
+    "value, shown",
+    [('"1"', '"1"'), ('"x"', '"x"'), ("true", "true"), ("false", "false"), ("null", "null"), ("[1]", "[1]")],
+)
+def test_non_numeric_coordinate(tmp_path, value, shown):
+    path = write_text(tmp_path / "nn.json", f"[[0, 0], [4, 0], [4, {value}], [0, 4]]")
+    with pytest.raises(PolygonError, match="non-numeric") as info:
+        read_polygon(path)
+    assert str(info.value) == f"{path}: vertex 2 has a non-numeric coordinate: {shown}"
+
+
+@pytest.mark.parametrize(
+    "token, shown",
+    [("NaN", "[nan, 0.0]"), ("Infinity", "[inf, 0.0]"), ("-Infinity", "[-inf, 0.0]"), ("1e400", "[inf, 0.0]")],
+)
+def test_non_finite_coordinate(tmp_path, token, shown):
+    # Python's json accepts NaN and Infinity (and overflows 1e400 to inf).
+    path = write_text(tmp_path / "nf.json", f"[[0, 0], [{token}, 0], [4, 4], [0, 4]]")
+    with pytest.raises(PolygonError, match="non-finite") as info:
+        read_polygon(path)
+    assert str(info.value) == f"{path}: vertex 1 has a non-finite coordinate: {shown}"
+
+
+def test_integer_too_large_for_a_float(tmp_path):
+    # JSON integers have no size limit; 10**400 is read as a Python int.
+    path = write_text(tmp_path / "huge.json", "[[0, 0], [1" + "0" * 400 + ", 0], [0, 4]]")
+    with pytest.raises(PolygonError, match="vertex 1") as info:
+        read_polygon(path)
+    assert str(info.value).startswith(f"{path}: ")
+
+
+def test_deeply_nested_json(tmp_path):
+    path = write_text(tmp_path / "deep.json", "[" * 100_000 + "]" * 100_000)
+    with pytest.raises(PolygonError) as info:
+        read_polygon(path)
+    assert str(info.value).startswith(f"{path}: ")
+
+
+@pytest.mark.parametrize(
+    "array",
+    [np.zeros((4, 3)), np.zeros((4,)), np.zeros((4, 2), dtype=bool), np.array([["0", "1"]] * 3)],
+    ids=["n-by-3", "flat", "bool", "str"],
+)
+def test_array_input_must_be_n_by_2_numbers(array):
+    with pytest.raises(PolygonError, match=r"must be an \(n, 2\) array of numbers") as info:
+        Polygon(array, name="arr")
+    assert str(info.value).startswith("arr: ")
+
+
+# --- invalid polygons --------------------------------------------------------
+
+
+def test_repeated_vertices_are_named():
+    msg = polygon_error([[0, 0], [4, 0], [4, 4], [4, 0], [0, 4]])
+    assert msg == "p.json: vertices 1 and 3 are repeated at (4.0, 0.0)"
+    assert "closes itself" not in msg
+
+
+def test_closing_vertex_equal_to_the_first_gets_a_hint(tmp_path):
+    path = write_text(tmp_path / "closed.json", json.dumps(SQUARE + [SQUARE[0]]))
+    with pytest.raises(PolygonError, match="repeated") as info:
+        read_polygon(path)
+    assert str(info.value) == (
+        f"{path}: vertices 0 and 4 are repeated at (0.0, 0.0) "
+        "(list each vertex once; the polygon closes itself)"
+    )
+
+
+@pytest.mark.parametrize(
+    "points",
+    [
+        [[0, 0], [1, 1], [2, 2], [3, 3]],
+        [[0, 0], [1, 0], [2, 0]],
+        [[5, 1], [5, 7], [5, 3]],
+    ],
+    ids=["diagonal", "horizontal", "vertical-back-and-forth"],
+)
+def test_collinear_points_have_zero_area(points):
+    msg = polygon_error(points)
+    assert msg == "p.json: polygon has zero area"
+
+
+@pytest.mark.parametrize(
+    "shift, edges",
+    [(0, (0, 2)), (1, (1, 3)), (2, (0, 2)), (3, (1, 3))],
+)
+def test_bow_tie_names_the_crossing_edges_and_point(shift, edges):
+    # Starting the list at vertex `shift` renumbers the edges: the crossing
+    # pair (0, 2) becomes (1, 3) after one step, (2, 0) = (0, 2) after two.
+    pts = np.roll(np.array(BOW_TIE, dtype=float), -shift, axis=0)
+    assert signed_area(pts) != 0  # so the crossing test, not the area test, must catch it
+    with pytest.raises(PolygonError, match="self-intersecting") as info:
+        Polygon(pts, name="bow.json")
+    e, f = edges
+    assert str(info.value) == f"bow.json: polygon is self-intersecting: edges {e} and {f} cross at (24.0, 24.0)"
+
+
+def test_bow_tie_crossing_point_with_fractional_coordinates():
+    # Edge 0: (0, 0) -> (3, 1); edge 2: (3, 0) -> (0, 2). On edge 0, y = x / 3;
+    # on edge 2, y = 2 - 2x / 3; so x = 2, y = 2 / 3.
+    msg = polygon_error([[0, 0], [3, 1], [3, 0], [0, 2]])
+    assert msg == "p.json: polygon is self-intersecting: edges 0 and 2 cross at (2.0, 0.666667)"
+
+
+def test_symmetric_bow_tie_is_reported_as_self_intersecting():
+    # Edges 0 ((0,0)->(4,4)) and 2 ((4,0)->(0,4)) cross at (2, 2); the lobes
+    # have equal and opposite signed areas, but the polygon's area is not zero.
+    msg = polygon_error([[0, 0], [4, 4], [4, 0], [0, 4]])
+    assert "edges 0 and 2 cross at (2.0, 2.0)" in msg
+
+
+def test_vertex_touching_a_non_adjacent_edge():
+    # Vertex 3 = (10, 0) lies inside edge 0 ((0, 0) -> (20, 0)); edge 2 ends there.
+    msg = polygon_error([[0, 0], [20, 0], [20, 20], [10, 0], [0, 20]])
+    assert msg == "p.json: polygon is self-intersecting: edges 0 and 2 cross at (10.0, 0.0)"
+
+
+def test_slot_cut_down_onto_the_boundary():
+    # A slot cut from the top edge (y = 10) down to the bottom edge (edge 0,
+    # y = 0): its walls, edges 3 and 5, end on edge 0, and edge 4 runs along it.
+    msg = polygon_error([[0, 0], [30, 0], [30, 10], [20, 10], [20, 0], [10, 0], [10, 10], [0, 10]])
+    assert msg == "p.json: polygon is self-intersecting: edges 0 and 3 cross at (20.0, 0.0)"
+
+
+def test_boundary_doubling_back_is_a_spike():
+    # (20, 0) -> (20, 20) -> (20, 10): edge 2 runs back along edge 1.
+    msg = polygon_error([[0, 0], [20, 0], [20, 20], [20, 10]])
+    assert msg == (
+        "p.json: edges 1 and 2 overlap (the boundary doubles back at vertex 2, (20.0, 20.0))"
+    )
+
+
+def test_spike_at_vertex_zero_names_the_last_edge():
+    msg = polygon_error([[20, 20], [20, 10], [0, 0], [20, 0]])
+    assert msg == "p.json: edges 3 and 0 overlap (the boundary doubles back at vertex 0, (20.0, 20.0))"
+
+
+def test_check_pair_rejects_different_vertex_counts():
+    src = Polygon(SQUARE, name="src.json")
+    dst = Polygon([[0, 0], [4, 0], [0, 4]], name="dst.json")
+    with pytest.raises(PolygonError, match="vertices but") as info:
+        check_pair(src, dst)
+    assert str(info.value) == "dst.json: polygon has 3 vertices but src.json has 4"
+
+
+def test_check_pair_accepts_equal_counts():
+    assert check_pair(Polygon(SQUARE), Polygon(regular(4))) is None
+
+
+# --- valid polygons ----------------------------------------------------------
+
+
+def test_both_orientations_are_accepted_with_opposite_signed_areas():
+    cw = Polygon(SQUARE)  # right along the top, then down: clockwise on screen (y down)
+    ccw = Polygon(SQUARE[::-1])
+    assert cw.signed_area == 16.0
+    assert ccw.signed_area == -16.0
+    assert cw.bounds == ccw.bounds == (0.0, 0.0, 4.0, 4.0)
+
+
+def test_signed_area_of_the_l_shape_is_exact():
+    # 112 x 112 square minus its 56 x 56 top-right quadrant.
+    assert Polygon(l_shape()).signed_area == 112.0**2 - 56.0**2
+    assert Polygon(l_shape()[::-1]).signed_area == -(112.0**2 - 56.0**2)
+
+
+@pytest.mark.parametrize("shift", range(6))
+@pytest.mark.parametrize("reverse", [False, True])
+def test_l_shape_has_exactly_one_reflex_vertex(shift, reverse):
+    pts = l_shape()
+    corner = pts[2].copy()  # (64, 64): the inner corner of the notch
+    if reverse:
+        pts = pts[::-1]
+    pts = np.roll(pts, -shift, axis=0)
+    reflex = Polygon(pts).reflex_vertices()
+    assert len(reflex) == 1
+    assert pts[reflex[0]].tolist() == corner.tolist()
+    expected = ((5 - 2) if reverse else 2) - shift
+    assert reflex.tolist() == [expected % 6]
+
+
+def test_reflex_vertices_of_convex_and_star_polygons():
+    assert Polygon(regular(7)).reflex_vertices().tolist() == []
+    # helpers.star puts the outer points at even indices: the inner ones are reflex.
+    assert Polygon(star(5)).reflex_vertices().tolist() == [1, 3, 5, 7, 9]
+    assert Polygon(star(5)[::-1]).reflex_vertices().tolist() == [0, 2, 4, 6, 8]
+
+
+def test_a_straight_angle_vertex_is_accepted_and_not_reflex():
+    # Vertex 1 sits on the straight line from vertex 0 to vertex 2 (180 degrees).
+    poly = Polygon([[0, 0], [10, 0], [20, 0], [20, 20], [0, 20]])
+    assert poly.signed_area == 400.0
+    assert poly.reflex_vertices().tolist() == []
+
+
+# --- properties --------------------------------------------------------------
+
+
+@st.composite
+def star_shaped(draw):
+    """Random radii in [0.3, 1] at sorted random angles, every wedge under pi.
+
+    With each angular gap (including the wrap-around) below pi, the origin is
+    in the polygon's kernel, so the polygon is simple.
+    """
+    angles = draw(
+        st.lists(
+            st.floats(0.0, 2 * math.pi, exclude_max=True, allow_nan=False),
+            min_size=3,
+            max_size=40,
+            unique=True,
+        )
+    )
+    angles = np.sort(np.array(angles))
+    gaps = np.diff(np.append(angles, angles[0] + 2 * math.pi))
+    assume(gaps.min() > 1e-3 and gaps.max() < math.pi - 1e-3)
+    radii = np.array(draw(st.lists(st.floats(0.3, 1.0), min_size=len(angles), max_size=len(angles))))
+    return np.stack([radii * np.cos(angles), radii * np.sin(angles)], axis=1)
+
+
+@given(star_shaped())
+def test_random_star_shaped_polygons_are_accepted(points):
+    poly = Polygon(points)
+    assert poly.n == len(points)
+    # Increasing angle with y down is clockwise on screen: positive area.
+    assert poly.signed_area > 0
+
+
+@given(star_shaped(), st.integers(0, 39))
+def test_reversing_the_vertex_order_flips_the_signed_area(points, shift):
+    fwd = Polygon(np.roll(points, shift, axis=0))
+    back = Polygon(points[::-1])
+    assert back.signed_area == pytest.approx(-fwd.signed_area, rel=1e-12)
+    assert math.copysign(1.0, back.signed_area) == -math.copysign(1.0, fwd.signed_area)
