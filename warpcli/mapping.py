@@ -48,7 +48,7 @@ class BijectiveMap:
         src: Polygon,
         dst: Polygon,
         *,
-        max_area: float | None = None,
+        max_area: float | tuple[float, float] | None = None,
         check: bool = True,
         timings: dict[str, float] | None = None,
     ) -> BijectiveMap:
@@ -58,9 +58,10 @@ class BijectiveMap:
         ----------
         src, dst : Polygon
             Corresponding polygons (vertex i of ``src`` goes to vertex i of ``dst``).
-        max_area : float or None
-            Largest triangle area of both meshes, in square pixels of the
-            image each polygon lives in; None picks `auto_max_area` for each.
+        max_area : float, (float, float) or None
+            Largest triangle area of both meshes, or of the source and the
+            target mesh, in square pixels of the image each polygon lives in;
+            None picks `auto_max_area` for each.
         check : bool
             Raise `FoldOverError` if either discrete map flips a triangle.
         timings : dict or None
@@ -74,8 +75,9 @@ class BijectiveMap:
         theta = regular_polygon(src.n)
         clock = time.perf_counter
         t0 = clock()
+        areas = (max_area, max_area) if max_area is None or np.isscalar(max_area) else max_area
         meshes = [
-            mesh_polygon(p, auto_max_area(p) if max_area is None else float(max_area)) for p in (src, dst)
+            mesh_polygon(p, auto_max_area(p) if a is None else float(a)) for p, a in zip((src, dst), areas)
         ]
         t1 = clock()
         phi0, phi1 = (solve_harmonic(m, theta) for m in meshes)

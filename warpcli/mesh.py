@@ -23,19 +23,22 @@ AUTO_MAX_TRIANGLES = 1_000_000
 #: The default mesh density: the largest triangle area is the polygon's size
 #: sqrt(area) divided by this, but never below one square pixel. The FEM error
 #: in pixels grows like area bound / size, so this keeps the map's mean error
-#: against a 4x finer mesh near 0.01 px at every image size (bench/accuracy.py
-#: measures it); ``max_area=1`` gives the paper's pixel-matched density.
-AUTO_AREA_DIVISOR = 100.0
+#: against a 4x finer mesh near 0.015 px at every image size (measured by the
+#: accuracy table of bench/run.py); ``max_area=1`` is the paper's pixel density.
+AUTO_AREA_DIVISOR = 50.0
 
 #: Triangle's minimum-angle bound (degrees) for quality meshing.
 MIN_ANGLE = 30.0
 
 # Near a reflex (re-entrant) vertex the harmonic map's gradient is singular and
-# the FEM error concentrates there; boundary segments shrink geometrically
-# towards such a vertex, down to this fraction of the nominal edge length,
-# and Triangle's quality refinement grades the interior to match.
-_GRADE_MIN = 1.0 / 16.0
-_GRADE_RATIO = 1.5
+# the FEM error concentrates there. Boundary points are placed at geometric
+# distances from such a vertex, from _GRADE_MIN pixels up to _GRADE_REACH times
+# the nominal edge length, and Triangle's quality refinement grades the
+# interior to match.
+_GRADE_MIN = 0.1
+_GRADE_RATIO = 1.4
+_GRADE_REACH = 6.0
+_GRADE_SLOPE = 0.25
 
 
 @dataclass(frozen=True)
@@ -159,6 +162,16 @@ def mesh_polygon(polygon: Polygon, max_area: float, *, grade: bool = True) -> Tr
     }
     try:
         out = tr.triangulate(tri_in, f"pq{MIN_ANGLE:g}a{max_area:.17g}Q")
+        reflex = polygon.points[polygon.reflex_vertices()] if grade else np.empty((0, 2))
+        if len(reflex):
+            # Size field: edge length growing linearly with the distance to the
+            # nearest reflex vertex, from _GRADE_MIN up to the nominal length.
+            centroid = out["vertices"][out["triangles"]].mean(axis=1)
+            dist = _nearest_distance(centroid, reflex)
+            h = math.sqrt(4.0 * max_area / math.sqrt(3.0))
+            edge = np.clip(_GRADE_SLOPE * dist, _GRADE_MIN, h)
+            out["triangle_max_area"] = (math.sqrt(3.0) / 4.0 * edge * edge).reshape(-1, 1)
+            out = tr.triangulate(out, f"rpq{MIN_ANGLE:g}aQ")
     except Exception as err:  # triangle raises bare RuntimeErrors; say which polygon.
         raise MeshingError(f"{polygon.name}: triangle failed to mesh the polygon: {err}") from err
     verts = np.ascontiguousarray(out["vertices"], dtype=np.float64)
@@ -179,6 +192,14 @@ def mesh_polygon(polygon: Polygon, max_area: float, *, grade: bool = True) -> Tr
     t = np.einsum("ij,ij->i", verts[boundary] - a, d) / np.einsum("ij,ij->i", d, d)
     t = np.where(mk < 2 + n, 0.0, np.clip(t, 0.0, 1.0))
     return TriMesh(verts, tris, boundary, edge, t)
+
+
+def _nearest_distance(points: NDArray[np.float64], sites: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Distance from each point to the nearest site (sites are few: polygon vertices)."""
+    best = np.full(len(points), np.inf)
+    for s in sites:
+        np.minimum(best, np.hypot(points[:, 0] - s[0], points[:, 1] - s[1]), out=best)
+    return best
 
 
 def _boundary_points(polygon: Polygon, max_area: float, grade: bool):
@@ -212,11 +233,13 @@ def _edge_params(length: float, h: float, grade_start: bool, grade_end: bool) ->
     """
     if not (grade_start or grade_end) or length <= 0:
         return np.zeros(1)
-    # Geometric distances from a graded end: h*_GRADE_MIN, growing by
-    # _GRADE_RATIO until they reach h, capped at a third of the edge each side.
-    radii = [h * _GRADE_MIN]
-    while radii[-1] * _GRADE_RATIO < h:
-        radii.append(radii[-1] * _GRADE_RATIO)
+    # Distances from a graded end: _GRADE_MIN px, then each step at most
+    # _GRADE_RATIO - 1 times the distance (so segments grow geometrically) and
+    # at most the nominal length h, out to _GRADE_REACH * h; capped at a third
+    # of the edge each side.
+    radii = [min(_GRADE_MIN, h)]
+    while radii[-1] < _GRADE_REACH * h:
+        radii.append(radii[-1] + min(h, radii[-1] * (_GRADE_RATIO - 1.0)))
     r = np.array(radii)
     cap = length / 3.0 if (grade_start and grade_end) else length / 1.5
     r = r[r < cap]
