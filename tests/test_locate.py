@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 
 from helpers import comb, star
-from warpcli.locate import TriangleLocator, barycentric_combine, scan_convert
+from warpcli.locate import TriangleLocator, barycentric_combine
 from warpcli.mesh import mesh_polygon
-from warpcli.pipeline import pixel_centres
 from warpcli.polygon import Polygon
 
 
@@ -43,19 +42,15 @@ def test_locator_agrees_with_brute_force(shape):
     assert np.isnan(bary[tri < 0]).all()
 
 
-@pytest.mark.parametrize("shape", [star(), comb()])
-def test_scan_conversion_equals_point_location_at_pixel_centres(shape):
-    mesh = mesh_polygon(Polygon(shape), 3.0)
-    tri_s, bary_s = scan_convert(mesh.vertices, mesh.triangles, 130, 125)
-    tri_l, bary_l = TriangleLocator(mesh.vertices, mesh.triangles).locate(pixel_centres(130, 125))
-    assert np.array_equal(tri_s, tri_l)
-    np.testing.assert_array_equal(bary_s, bary_l)
-
-
-def test_pixel_centre_on_a_shared_edge_goes_to_the_smaller_index():
-    # Two triangles sharing the diagonal x = y; pixel (1, 1) has its centre on it.
-    v = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]])
-    for tris in (np.array([[0, 1, 2], [0, 2, 3]]), np.array([[0, 2, 3], [0, 1, 2]])):
-        tri, _ = scan_convert(v, tris, 4, 4)
-        assert tri.reshape(4, 4)[1, 1] == 0
-        assert (tri >= 0).all()
+def test_neighbours_are_mutual_and_share_the_opposite_edge():
+    mesh = mesh_polygon(Polygon(comb()), 20.0)
+    nbr = TriangleLocator(mesh.vertices, mesh.triangles).neighbours
+    t = mesh.triangles
+    for i in range(len(t)):
+        for k in range(3):
+            j = nbr[i, k]
+            edge = {t[i, (k + 1) % 3], t[i, (k + 2) % 3]}
+            if j < 0:
+                continue
+            assert i in nbr[j]
+            assert edge <= set(t[j])

@@ -169,4 +169,19 @@ def test_inverse_grid_equals_inverse_at_pixel_centres(name):
     f = BijectiveMap.between(src, dst)
     grid = f.inverse_grid(130, 120)
     direct = f.inverse(pixel_centres(130, 120)).reshape(120, 130, 2)
-    np.testing.assert_array_equal(grid, direct)
+    assert np.array_equal(np.isnan(grid), np.isnan(direct))
+    np.testing.assert_allclose(grid, direct, atol=1e-9, rtol=0)
+
+
+def test_inverse_grid_on_a_square_split_along_pixel_centres():
+    """Pixel centres exactly on shared edges and on the boundary are inside, once."""
+    sq = Polygon([[0.5, 0.5], [6.5, 0.5], [6.5, 6.5], [0.5, 6.5]])
+    f = BijectiveMap.between(sq, sq)
+    grid = f.inverse_grid(8, 8)
+    from warpcli.pipeline import pixel_centres
+
+    centres = pixel_centres(8, 8).reshape(8, 8, 2)
+    inside = np.zeros((8, 8), bool)
+    inside[0:7, 0:7] = True  # centres 0.5 .. 6.5 lie on or inside the square
+    assert np.array_equal(np.isfinite(grid[..., 0]), inside)
+    np.testing.assert_allclose(grid[inside], centres[inside], atol=1e-9)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -14,6 +15,7 @@ BARY_TOL = 1e-10
 
 # Queries are processed in blocks of this many points to bound memory.
 _BLOCK = 1 << 20
+
 
 
 class TriangleLocator:
@@ -32,7 +34,7 @@ class TriangleLocator:
     triangles : (M, 3) array_like of int
     """
 
-    def __init__(self, vertices: ArrayLike, triangles: ArrayLike, cells_per_triangle: float = 1.0) -> None:
+    def __init__(self, vertices: ArrayLike, triangles: ArrayLike) -> None:
         v = np.asarray(vertices, dtype=np.float64)
         t = np.asarray(triangles, dtype=np.int64)
         self.vertices = v
@@ -42,7 +44,7 @@ class TriangleLocator:
         lo = v.min(axis=0)
         hi = v.max(axis=0)
         span = np.maximum(hi - lo, 1e-300)
-        cell = math.sqrt(float(span[0] * span[1]) / max(len(t) * cells_per_triangle, 1))
+        cell = math.sqrt(float(span[0] * span[1]) / max(len(t), 1))
         cell = max(cell, float(span.max()) / 4096.0)
         self._lo = lo
         self._cell = cell
@@ -134,6 +136,21 @@ class TriangleLocator:
             pending, first, left = pending[more], first[more] + 1, left[more] - 1
         return tri, bary
 
+    @property
+    def coefficients(self) -> NDArray[np.float64]:
+        """(M, 6) barycentric coefficients per triangle (see `_affine_coefficients`)."""
+        return self._coef
+
+    def bucket_grid(self) -> tuple[float, float, float, int, int, NDArray[np.int64], NDArray[np.int64]]:
+        """``(lo_x, lo_y, cell, rows, cols, indptr, triangle_ids)``: the CSR bucket grid."""
+        lo_x, lo_y = (float(v) for v in self._lo)
+        return lo_x, lo_y, float(self._cell), self._shape[0], self._shape[1], self._indptr, self._tri_ids
+
+    @cached_property
+    def neighbours(self) -> NDArray[np.int64]:
+        """(M, 3): the triangle across the edge opposite each corner, -1 on the boundary."""
+        return triangle_neighbours(self.triangles)
+
     def interpolate(self, values: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
         """Piecewise-linear interpolation of per-vertex ``values`` at ``points``.
 
@@ -145,6 +162,30 @@ class TriangleLocator:
         vals = np.asarray(values, dtype=np.float64)
         tri, bary = self.locate(points)
         return barycentric_combine(vals, self.triangles, tri, bary)
+
+
+def triangle_neighbours(triangles: ArrayLike) -> NDArray[np.int64]:
+    """For each triangle and corner k, the triangle sharing the edge opposite k (-1 if none).
+
+    >>> triangle_neighbours([[0, 1, 2], [2, 1, 3]]).tolist()
+    [[1, -1, -1], [-1, -1, 0]]
+    """
+    t = np.asarray(triangles, dtype=np.int64)
+    m = len(t)
+    # Half-edge opposite corner k of triangle i: (t[i, k+1], t[i, k+2]).
+    a = np.concatenate([t[:, 1], t[:, 2], t[:, 0]])
+    b = np.concatenate([t[:, 2], t[:, 0], t[:, 1]])
+    key = np.minimum(a, b) * (int(t.max(initial=0)) + 1) + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    same = np.flatnonzero(ks[1:] == ks[:-1])
+    out = np.full(3 * m, -1, dtype=np.int64)
+    h1 = order[same]
+    h2 = order[same + 1]
+    out[h1] = h2 % m
+    out[h2] = h1 % m
+    # Half-edge j = k * m + i  ->  (i, k).
+    return out.reshape(3, m).T.copy()
 
 
 def barycentric_combine(
@@ -186,81 +227,3 @@ def _affine_coefficients(v: NDArray[np.float64], t: NDArray[np.int64]) -> NDArra
         ],
         axis=1,
     )
-
-
-def scan_convert(
-    vertices: ArrayLike, triangles: ArrayLike, width: int, height: int
-) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """Locate every pixel centre of a ``width`` x ``height`` grid in a triangle mesh.
-
-    Pixel ``(r, c)`` has its centre at ``(c + 0.5, r + 0.5)``. Each triangle
-    enumerates the pixel centres of its bounding box and keeps those inside,
-    so the cost is proportional to the pixels covered, with no search. A
-    centre on an edge shared by two triangles goes to the smaller triangle
-    index, as in `TriangleLocator.locate`.
-
-    Returns
-    -------
-    tri : (height * width,) ndarray of int64
-        Containing triangle per pixel (row-major), -1 outside the mesh.
-    bary : (height * width, 3) ndarray of float
-        Barycentric coordinates (NaN outside the mesh).
-    """
-    v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    coef = _affine_coefficients(v, t)
-    corners = v[t]  # (M, 3, 2)
-    lo = corners.min(axis=1)
-    hi = corners.max(axis=1)
-    # Columns whose centre c + 0.5 lies in [xmin, xmax], slightly widened so
-    # that centres on an edge within the barycentric tolerance are tested.
-    pad = 1e-9 * max(width, height)
-    c0 = np.maximum(np.ceil(lo[:, 0] - 0.5 - pad), 0).astype(np.int64)
-    c1 = np.minimum(np.floor(hi[:, 0] - 0.5 + pad), width - 1).astype(np.int64)
-    r0 = np.maximum(np.ceil(lo[:, 1] - 0.5 - pad), 0).astype(np.int64)
-    r1 = np.minimum(np.floor(hi[:, 1] - 0.5 + pad), height - 1).astype(np.int64)
-    nx = np.maximum(c1 - c0 + 1, 0)
-    ny = np.maximum(r1 - r0 + 1, 0)
-    counts = nx * ny
-    npix = width * height
-    best = np.full(npix, np.iinfo(np.int64).max, dtype=np.int64)
-    hits_tri = []
-    hits_pix = []
-    hits_bary = []
-    # Triangles in chunks of at most ~_BLOCK candidate pixels, to bound memory.
-    ends = np.searchsorted(np.cumsum(counts), np.arange(_BLOCK, counts.sum() + _BLOCK, _BLOCK), side="right")
-    start = 0
-    for end in np.unique(np.append(ends, len(t))):
-        if end <= start:
-            continue
-        sl = slice(start, end)
-        start = end
-        cnt = counts[sl]
-        if cnt.sum() == 0:
-            continue
-        tri = np.repeat(np.arange(sl.start, sl.stop), cnt)
-        first = np.cumsum(cnt) - cnt
-        k = np.arange(tri.size) - np.repeat(first, cnt)
-        w = nx[tri]
-        col = c0[tri] + k % w
-        row = r0[tri] + k // w
-        co = coef[tri]
-        dx = col + 0.5 - co[:, 0]
-        dy = row + 0.5 - co[:, 1]
-        l1 = dx * co[:, 2] + dy * co[:, 3]
-        l2 = dx * co[:, 4] + dy * co[:, 5]
-        l0 = 1.0 - l1 - l2
-        inside = (l0 >= -BARY_TOL) & (l1 >= -BARY_TOL) & (l2 >= -BARY_TOL)
-        pix = row[inside] * width + col[inside]
-        tri = tri[inside]
-        np.minimum.at(best, pix, tri)
-        hits_tri.append(tri)
-        hits_pix.append(pix)
-        hits_bary.append(np.stack([l0[inside], l1[inside], l2[inside]], axis=1))
-    out_tri = np.full(npix, -1, dtype=np.int64)
-    out_bary = np.full((npix, 3), np.nan)
-    for tri, pix, bary in zip(hits_tri, hits_pix, hits_bary):
-        win = best[pix] == tri
-        out_tri[pix[win]] = tri[win]
-        out_bary[pix[win]] = bary[win]
-    return out_tri, out_bary

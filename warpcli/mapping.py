@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from concurrent.futures import ThreadPoolExecutor
 from functools import cached_property
 
 import numpy as np
@@ -10,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import FoldOverError
 from .harmonic import HarmonicMap, solve_harmonic
-from .locate import TriangleLocator, barycentric_combine, scan_convert
+from .locate import TriangleLocator, _affine_coefficients, barycentric_combine
 from .mesh import auto_max_area, mesh_polygon
 from .polygon import Polygon, check_pair
 from .theta import regular_polygon
@@ -73,14 +74,20 @@ class BijectiveMap:
         """
         check_pair(src, dst)
         theta = regular_polygon(src.n)
+        areas = (max_area, max_area) if max_area is None or np.isscalar(max_area) else max_area
+        area0, area1 = (auto_max_area(p) if a is None else float(a) for p, a in zip((src, dst), areas))
         clock = time.perf_counter
         t0 = clock()
-        areas = (max_area, max_area) if max_area is None or np.isscalar(max_area) else max_area
-        meshes = [
-            mesh_polygon(p, auto_max_area(p) if a is None else float(a)) for p, a in zip((src, dst), areas)
-        ]
-        t1 = clock()
-        phi0, phi1 = (solve_harmonic(m, theta) for m in meshes)
+        # SuperLU releases the GIL and triangle does not: the source map is
+        # solved on a second core while the target is meshed, then both
+        # solves run at once. Each solve is independent, so the results do
+        # not depend on the scheduling.
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            solve0 = pool.submit(solve_harmonic, mesh_polygon(src, area0), theta)
+            mesh1 = mesh_polygon(dst, area1)
+            t1 = clock()
+            solve1 = pool.submit(solve_harmonic, mesh1, theta)
+            phi0, phi1 = solve0.result(), solve1.result()
         if timings is not None:
             timings["mesh"] = t1 - t0
             timings["solve"] = clock() - t1
@@ -161,18 +168,32 @@ class BijectiveMap:
     def inverse_grid(self, width: int, height: int) -> NDArray[np.float64]:
         """`inverse` at every pixel centre of a ``width`` x ``height`` output image.
 
-        The same values as ``inverse(pixel_centres(width, height))``, but the
-        target mesh is scan-converted onto the pixel grid instead of searched.
+        The same values as ``inverse(pixel_centres(width, height))`` (up to
+        rounding on shared edges), computed by one compiled pass: the target
+        mesh is scan-converted onto the pixel grid, and each pixel's search in
+        Theta walks from the previous pixel's triangle.
 
         Returns
         -------
         (height, width, 2) ndarray of float
             Source point of each output pixel centre; NaN outside the target.
         """
-        mesh = self.phi1.mesh
-        tri, bary = scan_convert(mesh.vertices, mesh.triangles, width, height)
-        theta = barycentric_combine(self.phi1.values, mesh.triangles, tri, bary)
-        out = self._from_theta(theta, self._theta0_locator, self.phi0, self.src)
+        from . import _kernels
+
+        mesh1 = self.phi1.mesh
+        tri1 = mesh1.triangles.astype(np.int64)
+        loc0 = self._theta0_locator
+        out = np.empty((height * width, 2))
+        status = np.zeros(height * width, dtype=np.int8)
+        _kernels.compose_grid(
+            mesh1.vertices, tri1, _affine_coefficients(mesh1.vertices, tri1), self.phi1.values,
+            loc0.triangles, loc0.coefficients, loc0.neighbours, self.phi0.mesh.vertices,
+            *loc0.bucket_grid(), width, height, out, status,
+        )  # fmt: skip
+        out[status == _kernels.OUTSIDE] = np.nan
+        lost = np.flatnonzero(status == _kernels.LOST)
+        if lost.size:
+            out[lost] = theta_boundary_to_polygon(out[lost], self.theta, self.src.points)
         return out.reshape(height, width, 2)
 
     def to_theta_src(self, points: ArrayLike) -> NDArray[np.float64]:
@@ -184,7 +205,11 @@ class BijectiveMap:
         return self._dst_locator.interpolate(self.phi1.values, _points(points))
 
     def _from_theta(
-        self, theta: NDArray[np.float64], locator: TriangleLocator, phi: HarmonicMap, poly: Polygon
+        self,
+        theta: NDArray[np.float64],
+        locator: TriangleLocator,
+        phi: HarmonicMap,
+        poly: Polygon,
     ) -> NDArray[np.float64]:
         """phi^-1: points of Theta back to the polygon phi is defined on."""
         tri, bary = locator.locate(theta)

@@ -47,8 +47,6 @@ def resample(
         Integer results are rounded and clipped to the type's range; float
         results are neither clipped nor quantized.
     """
-    from scipy.ndimage import map_coordinates
-
     if interp not in INTERPOLATIONS:
         raise ValueError(f"interp must be one of {sorted(INTERPOLATIONS)}, got {interp!r}")
     img = np.asarray(image)
@@ -74,11 +72,19 @@ def resample(
         for c in range(nc):
             if c != alpha_channel:
                 src[:, :, c] *= a
-    # Array index i has its centre at coordinate i + 0.5.
-    idx = np.stack([y[valid] - 0.5, x[valid] - 0.5])
-    order = INTERPOLATIONS[interp]
-    for c in range(nc):
-        out[valid, c] = map_coordinates(src[:, :, c], idx, order=order, mode="nearest", prefilter=True)
+    if interp == "cubic":
+        from scipy.ndimage import map_coordinates
+
+        # Array index i has its centre at coordinate i + 0.5.
+        idx = np.stack([y[valid] - 0.5, x[valid] - 0.5])
+        for c in range(nc):
+            out[valid, c] = map_coordinates(src[:, :, c], idx, order=3, mode="nearest", prefilter=True)
+    else:
+        from . import _kernels
+
+        sample = _kernels.sample_linear if interp == "linear" else _kernels.sample_nearest
+        points = np.ascontiguousarray(coords.reshape(-1, 2))
+        sample(np.ascontiguousarray(src), points, out)
     if alpha_channel is not None:
         a = out[valid, alpha_channel] / alpha_scale
         with np.errstate(divide="ignore", invalid="ignore"):
