@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import logging
 import os
 import subprocess
@@ -469,3 +470,37 @@ def test_huge_polygon_at_pixel_density_is_refused_without_meshing(files):
     assert "Traceback" not in proc.stderr
     assert not os.path.exists(files.out)
     assert sorted(os.listdir(files.dir)) == ["big.json", "dst.json", "in.png", "src.json"]
+
+
+class _FakeTerminal(io.StringIO):
+    def __init__(self, tty: bool) -> None:
+        super().__init__()
+        self._tty = tty
+
+    def isatty(self) -> bool:
+        return self._tty
+
+
+@pytest.mark.parametrize("tty,enabled,shown", [(True, True, True), (False, True, False), (True, False, False)])
+def test_progress_only_on_a_terminal_and_not_when_quiet(tty, enabled, shown):
+    import time
+
+    from warpcli.cli import Progress
+
+    stream = _FakeTerminal(tty)
+    with Progress(stream, enabled=enabled, delay=0.01, interval=0.01) as progress:
+        progress.stage("solving")
+        time.sleep(0.1)
+    text = stream.getvalue()
+    assert ("warp: solving..." in text) == shown
+    if shown:
+        assert text.endswith("\r\x1b[K")  # the line is cleared at the end
+
+
+def test_progress_stays_silent_for_short_runs():
+    from warpcli.cli import Progress
+
+    stream = _FakeTerminal(True)
+    with Progress(stream, delay=5.0) as progress:
+        progress.stage("solving")
+    assert stream.getvalue() == ""

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import logging
 import sys
+import threading
+import time
 
 import click
 
@@ -99,16 +101,18 @@ def warp(input_path, output_path, src_path, dst_path, interp, size, background, 
     _configure_logging(verbose, quiet)
     from .pipeline import warp_file
 
-    result = warp_file(
-        input_path,
-        output_path,
-        src_path,
-        dst_path,
-        size=size,
-        interp=interp,
-        background=background,
-        max_area=max_area,
-    )
+    with Progress(sys.stderr, enabled=not quiet) as progress:
+        result = warp_file(
+            input_path,
+            output_path,
+            src_path,
+            dst_path,
+            size=size,
+            interp=interp,
+            background=background,
+            max_area=max_area,
+            progress=progress.stage,
+        )
     log = logging.getLogger("warpcli")
     for stage, seconds in result.timings.items():
         log.info("%-9s %7.3f s", stage, seconds)
@@ -117,6 +121,61 @@ def warp(input_path, output_path, src_path, dst_path, interp, size, background, 
         result.map.phi0.mesh.n_vertices,
         result.map.phi1.mesh.n_vertices,
     )
+
+
+class Progress:
+    """A one-line stage display on stderr for runs longer than ``delay`` seconds.
+
+    Shown only when the stream is a terminal (never in scripts or logs) and
+    not with -q; the line is cleared when the run ends.
+    """
+
+    def __init__(self, stream, *, enabled: bool = True, delay: float = 1.0, interval: float = 0.2) -> None:
+        self._stream = stream
+        self._enabled = enabled and _isatty(stream)
+        self._delay = delay
+        self._interval = interval
+        self._stage = "starting"
+        self._shown = False
+        self._start = 0.0
+        self._done = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def stage(self, name: str) -> None:
+        self._stage = name
+
+    def __enter__(self) -> Progress:
+        if self._enabled:
+            self._start = time.monotonic()
+            self._thread = threading.Thread(target=self._run, name="warp-progress", daemon=True)
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._thread is not None:
+            self._done.set()
+            self._thread.join()
+            if self._shown:
+                self._stream.write("\r\x1b[K")
+                self._stream.flush()
+
+    def _run(self) -> None:
+        if self._done.wait(self._delay):
+            return
+        while True:
+            elapsed = time.monotonic() - self._start
+            self._stream.write(f"\r\x1b[Kwarp: {self._stage}... {elapsed:.1f} s")
+            self._stream.flush()
+            self._shown = True
+            if self._done.wait(self._interval):
+                return
+
+
+def _isatty(stream) -> bool:
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):
+        return False
 
 
 def _configure_logging(verbose: int, quiet: bool) -> None:

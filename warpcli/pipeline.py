@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,6 +67,7 @@ def warp_image(
     alpha_channel: int | None = None,
     max_area: float | None = None,
     warp_map: BijectiveMap | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> WarpResult:
     """Warp an image so that polygon ``src`` goes onto polygon ``dst``.
 
@@ -89,6 +91,8 @@ def warp_image(
         Largest mesh triangle area in square pixels (None: automatic).
     warp_map : BijectiveMap or None
         A map already built for these polygons, to reuse.
+    progress : callable or None
+        Called with the name of each stage as it starts.
 
     Returns
     -------
@@ -120,13 +124,17 @@ def warp_image(
     if np.issubdtype(img.dtype, np.integer):
         bg = bg * np.iinfo(img.dtype).max
 
+    report = progress or (lambda stage: None)
     fmap = warp_map
     if fmap is None:
+        report("meshing and solving")
         fmap = BijectiveMap.between(src, dst, max_area=max_area, timings=timings)
     clock = time.perf_counter
     t0 = clock()
+    report("composing the map")
     inverse = fmap.inverse_grid(width, height)
     t1 = clock()
+    report("resampling")
     out = resample(img, inverse, interp=interp, background=bg, alpha_channel=alpha_channel)
     timings["compose"] = t1 - t0
     timings["resample"] = clock() - t1
@@ -147,11 +155,13 @@ def warp_file(
     no file behind. ``options`` are those of `warp_image`.
     """
     clock = time.perf_counter
+    report = options.get("progress") or (lambda stage: None)
     check_output_path(output_path, inputs=(input_path, src_path, dst_path))
     src = read_polygon(src_path)
     dst = read_polygon(dst_path)
     check_pair(src, dst)
     t0 = clock()
+    report("reading")
     image = read_image(input_path)
     t_read = clock() - t0
     _warn_if_outside(src, image.width, image.height, os.fspath(input_path))
@@ -159,6 +169,7 @@ def warp_file(
         log.info("%s and %s run in opposite directions: the warp mirrors the image", src.name, dst.name)
     result = warp_image(image.pixels, src, dst, alpha_channel=image.alpha_channel, **options)
     t0 = clock()
+    report("writing")
     write_image(
         output_path,
         RasterImage(result.pixels, image.channel_names, image.alpha_channel, image.attributes),
