@@ -73,13 +73,30 @@ def test_identical_polygons_give_the_identity(name):
 def test_similar_polygons_give_the_similarity(name, scale, angle, shift):
     src = Polygon(SHAPES[name])
     dst = Polygon(similarity(src.points, scale, angle, shift))
-    f = BijectiveMap.between(src, dst)
+    f = BijectiveMap.between(src, dst, max_area=2.0)
     p = inside_points(src, 3000)
     err = np.hypot(*(f.forward(p) - similarity(p, scale, angle, shift)).T)
     # FEM accuracy: the two meshes are not similar, so the two discrete maps
     # differ by their discretization error (largest at reflex corners).
     assert np.mean(err) < 0.02
     assert np.max(err) < 0.3
+
+
+def test_default_density_is_within_the_documented_accuracy():
+    """auto density: mean error against a 4x finer mesh at most 0.05 px (README)."""
+    from warpcli.mesh import auto_max_area
+    from warpcli.pipeline import pixel_centres
+
+    src = Polygon(star(cx=128, cy=128, r_in=60, r_out=124))
+    dst = Polygon(star(cx=128, cy=128, r_in=45, r_out=120, phase=0.3))
+    coarse = BijectiveMap.between(src, dst)
+    fine = BijectiveMap.between(src, dst, max_area=(auto_max_area(src) / 4, auto_max_area(dst) / 4))
+    a = coarse.inverse_grid(256, 256)
+    b = fine.inverse_grid(256, 256)
+    ok = np.isfinite(a[..., 0]) & np.isfinite(b[..., 0])
+    err = np.hypot(*(a[ok] - b[ok]).T)
+    assert err.mean() < 0.05
+    assert err.max() < 1.0
 
 
 def test_mirrored_target_gives_the_reflection():

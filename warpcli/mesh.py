@@ -23,9 +23,10 @@ AUTO_MAX_TRIANGLES = 1_000_000
 #: The default mesh density: the largest triangle area is the polygon's size
 #: sqrt(area) divided by this, but never below one square pixel. The FEM error
 #: in pixels grows like area bound / size, so this keeps the map's mean error
-#: against a 4x finer mesh near 0.015 px at every image size (measured by the
-#: accuracy table of bench/run.py); ``max_area=1`` is the paper's pixel density.
-AUTO_AREA_DIVISOR = 50.0
+#: against a 4x finer mesh near 0.015-0.02 px at every image size, a third of
+#: the 0.05 px we allow (measured by the accuracy table of bench/run.py);
+#: ``max_area=1`` is the paper's pixel density.
+AUTO_AREA_DIVISOR = 35.0
 
 #: Triangle's minimum-angle bound (degrees) for quality meshing.
 MIN_ANGLE = 30.0
