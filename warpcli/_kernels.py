@@ -61,7 +61,7 @@ def compose_grid(
     v1, tri1, coef1, val1,
     tri0, coef0, nbr0, v0,
     lo_x, lo_y, cell, rows, cols, indptr, ids,
-    width, height, out, status,
+    width, height, out, status, where0, where1,
 ):  # fmt: skip
     """Pull every pixel centre of the output grid back through phi0^-1 o phi1.
 
@@ -75,6 +75,8 @@ def compose_grid(
     Writes ``out[p]`` = x and ``status[p]`` = FOUND; for a pixel outside the
     target, status OUTSIDE (out untouched); for a theta found in no triangle
     (a rounding error at Theta's boundary), status LOST and ``out[p]`` = theta.
+    ``where1[p]`` and ``where0[p]`` receive the target and source triangles
+    (the latter -1 when LOST), for the Jacobians of the map.
     """
     hint = 0
     for i in range(tri1.shape[0]):
@@ -98,6 +100,7 @@ def compose_grid(
                 l0, l1, l2 = _bary(coef1, i, col + 0.5, r + 0.5)
                 if l0 < -_TOL or l1 < -_TOL or l2 < -_TOL:
                     continue
+                where1[pix] = i
                 thx = l0 * val1[a, 0] + l1 * val1[b, 0] + l2 * val1[c, 0]
                 thy = l0 * val1[a, 1] + l1 * val1[b, 1] + l2 * val1[c, 1]
                 t = hint
@@ -125,6 +128,7 @@ def compose_grid(
                     out[pix, 1] = thy
                     continue
                 hint = found
+                where0[pix] = found
                 m0, m1, m2 = _bary(coef0, found, thx, thy)
                 p0 = tri0[found, 0]
                 p1 = tri0[found, 1]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
@@ -15,6 +16,25 @@ from .locate import TriangleLocator, _affine_coefficients, barycentric_combine
 from .mesh import auto_max_area, mesh_polygon
 from .polygon import Polygon, check_pair
 from .theta import regular_polygon
+
+@dataclass(frozen=True)
+class GridPullBack:
+    """The inverse map at output pixel centres, with the triangles it went through.
+
+    Attributes
+    ----------
+    inverse_map : (H, W, 2) ndarray of float
+        Source point of each output pixel centre, NaN outside the target.
+    source_triangle, target_triangle : (H, W) ndarray of int32
+        Triangle of the source mesh containing the source point and of the
+        target mesh containing the pixel centre (-1 outside, or for the source
+        triangle of a pixel on the boundary resolved through Theta's boundary).
+    """
+
+    inverse_map: NDArray[np.float64]
+    source_triangle: NDArray[np.int32]
+    target_triangle: NDArray[np.int32]
+
 
 class BijectiveMap:
     """The smooth bijective map between two polygons, discretized by FEM.
@@ -178,6 +198,10 @@ class BijectiveMap:
         (height, width, 2) ndarray of float
             Source point of each output pixel centre; NaN outside the target.
         """
+        return self.pull_back_grid(width, height).inverse_map
+
+    def pull_back_grid(self, width: int, height: int) -> GridPullBack:
+        """`inverse_grid` together with the triangles each pixel went through."""
         from . import _kernels
 
         mesh1 = self.phi1.mesh
@@ -185,16 +209,19 @@ class BijectiveMap:
         loc0 = self._theta0_locator
         out = np.empty((height * width, 2))
         status = np.zeros(height * width, dtype=np.int8)
+        where0 = np.full(height * width, -1, dtype=np.int32)
+        where1 = np.full(height * width, -1, dtype=np.int32)
         _kernels.compose_grid(
             mesh1.vertices, tri1, _affine_coefficients(mesh1.vertices, tri1), self.phi1.values,
             loc0.triangles, loc0.coefficients, loc0.neighbours, self.phi0.mesh.vertices,
-            *loc0.bucket_grid(), width, height, out, status,
+            *loc0.bucket_grid(), width, height, out, status, where0, where1,
         )  # fmt: skip
         out[status == _kernels.OUTSIDE] = np.nan
         lost = np.flatnonzero(status == _kernels.LOST)
         if lost.size:
             out[lost] = theta_boundary_to_polygon(out[lost], self.theta, self.src.points)
-        return out.reshape(height, width, 2)
+        shape = (height, width)
+        return GridPullBack(out.reshape(height, width, 2), where0.reshape(shape), where1.reshape(shape))
 
     def to_theta_src(self, points: ArrayLike) -> NDArray[np.float64]:
         """phi0: source points to Theta (NaN outside the source polygon)."""
