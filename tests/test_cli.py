@@ -130,7 +130,7 @@ def test_version(capsys):
 
 def assert_full_help(text):
     assert text.startswith("Usage: warp [OPTIONS] INPUT OUTPUT")
-    assert "Example:" in text
+    assert "Examples:" in text
     assert "warp face.png --src face.json --dst smile.json warped.png" in text
     assert "Exit status:" in text
     for code in ("0  success", "1  failure", "2  bad input"):
@@ -504,3 +504,66 @@ def test_progress_stays_silent_for_short_runs():
     with Progress(stream, delay=5.0) as progress:
         progress.stage("solving")
     assert stream.getvalue() == ""
+
+
+# --- report, grid and heatmap -------------------------------------------------
+
+REPORT_KEYS = [
+    "vertices", "source_mesh", "target_mesh", "flipped_triangles", "min_jacobian_det",
+    "conformal", "isometric", "timings",
+]  # fmt: skip
+
+
+def test_report_to_a_file_and_to_stdout(files, capsys):
+    import json
+
+    rep_path = files.dir / "report.json"
+    assert main(argv(files, "--report", str(rep_path))) == 0
+    doc = json.loads(rep_path.read_text())
+    assert list(doc) == REPORT_KEYS
+    assert doc["vertices"] == 4
+    assert set(doc["source_mesh"]) == {"vertices", "triangles"} == set(doc["target_mesh"])
+    assert doc["flipped_triangles"] == 0 and doc["min_jacobian_det"] > 0
+    assert set(doc["conformal"]) == {"mean", "max"} == set(doc["isometric"])
+    assert doc["conformal"]["mean"] >= 2.0 and doc["isometric"]["mean"] >= 1.0
+    assert {"mesh", "solve", "compose", "resample", "read", "write", "metrics"} <= set(doc["timings"])
+    capsys.readouterr()
+    assert main(argv(files, "--report", "-", out=str(files.dir / "o2.png"))) == 0
+    out = capsys.readouterr().out
+    again = json.loads(out)
+    assert list(again) == REPORT_KEYS
+    assert again["conformal"] == doc["conformal"]  # deterministic
+
+
+def test_grid_and_heatmap_pictures(files):
+    grid = files.dir / "grid.png"
+    heat = files.dir / "heat.png"
+    assert main(argv(files, "--grid", str(grid), "--heatmap", str(heat), "--heatmap-measure", "det")) == 0
+    g = read_pixels(grid)
+    assert g.shape[0] == 64 and g.shape[1] > 2 * 64 and g.shape[2] == 3
+    h = read_pixels(heat)
+    assert h.shape[2] == 3 and h.shape[1] > 64  # the picture and its legend
+
+
+@pytest.mark.parametrize("weights", ["cotan", "positive"])
+def test_weights_option(files, weights):
+    assert main(argv(files, "--weights", weights)) == 0
+    assert os.path.exists(files.out)
+
+
+def test_report_beside_a_missing_directory_is_bad_input(files, capsys):
+    bad = str(files.dir / "nope" / "r.json")
+    before = sorted(os.listdir(files.dir))
+    assert main(argv(files, "--report", bad)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nope" in err[0]
+    assert sorted(os.listdir(files.dir)) == before
+
+
+def test_grid_may_not_overwrite_an_input_or_the_output(files, capsys):
+    before = sorted(os.listdir(files.dir))
+    assert main(argv(files, "--grid", files.image)) == 2
+    assert main(argv(files, "--grid", files.out)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "overwrite" in err[0] and "two outputs" in err[1]
+    assert sorted(os.listdir(files.dir)) == before

@@ -75,3 +75,34 @@ def test_mirrored_polygon_maps_without_flips():
     poly = Polygon(regular(7)[::-1])
     phi = solve_harmonic(mesh_polygon(poly, 4.0), regular_polygon(7))
     assert not phi.flipped().any()
+
+
+def test_mean_value_weights_are_positive_and_reproduce_linear_functions():
+    from warpcli.harmonic import mean_value_laplacian
+
+    mesh = mesh_polygon(Polygon(star()), 6.0)
+    k = mean_value_laplacian(mesh.vertices, mesh.triangles)
+    coo = k.tocoo()
+    off = coo.row != coo.col
+    assert (coo.data[off] < 0).all()  # w_ij > 0 on every edge
+    assert np.abs(np.asarray(k.sum(axis=1))).max() < 1e-10
+    # Linear precision: sum_j w_ij (v_j - v_i) = 0 at interior vertices.
+    interior = np.setdiff1d(np.arange(mesh.n_vertices), mesh.boundary)
+    assert np.abs((k @ mesh.vertices)[interior]).max() < 1e-9
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_positive_weights_never_flip_and_interpolate_the_boundary(name):
+    poly = Polygon(SHAPES[name])
+    theta = regular_polygon(poly.n)
+    phi = solve_harmonic(mesh_polygon(poly, 4.0), theta, "positive")
+    assert not phi.flipped().any()
+    np.testing.assert_allclose(phi.values[phi.mesh.boundary], boundary_values(phi.mesh, theta), atol=0)
+
+
+def test_positive_weights_map_a_triangle_affinely():
+    tri = Polygon([[10.0, 12.0], [90.0, 30.0], [40.0, 100.0]])
+    phi = solve_harmonic(mesh_polygon(tri, 3.0), regular_polygon(3), "positive")
+    coef = np.linalg.solve(np.hstack([tri.points, np.ones((3, 1))]), regular_polygon(3))
+    expected = np.hstack([phi.mesh.vertices, np.ones((phi.mesh.n_vertices, 1))]) @ coef
+    np.testing.assert_allclose(phi.values, expected, atol=1e-12)

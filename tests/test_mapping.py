@@ -202,3 +202,55 @@ def test_inverse_grid_on_a_square_split_along_pixel_centres():
     inside[0:7, 0:7] = True  # centres 0.5 .. 6.5 lie on or inside the square
     assert np.array_equal(np.isfinite(grid[..., 0]), inside)
     np.testing.assert_allclose(grid[inside], centres[inside], atol=1e-9)
+
+
+def _with_a_flip(phi):
+    """The same map with two neighbouring interior nodes' images swapped: folded."""
+    from warpcli.harmonic import HarmonicMap
+
+    values = phi.values.copy()
+    interior = np.setdiff1d(np.arange(phi.mesh.n_vertices), phi.mesh.boundary)
+    t = phi.mesh.triangles
+    for tri in t:
+        inner = [v for v in tri if v in set(interior.tolist())]
+        if len(inner) >= 2:
+            a, b = inner[:2]
+            values[[a, b]] = values[[b, a]]
+            break
+    return HarmonicMap(phi.mesh, values, phi.theta, phi.weights)
+
+
+def test_a_folded_map_is_detected_and_refused():
+    from warpcli.errors import FoldOverError
+
+    src = Polygon(star())
+    f = BijectiveMap.between(src, src)
+    bad = BijectiveMap(src, src, _with_a_flip(f.phi0), f.phi1)
+    assert bad.flipped_triangles() > 0
+    with pytest.raises(FoldOverError, match="flip"):
+        bad.check_bijective()
+
+
+def test_a_folded_cotan_map_is_repaired_with_positive_weights(caplog):
+    from warpcli.mapping import _repaired
+
+    poly = Polygon(star())
+    f = BijectiveMap.between(poly, poly)
+    folded = _with_a_flip(f.phi0)
+    assert folded.flipped().any()
+    with caplog.at_level("WARNING", logger="warpcli"):
+        fixed = _repaired(folded, poly)
+    assert fixed.weights == "positive" and not fixed.flipped().any()
+    assert "positive" in caplog.text
+
+
+def test_positive_weights_give_a_bijective_map_close_to_the_harmonic_one():
+    src = Polygon(star())
+    dst = Polygon(regular(12, r=55.0, phase=0.2))
+    f = BijectiveMap.between(src, dst, weights="positive")
+    g = BijectiveMap.between(src, dst)
+    assert f.flipped_triangles() == 0
+    p = inside_points(src, 2000)
+    np.testing.assert_allclose(f.inverse(f.forward(p)), p, atol=1e-8)
+    # Not harmonic, but the same kind of map: within a few pixels everywhere.
+    assert np.nanmax(np.hypot(*(f.forward(p) - g.forward(p)).T)) < 8.0

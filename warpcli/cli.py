@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import sys
 import threading
@@ -81,10 +82,30 @@ def _parse_max_area(ctx, param, value):
     metavar="PX2|auto",
     help="Largest mesh triangle area in square pixels; 1 is the paper's pixel density, auto keeps the map within ~0.01 px of it, faster.",
 )
+@click.option(
+    "--weights",
+    type=click.Choice(("cotan", "positive")),
+    default="cotan",
+    show_default=True,
+    help="Laplacian weights: cotan solves the harmonic maps; positive (mean-value) is one-to-one on any mesh but not harmonic.",
+)
+@click.option("--report", "report_path", type=click.Path(dir_okay=False, allow_dash=True), help="Write a JSON report (mesh sizes, fold-overs, Jacobian, distortion, timings); - for stdout.")
+@click.option("--grid", "grid_path", type=click.Path(dir_okay=False), help="Write the input with a grid beside the output with the grid carried through the map.")
+@click.option("--heatmap", "heatmap_path", type=click.Path(dir_okay=False), help="Write the per-pixel distortion of the map in colour, with a legend.")
+@click.option(
+    "--heatmap-measure",
+    type=click.Choice(("conformal", "isometric", "det")),
+    default="conformal",
+    show_default=True,
+    help="What --heatmap shows.",
+)
 @click.option("-v", "--verbose", count=True, help="Report progress and timings on stderr (-vv for more).")
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 @click.version_option(__version__, "--version", prog_name="warp")
-def warp(input_path, output_path, src_path, dst_path, interp, size, background, max_area, verbose, quiet):
+def warp(
+    input_path, output_path, src_path, dst_path, interp, size, background, max_area, weights,
+    report_path, grid_path, heatmap_path, heatmap_measure, verbose, quiet,
+):  # fmt: skip
     """Warp INPUT so that polygon SRC goes onto polygon DST; write OUTPUT.
 
     The map is smooth and bijective (no fold-overs) and takes each edge of SRC
@@ -95,8 +116,9 @@ def warp(input_path, output_path, src_path, dst_path, interp, size, background, 
     extensions (anything OpenImageIO reads and writes).
 
     \b
-    Example:
+    Examples:
       warp face.png --src face.json --dst smile.json warped.png
+      warp face.png --src face.json --dst smile.json warped.png --report - --grid grid.png
     """
     _configure_logging(verbose, quiet)
     from .pipeline import warp_file
@@ -111,8 +133,15 @@ def warp(input_path, output_path, src_path, dst_path, interp, size, background, 
             interp=interp,
             background=background,
             max_area=max_area,
+            weights=weights,
+            report_path=report_path,
+            grid_path=grid_path,
+            heatmap_path=heatmap_path,
+            heatmap_measure=heatmap_measure,
             progress=progress.stage,
         )
+    if report_path == "-":
+        click.echo(json.dumps(result.report, indent=2))
     log = logging.getLogger("warpcli")
     for stage, seconds in result.timings.items():
         log.info("%-9s %7.3f s", stage, seconds)

@@ -22,11 +22,14 @@ class HarmonicMap:
         Image in Theta of every mesh vertex.
     theta : (n, 2) ndarray of float
         The convex polygon the map goes onto.
+    weights : str
+        The Laplacian's edge weights, ``"cotan"`` or ``"positive"``.
     """
 
     mesh: TriMesh
     values: NDArray[np.float64]
     theta: NDArray[np.float64]
+    weights: str = "cotan"
 
     def __post_init__(self) -> None:
         if self.values.shape != self.mesh.vertices.shape:
@@ -101,6 +104,42 @@ def cotan_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.integer
     return (off + sp.diags(diag)).tocsr()
 
 
+def mean_value_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.integer]) -> sp.csr_matrix:
+    """Floater's mean-value weights as a Laplacian (the paper's Section 3.1.4).
+
+    ``w_ij = (tan(a_ij / 2) + tan(b_ij / 2)) / |v_i - v_j|`` with a_ij and b_ij
+    the angles at v_i of the two triangles beside edge ij: positive for every
+    triangle mesh, so the discrete map onto a convex polygon is a
+    convex-combination map and one-to-one whatever the mesh. Not symmetric,
+    and not the harmonic map: the price of the guarantee is a different
+    (still smooth-looking) interpolant. Rows: ``L[i, i] = sum_j w_ij``,
+    ``L[i, j] = -w_ij``.
+    """
+    n = len(vertices)
+    t = np.asarray(triangles)
+    rows = []
+    cols = []
+    vals = []
+    for k in range(3):
+        i, j, m = t[:, k], t[:, (k + 1) % 3], t[:, (k + 2) % 3]
+        u = vertices[j] - vertices[i]
+        w = vertices[m] - vertices[i]
+        lu = np.hypot(u[:, 0], u[:, 1])
+        lw = np.hypot(w[:, 0], w[:, 1])
+        # tan(angle / 2) = sin / (1 + cos) = |u x w| / (|u| |w| + u . w)
+        half = np.abs(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]) / (lu * lw + np.einsum("ij,ij->i", u, w))
+        rows += [i, i]
+        cols += [j, m]
+        vals += [half / lu, half / lw]
+    w_mat = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)).tocsr()
+    w_mat.sum_duplicates()
+    return (sp.diags(np.asarray(w_mat.sum(axis=1)).ravel()) - w_mat).tocsr()
+
+
+#: Edge weights of the discrete Laplacian, by name.
+WEIGHTS = ("cotan", "positive")
+
+
 def boundary_values(mesh: TriMesh, theta: NDArray[np.float64]) -> NDArray[np.float64]:
     """Piecewise-linear Dirichlet data: a node at parameter t on edge i goes to
     ``(1 - t) w_i + t w_{i+1}`` (Section 2, linear boundary behaviour)."""
@@ -110,7 +149,7 @@ def boundary_values(mesh: TriMesh, theta: NDArray[np.float64]) -> NDArray[np.flo
     return (1.0 - t) * theta[e] + t * theta[(e + 1) % n]
 
 
-def solve_harmonic(mesh: TriMesh, theta: NDArray[np.float64]) -> HarmonicMap:
+def solve_harmonic(mesh: TriMesh, theta: NDArray[np.float64], weights: str = "cotan") -> HarmonicMap:
     """Solve the discrete Dirichlet problem for both coordinates (Section 3.1.1).
 
     Parameters
@@ -118,6 +157,9 @@ def solve_harmonic(mesh: TriMesh, theta: NDArray[np.float64]) -> HarmonicMap:
     mesh : TriMesh
     theta : (n, 2) array of float
         Convex polygon with as many vertices as the meshed polygon.
+    weights : {"cotan", "positive"}
+        ``cotan``: the FEM (cotangent) Laplacian, the harmonic map;
+        ``positive``: mean-value weights, one-to-one on any mesh (Section 3.1.4).
 
     Returns
     -------
@@ -132,18 +174,24 @@ def solve_harmonic(mesh: TriMesh, theta: NDArray[np.float64]) -> HarmonicMap:
     is_b = np.zeros(nv, dtype=bool)
     is_b[mesh.boundary] = True
     interior = np.flatnonzero(~is_b)
+    if weights not in WEIGHTS:
+        raise ValueError(f"weights must be one of {WEIGHTS}, got {weights!r}")
     if interior.size:
-        k = cotan_laplacian(mesh.vertices, mesh.triangles)
-        k_ii = k[interior][:, interior].tocsc()
-        rhs = -(k[interior][:, mesh.boundary] @ values[mesh.boundary])
-        # K_II is a symmetric M-matrix: symmetric mode with a fill-reducing
-        # ordering of A^T + A and no pivoting is both exact and the fastest
-        # direct solve here (see bench/).
+        if weights == "cotan":
+            k = cotan_laplacian(mesh.vertices, mesh.triangles)
+        else:
+            k = mean_value_laplacian(mesh.vertices, mesh.triangles)
+        k_i = k[interior]
+        k_ii = k_i[:, interior].tocsc()
+        rhs = -(k_i[:, mesh.boundary] @ values[mesh.boundary])
+        # K_II is an M-matrix (diagonally dominant, non-positive off-diagonal):
+        # a fill-reducing ordering of A^T + A without pivoting is exact and the
+        # fastest direct solve here; the cotangent matrix is also symmetric.
         lu = splu(
             k_ii,
             permc_spec="MMD_AT_PLUS_A",
             diag_pivot_thresh=0.0,
-            options={"SymmetricMode": True},
+            options={"SymmetricMode": weights == "cotan"},
         )
         values[interior] = lu.solve(np.ascontiguousarray(rhs))
-    return HarmonicMap(mesh, values, theta)
+    return HarmonicMap(mesh, values, theta, weights)

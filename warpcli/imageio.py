@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -103,8 +104,15 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
     return RasterImage(np.ascontiguousarray(pixels), tuple(spec.channelnames), alpha, attrs)
 
 
-def check_output_path(path: str | os.PathLike[str], inputs: tuple[str | os.PathLike[str], ...] = ()) -> None:
+def check_output_path(
+    path: str | os.PathLike[str], inputs: tuple[str | os.PathLike[str], ...] = (), *, image: bool = True
+) -> None:
     """Check before any work that an output can be written at ``path``.
+
+    Parameters
+    ----------
+    inputs : paths that must not be overwritten.
+    image : whether the output is an image (its format must be known).
 
     Raises
     ------
@@ -123,6 +131,8 @@ def check_output_path(path: str | os.PathLike[str], inputs: tuple[str | os.PathL
         raise ImageInputError(f"{name}: output directory {directory} does not exist")
     if os.path.isdir(name):
         raise ImageInputError(f"{name}: is a directory")
+    if not image:
+        return
     out = oiio.ImageOutput.create(name)
     if out is None:
         _oiio_error(oiio)
@@ -144,14 +154,22 @@ def write_image(path: str | os.PathLike[str], image: RasterImage) -> None:
 
     name = os.fspath(path)
     check_output_path(name)
-    directory = os.path.dirname(os.path.abspath(name))
-    base, ext = os.path.splitext(os.path.basename(name))
+    with atomic_path(name) as tmp:
+        _write(oiio, tmp, image, shown_name=name)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str):
+    """Yield a temporary path beside ``path`` (same extension); on success rename it
+    over ``path``, on any failure remove it. Readers never see a partial file."""
+    directory = os.path.dirname(os.path.abspath(path))
+    base, ext = os.path.splitext(os.path.basename(path))
     fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=f".tmp{ext}", dir=directory)
     os.close(fd)
     try:
-        _write(oiio, tmp, image, shown_name=name)
+        yield tmp
         os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, name)
+        os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)

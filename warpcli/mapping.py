@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -16,6 +17,8 @@ from .locate import TriangleLocator, _affine_coefficients, barycentric_combine
 from .mesh import auto_max_area, mesh_polygon
 from .polygon import Polygon, check_pair
 from .theta import regular_polygon
+
+log = logging.getLogger("warpcli")
 
 @dataclass(frozen=True)
 class GridPullBack:
@@ -70,6 +73,7 @@ class BijectiveMap:
         dst: Polygon,
         *,
         max_area: float | tuple[float, float] | None = None,
+        weights: str = "cotan",
         check: bool = True,
         timings: dict[str, float] | None = None,
     ) -> BijectiveMap:
@@ -83,8 +87,14 @@ class BijectiveMap:
             Largest triangle area of both meshes, or of the source and the
             target mesh, in square pixels of the image each polygon lives in;
             None picks `auto_max_area` for each.
+        weights : {"cotan", "positive"}
+            ``cotan`` solves the harmonic maps (FEM); ``positive`` uses
+            mean-value weights, one-to-one on any mesh but no longer harmonic.
         check : bool
-            Raise `FoldOverError` if either discrete map flips a triangle.
+            Make sure neither discrete map flips a triangle: a cotangent map
+            that does (which the constrained Delaunay meshes should rule out)
+            is solved again with positive weights, with a warning; if a flip
+            remains, raise `FoldOverError`. Never hand back a folding map.
         timings : dict or None
             If given, receives the seconds spent in ``"mesh"`` and ``"solve"``.
 
@@ -103,11 +113,13 @@ class BijectiveMap:
         # solves run at once. Each solve is independent, so the results do
         # not depend on the scheduling.
         with ThreadPoolExecutor(max_workers=2) as pool:
-            solve0 = pool.submit(solve_harmonic, mesh_polygon(src, area0), theta)
+            solve0 = pool.submit(solve_harmonic, mesh_polygon(src, area0), theta, weights)
             mesh1 = mesh_polygon(dst, area1)
             t1 = clock()
-            solve1 = pool.submit(solve_harmonic, mesh1, theta)
+            solve1 = pool.submit(solve_harmonic, mesh1, theta, weights)
             phi0, phi1 = solve0.result(), solve1.result()
+        if check:
+            phi0, phi1 = (_repaired(phi, poly) for phi, poly in ((phi0, src), (phi1, dst)))
         if timings is not None:
             timings["mesh"] = t1 - t0
             timings["solve"] = clock() - t1
@@ -247,6 +259,19 @@ class BijectiveMap:
         if lost.size:
             out[lost] = theta_boundary_to_polygon(theta[lost], self.theta, poly.points)
         return out
+
+
+def _repaired(phi: HarmonicMap, poly: Polygon) -> HarmonicMap:
+    """phi itself if it flips no triangle, else phi solved with positive weights."""
+    flips = int(phi.flipped().sum())
+    if flips == 0 or phi.weights == "positive":
+        return phi
+    log.warning(
+        "%s: the harmonic map flips %d triangle(s); solving with positive (mean-value) weights instead",
+        poly.name,
+        flips,
+    )
+    return solve_harmonic(phi.mesh, phi.theta, "positive")
 
 
 def theta_boundary_to_polygon(

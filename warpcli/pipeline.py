@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import logging
 import os
 import time
@@ -12,8 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import InputError
-from .imageio import RasterImage, check_output_path, read_image, write_image
+from .imageio import RasterImage, atomic_path, check_output_path, read_image, write_image
 from .mapping import BijectiveMap
+from .metrics import Distortion, distortion_at_pixels
 from .polygon import Polygon, check_pair, read_polygon
 from .resample import INTERPOLATIONS, resample
 
@@ -36,12 +39,25 @@ class WarpResult:
         Source position of every output pixel centre; NaN outside the target.
     timings : dict of str to float
         Seconds per stage.
+    source_triangle, target_triangle : (H, W) ndarray of int32
+        Mesh triangles each output pixel went through (-1 outside).
+    report : dict or None
+        The report of `build_report`, when `warp_file` was asked for one.
     """
 
     pixels: NDArray
     map: BijectiveMap
     inverse_map: NDArray[np.float64]
     timings: dict[str, float] = field(default_factory=dict)
+    source_triangle: NDArray[np.int32] | None = field(default=None, repr=False)
+    target_triangle: NDArray[np.int32] | None = field(default=None, repr=False)
+    report: dict | None = None
+
+    def distortion(self) -> Distortion:
+        """Distortion of the map at every output pixel (NaN outside the target)."""
+        if self.source_triangle is None or self.target_triangle is None:
+            raise ValueError("this result carries no per-pixel triangles")
+        return distortion_at_pixels(self.map.phi0, self.map.phi1, self.source_triangle, self.target_triangle)
 
 
 def pixel_centres(width: int, height: int) -> NDArray[np.float64]:
@@ -66,6 +82,7 @@ def warp_image(
     background: float | ArrayLike = 0.0,
     alpha_channel: int | None = None,
     max_area: float | None = None,
+    weights: str = "cotan",
     warp_map: BijectiveMap | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> WarpResult:
@@ -89,6 +106,9 @@ def warp_image(
         Index of an alpha channel, resampled premultiplied.
     max_area : float or None
         Largest mesh triangle area in square pixels (None: automatic).
+    weights : {"cotan", "positive"}
+        Laplacian weights: the harmonic maps, or mean-value weights (see
+        `BijectiveMap.between`).
     warp_map : BijectiveMap or None
         A map already built for these polygons, to reuse.
     progress : callable or None
@@ -124,21 +144,22 @@ def warp_image(
     if np.issubdtype(img.dtype, np.integer):
         bg = bg * np.iinfo(img.dtype).max
 
-    report = progress or (lambda stage: None)
+    stage = progress or (lambda name: None)
     fmap = warp_map
     if fmap is None:
-        report("meshing and solving")
-        fmap = BijectiveMap.between(src, dst, max_area=max_area, timings=timings)
+        stage("meshing and solving")
+        fmap = BijectiveMap.between(src, dst, max_area=max_area, weights=weights, timings=timings)
     clock = time.perf_counter
     t0 = clock()
-    report("composing the map")
-    inverse = fmap.inverse_grid(width, height)
+    stage("composing the map")
+    pulled = fmap.pull_back_grid(width, height)
+    inverse = pulled.inverse_map
     t1 = clock()
-    report("resampling")
+    stage("resampling")
     out = resample(img, inverse, interp=interp, background=bg, alpha_channel=alpha_channel)
     timings["compose"] = t1 - t0
     timings["resample"] = clock() - t1
-    return WarpResult(out, fmap, inverse, timings)
+    return WarpResult(out, fmap, inverse, timings, pulled.source_triangle, pulled.target_triangle)
 
 
 def warp_file(
@@ -146,22 +167,44 @@ def warp_file(
     output_path: str | os.PathLike[str],
     src_path: str | os.PathLike[str],
     dst_path: str | os.PathLike[str],
+    *,
+    report_path: str | os.PathLike[str] | None = None,
+    grid_path: str | os.PathLike[str] | None = None,
+    heatmap_path: str | os.PathLike[str] | None = None,
+    heatmap_measure: str = "conformal",
     **options,
 ) -> WarpResult:
     """Read an image and two polygon files, warp, and write the result atomically.
 
     Everything that can be checked before the work starts is checked first
-    (polygons, input image, output path), so bad input fails fast and leaves
-    no file behind. ``options`` are those of `warp_image`.
+    (polygons, input image, every output path), so bad input fails fast and
+    leaves no file behind. ``options`` are those of `warp_image`.
+
+    Parameters
+    ----------
+    report_path : path-like or None
+        Write the JSON report of `build_report` there; ``"-"`` computes it
+        (``result.report``) without writing a file.
+    grid_path, heatmap_path : path-like or None
+        Write `warpcli.figures.grid_figure` / `heatmap_figure` there.
+    heatmap_measure : {"conformal", "isometric", "det"}
     """
     clock = time.perf_counter
-    report = options.get("progress") or (lambda stage: None)
-    check_output_path(output_path, inputs=(input_path, src_path, dst_path))
+    stage = options.get("progress") or (lambda name: None)
+    inputs = (input_path, src_path, dst_path)
+    extra = [p for p in (grid_path, heatmap_path) if p is not None]
+    for path in (output_path, *extra):
+        check_output_path(path, inputs=inputs)
+    if report_path is not None and os.fspath(report_path) != "-":
+        check_output_path(report_path, inputs=inputs, image=False)
+    outputs = [os.path.abspath(os.fspath(p)) for p in (output_path, *extra, report_path) if p not in (None, "-")]
+    if len(set(outputs)) != len(outputs):
+        raise InputError(f"{os.fspath(output_path)}: the same path is given for two outputs")
     src = read_polygon(src_path)
     dst = read_polygon(dst_path)
     check_pair(src, dst)
     t0 = clock()
-    report("reading")
+    stage("reading")
     image = read_image(input_path)
     t_read = clock() - t0
     _warn_if_outside(src, image.width, image.height, os.fspath(input_path))
@@ -169,14 +212,61 @@ def warp_file(
         log.info("%s and %s run in opposite directions: the warp mirrors the image", src.name, dst.name)
     result = warp_image(image.pixels, src, dst, alpha_channel=image.alpha_channel, **options)
     t0 = clock()
-    report("writing")
+    stage("writing")
     write_image(
         output_path,
         RasterImage(result.pixels, image.channel_names, image.alpha_channel, image.attributes),
     )
     result.timings["read"] = t_read
     result.timings["write"] = clock() - t0
+    if grid_path is not None or heatmap_path is not None:
+        from . import figures
+
+        t0 = clock()
+        stage("drawing figures")
+        if grid_path is not None:
+            fig = figures.grid_figure(image.pixels, result.inverse_map, src, dst, alpha_channel=image.alpha_channel)
+            write_image(grid_path, RasterImage(fig))
+        if heatmap_path is not None:
+            values = getattr(result.distortion(), heatmap_measure).reshape(result.inverse_map.shape[:2])
+            write_image(heatmap_path, RasterImage(figures.heatmap_figure(values, heatmap_measure)))
+        result.timings["figures"] = clock() - t0
+    if report_path is not None:
+        stage("measuring distortion")
+        doc = build_report(result)
+        if os.fspath(report_path) != "-":
+            with atomic_path(os.fspath(report_path)) as tmp:
+                with open(tmp, "w") as fh:
+                    json.dump(doc, fh, indent=2)
+                    fh.write("\n")
+        result = dataclasses.replace(result, report=doc)
     return result
+
+
+def build_report(result: WarpResult) -> dict:
+    """The map's mesh sizes, fold-over count, Jacobian and distortion (the paper's Table 2).
+
+    Distortion is sampled at the output pixels: each stands for the source
+    area it pulls back (see `warpcli.metrics.distortion_at_pixels`), so the
+    means are area-weighted means over the source polygon, and the maxima
+    and ``min_jacobian_det`` are taken over the sampled points.
+    """
+    clock = time.perf_counter
+    t0 = clock()
+    summary = result.distortion().summary()
+    f = result.map
+    timings = dict(result.timings)
+    timings["metrics"] = clock() - t0
+    return {
+        "vertices": f.src.n,
+        "source_mesh": {"vertices": f.phi0.mesh.n_vertices, "triangles": f.phi0.mesh.n_triangles},
+        "target_mesh": {"vertices": f.phi1.mesh.n_vertices, "triangles": f.phi1.mesh.n_triangles},
+        "flipped_triangles": f.flipped_triangles(),
+        "min_jacobian_det": summary["min_jacobian_det"],
+        "conformal": summary["conformal"],
+        "isometric": summary["isometric"],
+        "timings": {k: round(v, 4) for k, v in timings.items()},
+    }
 
 
 def _warn_if_outside(src: Polygon, width: int, height: int, image_name: str) -> None:

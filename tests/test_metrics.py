@@ -1,0 +1,127 @@
+"""Tests of warpcli.metrics and the report: closed forms and an independent computation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from helpers import l_shape, similarity, star
+from warpcli import Polygon, warp_image
+from warpcli.metrics import singular_values, triangle_jacobians
+from warpcli.pipeline import build_report
+
+
+def test_singular_values_closed_form_matches_svd():
+    rng = np.random.default_rng(10)
+    m = rng.normal(size=(500, 2, 2))
+    s1, s2 = singular_values(m)
+    ref = np.linalg.svd(m, compute_uv=False)
+    np.testing.assert_allclose(s1, ref[:, 0], rtol=1e-12)
+    np.testing.assert_allclose(s2, ref[:, 1], rtol=1e-9, atol=1e-12)
+
+
+def _warp(src, dst, size=(128, 128)):
+    img = np.zeros((size[1], size[0], 1), dtype=np.float32)
+    return warp_image(img, src, dst, size=size)
+
+
+def test_identity_reports_conformal_2_isometric_1_det_1():
+    poly = star()
+    rep = build_report(_warp(poly, poly))
+    assert rep["flipped_triangles"] == 0
+    assert rep["conformal"]["mean"] == pytest.approx(2.0, abs=1e-9)
+    assert rep["conformal"]["max"] == pytest.approx(2.0, abs=1e-6)
+    assert rep["isometric"]["mean"] == pytest.approx(1.0, abs=1e-9)
+    assert rep["min_jacobian_det"] == pytest.approx(1.0, abs=1e-6)
+
+
+def _similarity_case(scale: float, size: int, max_area):
+    k = size / 128
+    src = Polygon(star(cx=64 * k, cy=64 * k, r_in=25 * k, r_out=58 * k))
+    dst = Polygon(similarity(src.points, scale, 0.6, (5.0 * k, -4.0 * k), center=(64 * k, 64 * k)))
+    img = np.zeros((size, size, 1), dtype=np.float32)
+    return warp_image(img, src, dst, max_area=max_area)
+
+
+@pytest.mark.parametrize("scale", [0.5, 1.6])
+def test_similarity_reports_conformal_2_and_isometric_max_s_inverse_s(scale):
+    res = _similarity_case(scale, 256, 1.0)
+    rep = build_report(res)
+    # Derivatives of a piecewise-linear FEM map are piecewise constant with
+    # O(h) errors, and both measures are minimal at a similarity, so noise
+    # only raises them: the means sit slightly above the closed forms.
+    assert 2.0 <= rep["conformal"]["mean"] < 2.0 * 1.005
+    assert max(scale, 1 / scale) <= rep["isometric"]["mean"] < max(scale, 1 / scale) * 1.03
+    d = res.distortion()
+    assert np.nanmedian(d.det) == pytest.approx(scale * scale, rel=0.005)
+
+
+def test_distortion_converges_to_the_closed_form_as_the_mesh_refines():
+    excess = []
+    for area in (4.0, 1.0, 0.25):
+        rep = build_report(_similarity_case(0.5, 256, area))
+        excess.append(rep["isometric"]["mean"] - 2.0)
+    assert excess[0] > excess[1] > excess[2] > 0
+    assert excess[2] < 0.025
+
+
+def test_affine_triangle_map_reports_its_exact_singular_values():
+    src = np.array([[5.0, 5.0], [120.0, 15.0], [20.0, 110.0]])
+    dst = np.array([[10.0, 20.0], [100.0, 5.0], [70.0, 120.0]])
+    a = np.linalg.solve(np.hstack([src, np.ones((3, 1))]), dst)[:2].T  # dst = a @ src + b
+    s = np.linalg.svd(a, compute_uv=False)
+    rep = build_report(_warp(src, dst))
+    assert rep["conformal"]["mean"] == pytest.approx(s[0] / s[1] + s[1] / s[0], rel=1e-9)
+    assert rep["conformal"]["max"] == pytest.approx(s[0] / s[1] + s[1] / s[0], rel=1e-9)
+    assert rep["isometric"]["mean"] == pytest.approx(max(s[0], 1 / s[1]), rel=1e-9)
+    assert rep["min_jacobian_det"] == pytest.approx(np.linalg.det(a), rel=1e-9)
+
+
+def test_report_agrees_with_finite_differences_of_the_warped_coordinates():
+    """An independent computation: differentiate the pulled-back pixel coordinates."""
+    src = Polygon(l_shape(size=100))
+    dst = Polygon(star(3, 64, 64, 30, 60, 0.2))
+    res = _warp(src, dst)
+    x = res.inverse_map
+    # Central differences of x(y) over the pixel grid: J of f^-1 at interior pixels.
+    dx = (x[1:-1, 2:] - x[1:-1, :-2]) / 2.0
+    dy = (x[2:, 1:-1] - x[:-2, 1:-1]) / 2.0
+    j = np.stack([dx, dy], axis=-1)  # columns: d/dx, d/dy
+    ok = np.isfinite(j).all(axis=(-1, -2))
+    j = j[ok]
+    s1, s2 = singular_values(j)
+    area = np.abs(j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0])
+    conformal = float(((s1 / s2 + s2 / s1) * area).sum() / area.sum())
+    isometric = float((np.maximum(s1, 1 / s2) * area).sum() / area.sum())
+    rep = build_report(res)
+    assert rep["conformal"]["mean"] == pytest.approx(conformal, rel=0.03)
+    assert rep["isometric"]["mean"] == pytest.approx(isometric, rel=0.03)
+
+
+def test_mirror_map_has_negative_determinants_and_no_flips():
+    src = Polygon(star())
+    dst = Polygon(src.points * [-1.0, 1.0] + [128.0, 0.0])
+    res = _warp(src, dst)
+    rep = build_report(res)
+    assert rep["flipped_triangles"] == 0
+    d = res.distortion()
+    ok = np.isfinite(d.det)
+    assert (d.det[ok] < 0).all()  # orientation-reversing everywhere, never folded
+    assert np.median(d.det[ok]) == pytest.approx(-1.0, rel=0.005)
+    assert rep["min_jacobian_det"] < 0
+    assert rep["conformal"]["mean"] == pytest.approx(2.0, rel=0.01)
+
+
+def test_triangle_jacobians_of_an_affine_map():
+    from warpcli.harmonic import solve_harmonic
+    from warpcli.mesh import mesh_polygon
+    from warpcli.theta import regular_polygon
+
+    tri = Polygon([[0.0, 0.0], [40.0, 0.0], [0.0, 30.0]])
+    phi = solve_harmonic(mesh_polygon(tri, 20.0), regular_polygon(3))
+    j = triangle_jacobians(phi)
+    a = np.linalg.solve(np.hstack([tri.points, np.ones((3, 1))]), regular_polygon(3))[:2].T
+    np.testing.assert_allclose(j, np.broadcast_to(a, j.shape), atol=1e-12)
+    assert math.isfinite(j.sum())
