@@ -1,4 +1,4 @@
-"""Regenerate the sample images, polygon pairs and the README figure in this folder.
+"""Regenerate the sample images, polygon pairs and the README's pictures in this folder.
 
     pip install '.[test]' && python sample_images/make_samples.py
 
@@ -114,6 +114,24 @@ def readme_figure() -> None:
     write_png("before_after.png", np.concatenate(rows, axis=0)[:-8])
 
 
+def map_pictures() -> None:
+    """<sample>_grid.png and <sample>_heatmap.png: warp's own --grid and --heatmap output."""
+    import subprocess
+    import sys
+    import tempfile
+
+    pairs = [("grid", "grid.png", "grid_L.json", "grid_hexagon.json"), ("chelsea", "chelsea.png", "chelsea_ring.json", "chelsea_star.json")]
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, image, src, dst in pairs:
+            subprocess.run(
+                [sys.executable, "-m", "warpcli", os.path.join(HERE, image), os.path.join(tmp, "out.png"),
+                 "--src", os.path.join(HERE, src), "--dst", os.path.join(HERE, dst), "-q",
+                 "--grid", os.path.join(HERE, f"{name}_grid.png"),
+                 "--heatmap", os.path.join(HERE, f"{name}_heatmap.png")],
+                check=True,
+            )
+
+
 def _resize(px: np.ndarray, scale: float) -> np.ndarray:
     h, w = px.shape[:2]
     r = np.minimum((np.arange(round(h * scale)) / scale).astype(int), h - 1)
@@ -142,6 +160,7 @@ def main() -> None:
     write_json("chelsea_ring.json", ring(12, 225.5, 150, 215, 145, -math.pi / 2), "ellipse-like 12-gon in chelsea.png (451x300)")
     write_json("chelsea_star.json", star(6, 225.5, 150, 70, 148, -math.pi / 2), "6-pointed star (12 vertices)")
     readme_figure()
+    map_pictures()
 
 
 if __name__ == "__main__":
