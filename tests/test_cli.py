@@ -567,3 +567,112 @@ def test_grid_may_not_overwrite_an_input_or_the_output(files, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and "overwrite" in err[0] and "two outputs" in err[1]
     assert sorted(os.listdir(files.dir)) == before
+
+
+# --- batch ----------------------------------------------------------------------
+
+
+def _frames(files, count=3):
+    paths = []
+    for k in range(count):
+        px = np.roll(files.pixels, 5 * k, axis=1)
+        paths.append(write_png(files.dir / f"frame_{k:04d}.png", px))
+    return paths
+
+
+def test_batch_writes_every_input_with_one_map(files):
+    frames = _frames(files)
+    out_dir = files.dir / "out"
+    out_dir.mkdir()
+    assert main([*frames, "--src", files.src, "--dst", files.dst, "--out-dir", str(out_dir), "-q"]) == 0
+    assert sorted(os.listdir(out_dir)) == ["frame_0000.png", "frame_0001.png", "frame_0002.png"]
+    # Each equals the single-image warp of the same input.
+    single = files.dir / "single.png"
+    assert main([frames[1], str(single), "--src", files.src, "--dst", files.dst]) == 0
+    assert (out_dir / "frame_0001.png").read_bytes() == single.read_bytes()
+
+
+def test_batch_name_pattern_and_format(files):
+    frames = _frames(files, 2)
+    out_dir = files.dir / "out"
+    out_dir.mkdir()
+    args = [*frames, "--src", files.src, "--dst", files.dst, "--out-dir", str(out_dir), "--out-name", "{stem}_w.tif"]
+    assert main(args) == 0
+    assert sorted(os.listdir(out_dir)) == ["frame_0000_w.tif", "frame_0001_w.tif"]
+    assert read_pixels(out_dir / "frame_0000_w.tif").dtype == np.uint8
+
+
+def test_batch_reports_a_failing_input_and_goes_on(files, capsys):
+    frames = _frames(files)
+    broken = files.dir / "broken.png"
+    broken.write_text("not an image")
+    out_dir = files.dir / "out"
+    out_dir.mkdir()
+    code = main([frames[0], str(broken), frames[2], "--src", files.src, "--dst", files.dst, "--out-dir", str(out_dir), "-q"])
+    assert code == 2  # bad input, and nothing worse
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "broken.png" in err[0] and err[0].startswith("warp: error:")
+    assert sorted(os.listdir(out_dir)) == ["frame_0000.png", "frame_0002.png"]
+
+
+def test_batch_refuses_colliding_or_overwriting_outputs_before_any_work(files, capsys):
+    frames = _frames(files, 2)
+    other = files.dir / "sub"
+    other.mkdir()
+    twin = write_png(other / "frame_0000.png", files.pixels)
+    out_dir = files.dir / "out"
+    out_dir.mkdir()
+    assert main([frames[0], twin, "--src", files.src, "--dst", files.dst, "--out-dir", str(out_dir)]) == 2
+    assert main([*frames, "--src", files.src, "--dst", files.dst, "--out-dir", str(files.dir)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "both" in err[0] and "overwrite" in err[1]
+    assert os.listdir(out_dir) == []
+
+
+def test_batch_usage_errors(files, capsys):
+    assert main([files.image, "--src", files.src, "--dst", files.dst, "--out-dir", str(files.dir / "missing")]) == 2
+    assert main([files.image, files.out, "x.png", "--src", files.src, "--dst", files.dst]) == 2
+    assert main([files.image, "--src", files.src, "--dst", files.dst, "--out-dir", str(files.dir), "--report", "-"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3
+    assert "missing" in err[0] and "got 3 path" in err[1] and "--report applies to a single warp" in err[2]
+
+
+# --- polygon formats through the CLI ---------------------------------------------------
+
+
+def test_same_polygon_in_every_format_gives_byte_identical_output(files):
+    import json
+
+    def ring(p):
+        return {"type": "Polygon", "coordinates": [p + [p[0]]]}
+
+    docs = {
+        "plain.json": DST,
+        "points.json": {"points": DST},
+        "labelme.json": {"shapes": [{"label": "a", "points": DST, "shape_type": "polygon"}]},
+        "geo.json": ring(DST),
+        "feature.json": {"type": "Feature", "properties": {"label": "a"}, "geometry": ring(DST)},
+    }
+    outs = []
+    for name, doc in docs.items():
+        (files.dir / name).write_text(json.dumps(doc))
+        out = files.dir / f"out_{name}.png"
+        assert main([files.image, str(out), "--src", files.src, "--dst", str(files.dir / name)]) == 0
+        outs.append(out.read_bytes())
+    assert all(o == outs[0] for o in outs)
+
+
+def test_labels_choose_polygons_from_labelme_files(files):
+    import json
+
+    lm = {"shapes": [
+        {"label": "from", "points": SRC, "shape_type": "polygon"},
+        {"label": "to", "points": DST, "shape_type": "polygon"},
+    ]}  # fmt: skip
+    (files.dir / "both.json").write_text(json.dumps(lm))
+    both = str(files.dir / "both.json")
+    labelled = files.dir / "labelled.png"
+    assert main([files.image, str(labelled), "--src", both, "--src-label", "from", "--dst", both, "--dst-label", "to"]) == 0
+    assert main(argv(files)) == 0
+    assert labelled.read_bytes() == open(files.out, "rb").read()

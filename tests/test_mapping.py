@@ -254,3 +254,17 @@ def test_positive_weights_give_a_bijective_map_close_to_the_harmonic_one():
     np.testing.assert_allclose(f.inverse(f.forward(p)), p, atol=1e-8)
     # Not harmonic, but the same kind of map: within a few pixels everywhere.
     assert np.nanmax(np.hypot(*(f.forward(p) - g.forward(p)).T)) < 8.0
+
+
+def test_forward_grid_equals_forward_at_pixel_centres_and_inverts():
+    from warpcli.pipeline import pixel_centres
+
+    src = Polygon(comb())
+    dst = Polygon(regular(src.n, r=60.0, phase=0.1))
+    f = BijectiveMap.between(src, dst)
+    grid = f.forward_grid(128, 128)
+    direct = f.forward(pixel_centres(128, 128)).reshape(128, 128, 2)
+    assert np.array_equal(np.isnan(grid), np.isnan(direct))
+    np.testing.assert_allclose(grid, direct, atol=1e-9, rtol=0)
+    ok = np.isfinite(grid[..., 0])
+    np.testing.assert_allclose(f.inverse(grid[ok]), pixel_centres(128, 128).reshape(128, 128, 2)[ok], atol=1e-7)

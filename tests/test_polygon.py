@@ -129,8 +129,8 @@ def test_invalid_utf8(tmp_path):
 @pytest.mark.parametrize(
     "text, problem",
     [
-        ('{"vertices": [[0, 0], [1, 0], [0, 1]]}', 'JSON object has no "points" member'),
-        ("{}", 'JSON object has no "points" member'),
+        ('{"vertices": [[0, 0], [1, 0], [0, 1]]}', 'JSON object has no "points" member (and is neither a labelme file nor GeoJSON)'),
+        ("{}", 'JSON object has no "points" member (and is neither a labelme file nor GeoJSON)'),
         ("42", "expected an array of [x, y] pairs"),
         ('"[[0, 0], [1, 0], [0, 1]]"', "expected an array of [x, y] pairs"),
         ('{"points": {"0": [0, 0]}}', "expected an array of [x, y] pairs"),
@@ -402,3 +402,79 @@ def test_reversing_the_vertex_order_flips_the_signed_area(points, shift):
     back = Polygon(points[::-1])
     assert back.signed_area == pytest.approx(-fwd.signed_area, rel=1e-12)
     assert math.copysign(1.0, back.signed_area) == -math.copysign(1.0, fwd.signed_area)
+
+
+# --- other formats: labelme and GeoJSON, recognised by content ------------------
+
+PTS = [[10.0, 10.0], [50.0, 12.0], [40.0, 45.0], [12.0, 40.0]]
+
+
+def labelme(*shapes):
+    return {
+        "version": "5.4.1",
+        "flags": {},
+        "shapes": [{"label": lab, "points": pts, "group_id": None, "shape_type": kind, "flags": {}} for lab, pts, kind in shapes],
+        "imagePath": "in.png",
+        "imageData": None,
+        "imageHeight": 64,
+        "imageWidth": 64,
+    }
+
+
+def geo_polygon(pts):
+    return {"type": "Polygon", "coordinates": [pts + [pts[0]]]}
+
+
+@pytest.mark.parametrize(
+    "doc",
+    [
+        PTS,
+        {"points": PTS},
+        labelme(("face", PTS, "polygon")),
+        labelme(("dot", [[1.0, 1.0]], "point"), ("face", PTS, "polygon")),
+        geo_polygon(PTS),
+        {"type": "Feature", "properties": {}, "geometry": geo_polygon(PTS)},
+        {"type": "FeatureCollection", "features": [{"type": "Feature", "properties": None, "geometry": geo_polygon(PTS)}]},
+    ],
+    ids=["array", "points", "labelme", "labelme-with-a-point", "geojson", "feature", "collection"],
+)
+def test_every_format_gives_the_same_polygon(tmp_path, doc):
+    path = write_text(tmp_path / "p.json", json.dumps(doc))
+    assert read_polygon(path).points.tolist() == PTS
+
+
+def test_labelme_with_several_polygons_needs_a_label(tmp_path):
+    other = [[0.0, 0.0], [5.0, 0.0], [0.0, 5.0]]
+    path = write_text(tmp_path / "lm.json", json.dumps(labelme(("face", PTS, "polygon"), ("eye", other, "polygon"))))
+    with pytest.raises(PolygonError, match=r"2 polygons \(face, eye\); choose one") as info:
+        read_polygon(path)
+    assert str(info.value).startswith(f"{path}: ")
+    assert read_polygon(path, label="eye").points.tolist() == other
+    with pytest.raises(PolygonError, match="no polygon labelled 'nose'"):
+        read_polygon(path, label="nose")
+
+
+def test_geojson_rules(tmp_path):
+    open_ring = {"type": "Polygon", "coordinates": [PTS]}
+    with pytest.raises(PolygonError, match="ring must end with its first vertex"):
+        read_polygon(write_text(tmp_path / "a.json", json.dumps(open_ring)))
+    holed = {"type": "Polygon", "coordinates": [PTS + [PTS[0]], [[20, 20], [25, 20], [22, 25], [20, 20]]]}
+    with pytest.raises(PolygonError, match="hole"):
+        read_polygon(write_text(tmp_path / "b.json", json.dumps(holed)))
+    point = {"type": "Feature", "geometry": {"type": "Point", "coordinates": [1, 2]}}
+    with pytest.raises(PolygonError, match="Point, not a Polygon"):
+        read_polygon(write_text(tmp_path / "c.json", json.dumps(point)))
+    two = {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {"name": "a"}, "geometry": geo_polygon(PTS)},
+        {"type": "Feature", "properties": {"label": "b"}, "geometry": geo_polygon(PTS[::-1])},
+    ]}  # fmt: skip
+    path = write_text(tmp_path / "d.json", json.dumps(two))
+    with pytest.raises(PolygonError, match="2 features"):
+        read_polygon(path)
+    assert read_polygon(path, label="b").points.tolist() == PTS[::-1]
+
+
+def test_a_label_for_a_single_plain_polygon_is_an_error(tmp_path):
+    path = write_text(tmp_path / "p.json", json.dumps(PTS))
+    with pytest.raises(PolygonError, match="no labels"):
+        read_polygon(path, label="face")

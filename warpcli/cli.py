@@ -14,9 +14,14 @@ from . import __version__
 
 EXIT_CODES = """\b
 Exit status:
-  0  success
+  0  success (in a batch: every input)
   1  failure while processing (for example a write error)
   2  bad input or usage (unreadable or invalid polygon, image or option)
+"""
+
+WARP_EPILOG = EXIT_CODES + """
+\b
+Also: warp apply-map MAP.exr INPUT OUTPUT applies a saved map (see warp apply-map --help).
 """
 
 _INTERPS = ("nearest", "linear", "cubic")
@@ -58,12 +63,15 @@ def _parse_max_area(ctx, param, value):
 
 @click.command(
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
-    epilog=EXIT_CODES,
+    epilog=WARP_EPILOG,
 )
-@click.argument("input_path", metavar="INPUT", type=click.Path(dir_okay=True))
-@click.argument("output_path", metavar="OUTPUT", type=click.Path(dir_okay=True))
-@click.option("--src", "src_path", required=True, type=click.Path(), help="Source polygon file (JSON), in INPUT's pixel coordinates.")
-@click.option("--dst", "dst_path", required=True, type=click.Path(), help="Target polygon file (JSON), in OUTPUT's pixel coordinates.")
+@click.argument("paths", metavar="INPUT OUTPUT | INPUT... --out-dir DIR", nargs=-1, type=click.Path(dir_okay=True))
+@click.option("--src", "src_path", required=True, type=click.Path(), help="Source polygon file (JSON, labelme or GeoJSON), in INPUT's pixel coordinates.")
+@click.option("--dst", "dst_path", required=True, type=click.Path(), help="Target polygon file (JSON, labelme or GeoJSON), in OUTPUT's pixel coordinates.")
+@click.option("--src-label", help="Which polygon of a labelme or GeoJSON --src file holding several.")
+@click.option("--dst-label", help="Which polygon of a labelme or GeoJSON --dst file holding several.")
+@click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
+@click.option("--out-name", default="{name}", show_default=True, help="Batch output file name: {name}, {stem}, {ext} of the input (the extension picks the format).")
 @click.option("--interp", type=click.Choice(_INTERPS), default="linear", show_default=True, help="Resampling filter.")
 @click.option("--size", callback=_parse_size, metavar="WxH", help="Output size in pixels.  [default: INPUT's size]")
 @click.option(
@@ -99,12 +107,22 @@ def _parse_max_area(ctx, param, value):
     show_default=True,
     help="What --heatmap shows.",
 )
+@click.option("--save-map", type=click.Path(dir_okay=False), help="Write the inverse map (output pixel -> input point) as an STMap, e.g. map.exr.")
+@click.option("--save-forward-map", type=click.Path(dir_okay=False), help="Write the forward map (input pixel -> output point) as an STMap.")
+@click.option(
+    "--stmap-t",
+    type=click.Choice(("down", "up")),
+    default="down",
+    show_default=True,
+    help="Which way an STMap's t runs: down (OpenImageIO st_warp) or up (Nuke STMap).",
+)
 @click.option("-v", "--verbose", count=True, help="Report progress and timings on stderr (-vv for more).")
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
-    input_path, output_path, src_path, dst_path, interp, size, background, max_area, weights,
-    report_path, grid_path, heatmap_path, heatmap_measure, verbose, quiet,
+    paths, src_path, dst_path, src_label, dst_label, out_dir, out_name, interp, size, background, max_area,
+    weights, report_path, grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t,
+    verbose, quiet,
 ):  # fmt: skip
     """Warp INPUT so that polygon SRC goes onto polygon DST; write OUTPUT.
 
@@ -119,8 +137,24 @@ def warp(
     Examples:
       warp face.png --src face.json --dst smile.json warped.png
       warp face.png --src face.json --dst smile.json warped.png --report - --grid grid.png
+      warp frames/*.png --src a.json --dst b.json --out-dir warped/ -q
     """
     _configure_logging(verbose, quiet)
+    if out_dir is not None:
+        single_only = {
+            "--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path,
+            "--save-map": save_map, "--save-forward-map": save_forward_map, "--size": size,
+        }  # fmt: skip
+        used = [name for name, value in single_only.items() if value is not None]
+        if used:
+            raise click.UsageError(f"{', '.join(used)} applies to a single warp, not to --out-dir")
+        if not paths:
+            raise click.UsageError("no INPUT given")
+        _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, interp, background, max_area, weights)
+        return
+    if len(paths) != 2:
+        raise click.UsageError(f"expected INPUT and OUTPUT (or INPUTs with --out-dir DIR), got {len(paths)} path(s)")
+    input_path, output_path = paths
     from .pipeline import warp_file
 
     with Progress(sys.stderr, enabled=not quiet) as progress:
@@ -129,6 +163,11 @@ def warp(
             output_path,
             src_path,
             dst_path,
+            src_label=src_label,
+            dst_label=dst_label,
+            save_map=save_map,
+            save_forward_map=save_forward_map,
+            stmap_t_up=stmap_t == "up",
             size=size,
             interp=interp,
             background=background,
@@ -150,6 +189,65 @@ def warp(
         result.map.phi0.mesh.n_vertices,
         result.map.phi1.mesh.n_vertices,
     )
+
+
+def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, interp, background, max_area, weights):
+    """Warp every input with one map; report failures one line each and go on."""
+    from .errors import InputError
+    from .pipeline import warp_batch
+
+    log = logging.getLogger("warpcli")
+
+    def report(item):
+        if item.error is None:
+            log.info("wrote %s", item.output_path)
+        else:
+            click.echo(f"warp: error: {item.error}", err=True)
+
+    items = warp_batch(
+        list(paths), out_dir, src_path, dst_path, pattern=out_name, src_label=src_label, dst_label=dst_label,
+        on_item=report, interp=interp, background=background, max_area=max_area, weights=weights,
+    )  # fmt: skip
+    failed = [item for item in items if item.error is not None]
+    if failed:
+        log.warning("%d of %d inputs failed", len(failed), len(items))
+        code = 2 if all(isinstance(item.error, InputError) for item in failed) else 1
+        raise click.exceptions.Exit(code)
+
+
+@click.command(
+    "apply-map",
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+    epilog=EXIT_CODES,
+)
+@click.argument("map_path", metavar="MAP", type=click.Path())
+@click.argument("input_path", metavar="INPUT", type=click.Path())
+@click.argument("output_path", metavar="OUTPUT", type=click.Path())
+@click.option("--interp", type=click.Choice(_INTERPS), default="linear", show_default=True, help="Resampling filter.")
+@click.option("--background", default="0", show_default=True, callback=_parse_background, metavar="V[,V...]", help="Value of pixels where the map is undefined.")
+@click.option(
+    "--stmap-t",
+    type=click.Choice(("auto", "down", "up")),
+    default="auto",
+    show_default=True,
+    help="Which way the map's t runs; auto: as its header says (warpcli writes it), else down.",
+)
+@click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
+def apply_map(map_path, input_path, output_path, interp, background, stmap_t, quiet):
+    """Warp INPUT with a map saved by warp --save-map (or any STMap); write OUTPUT.
+
+    MAP holds, for each OUTPUT pixel, the normalized point (s, t) of INPUT it
+    comes from (OpenImageIO st_warp's convention); OUTPUT has MAP's size.
+
+    \b
+    Example:
+      warp apply-map map.exr frame_0002.png warped_0002.png
+    """
+    _configure_logging(0, quiet)
+    from .pipeline import apply_map_file
+
+    t_up = None if stmap_t == "auto" else stmap_t == "up"
+    apply_map_file(map_path, input_path, output_path, interp=interp, background=background, t_up=t_up)
 
 
 class Progress:
@@ -221,12 +319,17 @@ def main(argv: list[str] | None = None) -> int:
     """Run the ``warp`` command; return its exit status instead of raising."""
     from .errors import WarpError
 
+    args = list(sys.argv[1:] if argv is None else argv)
+    command, prog = (apply_map, "warp apply-map") if args[:1] == ["apply-map"] else (warp, "warp")
+    if command is apply_map:
+        args = args[1:]
     try:
-        warp.main(args=argv, prog_name="warp", standalone_mode=False)
+        # Without standalone mode click returns an Exit's code instead of raising it.
+        code = command.main(args=args, prog_name=prog, standalone_mode=False)
     except click.exceptions.Exit as done:  # --help, --version
         return done.exit_code
     except click.ClickException as err:
-        click.echo(f"warp: error: {err.format_message()} (see 'warp --help')", err=True)
+        click.echo(f"warp: error: {err.format_message()} (see '{prog} --help')", err=True)
         return err.exit_code
     except click.exceptions.Abort:
         click.echo("warp: interrupted", err=True)
@@ -237,7 +340,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         click.echo("warp: interrupted", err=True)
         return 130
-    return 0
+    return code if isinstance(code, int) else 0
 
 
 def run() -> None:

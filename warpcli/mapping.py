@@ -214,26 +214,18 @@ class BijectiveMap:
 
     def pull_back_grid(self, width: int, height: int) -> GridPullBack:
         """`inverse_grid` together with the triangles each pixel went through."""
-        from . import _kernels
+        return _through_theta(self.phi1, self.phi0, self._theta0_locator, self.theta, self.src, width, height)
 
-        mesh1 = self.phi1.mesh
-        tri1 = mesh1.triangles.astype(np.int64)
-        loc0 = self._theta0_locator
-        out = np.empty((height * width, 2))
-        status = np.zeros(height * width, dtype=np.int8)
-        where0 = np.full(height * width, -1, dtype=np.int32)
-        where1 = np.full(height * width, -1, dtype=np.int32)
-        _kernels.compose_grid(
-            mesh1.vertices, tri1, _affine_coefficients(mesh1.vertices, tri1), self.phi1.values,
-            loc0.triangles, loc0.coefficients, loc0.neighbours, self.phi0.mesh.vertices,
-            *loc0.bucket_grid(), width, height, out, status, where0, where1,
-        )  # fmt: skip
-        out[status == _kernels.OUTSIDE] = np.nan
-        lost = np.flatnonzero(status == _kernels.LOST)
-        if lost.size:
-            out[lost] = theta_boundary_to_polygon(out[lost], self.theta, self.src.points)
-        shape = (height, width)
-        return GridPullBack(out.reshape(height, width, 2), where0.reshape(shape), where1.reshape(shape))
+    def forward_grid(self, width: int, height: int) -> NDArray[np.float64]:
+        """`forward` at every pixel centre of a ``width`` x ``height`` source image.
+
+        Returns
+        -------
+        (height, width, 2) ndarray of float
+            Target point of each source pixel centre; NaN outside the source.
+        """
+        grid = _through_theta(self.phi0, self.phi1, self._theta1_locator, self.theta, self.dst, width, height)
+        return grid.inverse_map
 
     def to_theta_src(self, points: ArrayLike) -> NDArray[np.float64]:
         """phi0: source points to Theta (NaN outside the source polygon)."""
@@ -259,6 +251,42 @@ class BijectiveMap:
         if lost.size:
             out[lost] = theta_boundary_to_polygon(theta[lost], self.theta, poly.points)
         return out
+
+
+def _through_theta(
+    phi_grid: HarmonicMap,
+    phi_other: HarmonicMap,
+    other_locator: TriangleLocator,
+    theta: NDArray[np.float64],
+    other_poly: Polygon,
+    width: int,
+    height: int,
+) -> GridPullBack:
+    """phi_other^-1 o phi_grid at every pixel centre of the grid phi_grid's polygon lives on.
+
+    One compiled pass (warpcli._kernels.compose_grid): phi_grid's mesh is
+    scan-converted onto the pixel grid, and each pixel's image in Theta is
+    located in phi_other's image mesh by a walk from the previous pixel's.
+    """
+    from . import _kernels
+
+    mesh = phi_grid.mesh
+    tri = mesh.triangles.astype(np.int64)
+    out = np.empty((height * width, 2))
+    status = np.zeros(height * width, dtype=np.int8)
+    where_other = np.full(height * width, -1, dtype=np.int32)
+    where_grid = np.full(height * width, -1, dtype=np.int32)
+    _kernels.compose_grid(
+        mesh.vertices, tri, _affine_coefficients(mesh.vertices, tri), phi_grid.values,
+        other_locator.triangles, other_locator.coefficients, other_locator.neighbours, phi_other.mesh.vertices,
+        *other_locator.bucket_grid(), width, height, out, status, where_other, where_grid,
+    )  # fmt: skip
+    out[status == _kernels.OUTSIDE] = np.nan
+    lost = np.flatnonzero(status == _kernels.LOST)
+    if lost.size:
+        out[lost] = theta_boundary_to_polygon(out[lost], theta, other_poly.points)
+    shape = (height, width)
+    return GridPullBack(out.reshape(height, width, 2), where_other.reshape(shape), where_grid.reshape(shape))
 
 
 def _repaired(phi: HarmonicMap, poly: Polygon) -> HarmonicMap:

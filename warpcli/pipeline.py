@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError
+from .errors import InputError, WarpError
 from .imageio import RasterImage, atomic_path, check_output_path, read_image, write_image
 from .mapping import BijectiveMap
 from .metrics import Distortion, distortion_at_pixels
@@ -137,12 +137,7 @@ def warp_image(
     if interp not in INTERPOLATIONS:
         raise InputError(f"unknown interpolation {interp!r}; choose one of {', '.join(INTERPOLATIONS)}")
     width, height = size if size is not None else (img.shape[1], img.shape[0])
-    nc = img.shape[2]
-    bg = np.asarray(background, dtype=np.float64).ravel()
-    if bg.size not in (1, nc):
-        raise InputError(f"background has {bg.size} values but the image has {nc} channels")
-    if np.issubdtype(img.dtype, np.integer):
-        bg = bg * np.iinfo(img.dtype).max
+    bg = _background(background, img)
 
     stage = progress or (lambda name: None)
     fmap = warp_map
@@ -172,6 +167,11 @@ def warp_file(
     grid_path: str | os.PathLike[str] | None = None,
     heatmap_path: str | os.PathLike[str] | None = None,
     heatmap_measure: str = "conformal",
+    save_map: str | os.PathLike[str] | None = None,
+    save_forward_map: str | os.PathLike[str] | None = None,
+    stmap_t_up: bool = False,
+    src_label: str | None = None,
+    dst_label: str | None = None,
     **options,
 ) -> WarpResult:
     """Read an image and two polygon files, warp, and write the result atomically.
@@ -188,11 +188,18 @@ def warp_file(
     grid_path, heatmap_path : path-like or None
         Write `warpcli.figures.grid_figure` / `heatmap_figure` there.
     heatmap_measure : {"conformal", "isometric", "det"}
+    save_map, save_forward_map : path-like or None
+        Write the inverse map (output pixel -> input point) or the forward map
+        (input pixel -> output point) as an STMap (see `warpcli.stmap`).
+    stmap_t_up : bool
+        Write STMaps with t running up (Nuke) instead of down (OpenImageIO).
+    src_label, dst_label : str or None
+        Which polygon to take from a polygon file holding several.
     """
     clock = time.perf_counter
     stage = options.get("progress") or (lambda name: None)
     inputs = (input_path, src_path, dst_path)
-    extra = [p for p in (grid_path, heatmap_path) if p is not None]
+    extra = [p for p in (grid_path, heatmap_path, save_map, save_forward_map) if p is not None]
     for path in (output_path, *extra):
         check_output_path(path, inputs=inputs)
     if report_path is not None and os.fspath(report_path) != "-":
@@ -200,8 +207,8 @@ def warp_file(
     outputs = [os.path.abspath(os.fspath(p)) for p in (output_path, *extra, report_path) if p not in (None, "-")]
     if len(set(outputs)) != len(outputs):
         raise InputError(f"{os.fspath(output_path)}: the same path is given for two outputs")
-    src = read_polygon(src_path)
-    dst = read_polygon(dst_path)
+    src = read_polygon(src_path, src_label)
+    dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
     t0 = clock()
     stage("reading")
@@ -231,6 +238,18 @@ def warp_file(
             values = getattr(result.distortion(), heatmap_measure).reshape(result.inverse_map.shape[:2])
             write_image(heatmap_path, RasterImage(figures.heatmap_figure(values, heatmap_measure)))
         result.timings["figures"] = clock() - t0
+    if save_map is not None or save_forward_map is not None:
+        from .stmap import save_stmap
+
+        t0 = clock()
+        stage("saving maps")
+        out_h, out_w = result.inverse_map.shape[:2]
+        if save_map is not None:
+            save_stmap(save_map, result.inverse_map, (image.width, image.height), kind="inverse", t_up=stmap_t_up)
+        if save_forward_map is not None:
+            fwd = result.map.forward_grid(image.width, image.height)
+            save_stmap(save_forward_map, fwd, (out_w, out_h), kind="forward", t_up=stmap_t_up)
+        result.timings["maps"] = clock() - t0
     if report_path is not None:
         stage("measuring distortion")
         doc = build_report(result)
@@ -241,6 +260,123 @@ def warp_file(
                     fh.write("\n")
         result = dataclasses.replace(result, report=doc)
     return result
+
+
+@dataclass(frozen=True)
+class BatchItem:
+    """One input of a batch: where it went, and the error that stopped it, if any."""
+
+    input_path: str
+    output_path: str
+    error: WarpError | None = None
+
+
+def output_name(input_path: str | os.PathLike[str], pattern: str = "{name}") -> str:
+    """The output file name for an input: ``pattern`` with ``{name}`` (the input's
+    file name), ``{stem}`` (without extension) and ``{ext}`` (with its dot).
+
+    >>> output_name("shots/frame_0001.png", "{stem}_warped.exr")
+    'frame_0001_warped.exr'
+    """
+    name = os.path.basename(os.fspath(input_path))
+    stem, ext = os.path.splitext(name)
+    try:
+        return pattern.format(name=name, stem=stem, ext=ext)
+    except (KeyError, IndexError, ValueError) as err:
+        raise InputError(f"output name pattern {pattern!r} is invalid: use {{name}}, {{stem}} and {{ext}}") from err
+
+
+def warp_batch(
+    input_paths: list[str | os.PathLike[str]],
+    out_dir: str | os.PathLike[str],
+    src_path: str | os.PathLike[str],
+    dst_path: str | os.PathLike[str],
+    *,
+    pattern: str = "{name}",
+    src_label: str | None = None,
+    dst_label: str | None = None,
+    on_item: Callable[[BatchItem], None] | None = None,
+    **options,
+) -> list[BatchItem]:
+    """Warp many images with one map: ``out_dir/<pattern>`` for each input.
+
+    The map is computed once. Every output path is checked before any work
+    (a missing directory, an unknown format, two inputs with the same output,
+    or an output that is one of the inputs is bad input, raised at once); an
+    input that then fails (unreadable, not an image, a write error) is
+    reported through ``on_item`` and the rest still go through.
+
+    Returns
+    -------
+    list of BatchItem
+        In input order.
+    """
+    directory = os.fspath(out_dir)
+    if not os.path.isdir(directory):
+        raise InputError(f"{directory}: output directory does not exist")
+    outputs = [os.path.join(directory, output_name(p, pattern)) for p in input_paths]
+    seen: dict[str, str] = {}
+    for inp, out in zip(input_paths, outputs):
+        key = os.path.abspath(out)
+        if key in seen:
+            raise InputError(f"{out}: both {seen[key]} and {os.fspath(inp)} would be written there")
+        seen[key] = os.fspath(inp)
+        check_output_path(out, inputs=(*input_paths, src_path, dst_path))
+    src = read_polygon(src_path, src_label)
+    dst = read_polygon(dst_path, dst_label)
+    check_pair(src, dst)
+    fmap = BijectiveMap.between(src, dst, max_area=options.pop("max_area", None), weights=options.pop("weights", "cotan"))
+    items = []
+    for inp, out in zip(input_paths, outputs):
+        try:
+            image = read_image(inp)
+            result = warp_image(image.pixels, src, dst, alpha_channel=image.alpha_channel, warp_map=fmap, **options)
+            write_image(out, RasterImage(result.pixels, image.channel_names, image.alpha_channel, image.attributes))
+            item = BatchItem(os.fspath(inp), out)
+        except WarpError as err:
+            item = BatchItem(os.fspath(inp), out, err)
+        items.append(item)
+        if on_item is not None:
+            on_item(item)
+    return items
+
+
+def apply_map_file(
+    map_path: str | os.PathLike[str],
+    input_path: str | os.PathLike[str],
+    output_path: str | os.PathLike[str],
+    *,
+    interp: str = DEFAULT_INTERP,
+    background: float | ArrayLike = 0.0,
+    t_up: bool | None = None,
+) -> NDArray:
+    """Warp an image with a saved STMap (see `warpcli.stmap`); the output has the map's size.
+
+    Returns
+    -------
+    ndarray
+        The warped pixels, as written.
+    """
+    from .stmap import load_stmap
+
+    check_output_path(output_path, inputs=(input_path, map_path))
+    image = read_image(input_path)
+    points = load_stmap(map_path, (image.width, image.height), t_up=t_up)
+    bg = _background(background, image.pixels)
+    out = resample(image.pixels, points, interp=interp, background=bg, alpha_channel=image.alpha_channel)
+    write_image(output_path, RasterImage(out, image.channel_names, image.alpha_channel, image.attributes))
+    return out
+
+
+def _background(background: float | ArrayLike, img: NDArray) -> NDArray[np.float64]:
+    """Normalized background values (0..1 spans an integer type) in the image's units."""
+    nc = img.shape[2]
+    bg = np.asarray(background, dtype=np.float64).ravel()
+    if bg.size not in (1, nc):
+        raise InputError(f"background has {bg.size} values but the image has {nc} channels")
+    if np.issubdtype(img.dtype, np.integer):
+        bg = bg * np.iinfo(img.dtype).max
+    return bg
 
 
 def build_report(result: WarpResult) -> dict:

@@ -87,16 +87,27 @@ def signed_area(points: NDArray[np.float64]) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
-def read_polygon(path: str | os.PathLike[str]) -> Polygon:
-    """Read a polygon from a JSON file.
+def read_polygon(path: str | os.PathLike[str], label: str | None = None) -> Polygon:
+    """Read a polygon from a JSON file, recognising the format by its content.
 
-    The file holds either an array of ``[x, y]`` pairs or an object whose
-    ``"points"`` member is such an array.
+    - plain: an array of ``[x, y]`` pairs, or an object whose ``"points"``
+      member is one;
+    - labelme: an object with ``"shapes"``; the one polygon shape, or the
+      polygon shape whose ``"label"`` is ``label``;
+    - GeoJSON: a ``Polygon`` geometry, a ``Feature`` holding one, or a
+      ``FeatureCollection`` with exactly one (or, given ``label``, the one whose
+      ``properties.label`` or ``properties.name`` is ``label``); the exterior
+      ring ends with its first vertex again, which is not a vertex of its own.
+
+    Coordinates are taken as they are: continuous image coordinates, x right,
+    y down, origin at the image's top-left corner.
 
     Parameters
     ----------
     path : path-like
         The polygon file.
+    label : str or None
+        Which polygon to take from a file holding several.
 
     Returns
     -------
@@ -105,8 +116,8 @@ def read_polygon(path: str | os.PathLike[str]) -> Polygon:
     Raises
     ------
     PolygonError
-        If the file cannot be read, is not JSON of that shape, or the polygon
-        is invalid. The message starts with the file's name.
+        If the file cannot be read, is not JSON of one of these shapes, or the
+        polygon is invalid. The message starts with the file's name.
     """
     name = os.fspath(path)
     try:
@@ -124,11 +135,96 @@ def read_polygon(path: str | os.PathLike[str]) -> Polygon:
         ) from err
     except RecursionError as err:
         raise PolygonError(f"{name}: invalid JSON: nested too deeply") from err
-    if isinstance(doc, dict):
-        if "points" not in doc:
-            raise PolygonError(f'{name}: JSON object has no "points" member')
-        doc = doc["points"]
-    return Polygon(doc, name=name)
+    return Polygon(_points_of(doc, name, label), name=name)
+
+
+def _points_of(doc: object, name: str, label: str | None) -> object:
+    """The vertex list of a parsed polygon document (plain, labelme or GeoJSON)."""
+    if isinstance(doc, list):
+        return _unlabelled(doc, name, label)
+    if not isinstance(doc, dict):
+        raise PolygonError(f"{name}: expected an array of [x, y] pairs")
+    if "shapes" in doc:
+        return _labelme_points(doc, name, label)
+    if doc.get("type") in ("Polygon", "Feature", "FeatureCollection", "MultiPolygon"):
+        return _geojson_points(doc, name, label)
+    if "points" in doc:
+        return _unlabelled(doc["points"], name, label)
+    raise PolygonError(
+        f'{name}: JSON object has no "points" member (and is neither a labelme file nor GeoJSON)'
+    )
+
+
+def _unlabelled(points: object, name: str, label: str | None) -> object:
+    if label is not None:
+        raise PolygonError(f"{name}: holds a single polygon with no labels, but label {label!r} was asked for")
+    return points
+
+
+def _labelme_points(doc: dict, name: str, label: str | None) -> object:
+    shapes = doc["shapes"]
+    if not isinstance(shapes, list):
+        raise PolygonError(f'{name}: labelme "shapes" must be an array')
+    polys = [s for s in shapes if isinstance(s, dict) and s.get("shape_type", "polygon") == "polygon"]
+    labels = [str(s.get("label")) for s in polys]
+    if label is not None:
+        chosen = [s for s in polys if s.get("label") == label]
+        if len(chosen) != 1:
+            what = "no" if not chosen else f"{len(chosen)}"
+            raise PolygonError(
+                f"{name}: labelme file has {what} polygon labelled {label!r} (labels: {', '.join(labels) or 'none'})"
+            )
+        polys = chosen
+    if len(polys) != 1:
+        if not polys:
+            raise PolygonError(f"{name}: labelme file has no polygon shape")
+        raise PolygonError(
+            f"{name}: labelme file has {len(polys)} polygons ({', '.join(labels)}); choose one with a label option"
+        )
+    if "points" not in polys[0]:
+        raise PolygonError(f'{name}: labelme shape has no "points"')
+    return polys[0]["points"]
+
+
+def _geojson_points(doc: dict, name: str, label: str | None) -> object:
+    kind = doc.get("type")
+    if kind == "FeatureCollection":
+        features = [f for f in doc.get("features") or [] if isinstance(f, dict)]
+        if label is not None:
+            features = [f for f in features if label in _feature_names(f)]
+        if len(features) != 1:
+            which = f" labelled {label!r}" if label is not None else ""
+            raise PolygonError(
+                f"{name}: GeoJSON FeatureCollection has {len(features)} features{which}; it must have exactly one"
+                + ("" if label is not None else " (or choose one with a label option)")
+            )
+        doc = features[0]
+        kind = doc.get("type")
+    elif label is not None and kind == "Feature" and label not in _feature_names(doc):
+        raise PolygonError(f"{name}: the GeoJSON feature is not labelled {label!r}")
+    elif label is not None and kind != "Feature":
+        raise PolygonError(f"{name}: a GeoJSON geometry has no label, but label {label!r} was asked for")
+    if kind == "Feature":
+        doc = doc.get("geometry")
+        if not isinstance(doc, dict):
+            raise PolygonError(f"{name}: GeoJSON feature has no geometry")
+        kind = doc.get("type")
+    if kind != "Polygon":
+        raise PolygonError(f"{name}: GeoJSON geometry is a {kind}, not a Polygon")
+    rings = doc.get("coordinates")
+    if not isinstance(rings, list) or not rings:
+        raise PolygonError(f"{name}: GeoJSON Polygon has no coordinates")
+    if len(rings) > 1:
+        raise PolygonError(f"{name}: GeoJSON Polygon has {len(rings) - 1} hole(s); polygons with holes are not supported")
+    ring = rings[0]
+    if not isinstance(ring, list) or len(ring) < 2 or ring[0] != ring[-1]:
+        raise PolygonError(f"{name}: GeoJSON ring must end with its first vertex (a closed linear ring)")
+    return ring[:-1]
+
+
+def _feature_names(feature: dict) -> tuple:
+    props = feature.get("properties") or {}
+    return tuple(props.get(k) for k in ("label", "name") if isinstance(props, dict) and k in props)
 
 
 def check_pair(src: Polygon, dst: Polygon) -> None:

@@ -1,0 +1,138 @@
+"""Maps as files: STMaps written by --save-map, read by apply-map and by OpenImageIO."""
+
+from __future__ import annotations
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from helpers import read_pixels, regular, star, write_png, write_polygon
+from warpcli.cli import main
+from warpcli.pipeline import pixel_centres
+from warpcli.stmap import load_stmap, save_stmap
+
+
+@pytest.fixture
+def scene(tmp_path):
+    rng = np.random.default_rng(11)
+    # A smooth image, so filters that differ only at the border agree inside.
+    y, x = np.mgrid[0:96, 0:112] / 96.0
+    px = np.stack([0.5 + 0.4 * np.sin(5 * x), 0.5 + 0.4 * np.cos(4 * y), 0.3 + 0.5 * x * y], axis=2)
+    px = np.round(px * 255 + rng.normal(0, 0.2, px.shape)).clip(0, 255).astype(np.uint8)
+    return {
+        "dir": tmp_path,
+        "pixels": px,
+        "image": write_png(tmp_path / "in.png", px),
+        "src": write_polygon(tmp_path / "src.json", star(6, 56, 48, 20, 44)),
+        "dst": write_polygon(tmp_path / "dst.json", regular(12, 56, 48, 44, 0.2)),
+    }
+
+
+@pytest.mark.parametrize("t_up", [False, True])
+def test_save_and_load_round_trip(tmp_path, t_up):
+    pts = np.stack(np.meshgrid(np.linspace(0.5, 40.5, 7), np.linspace(1.0, 30.0, 5)), axis=-1)
+    pts[1, 2] = np.nan
+    save_stmap(tmp_path / "m.exr", pts, (41, 31), t_up=t_up)
+    back = load_stmap(tmp_path / "m.exr", (41, 31))  # the header says which way t runs
+    assert np.array_equal(np.isnan(back), np.isnan(pts))
+    np.testing.assert_allclose(back[np.isfinite(pts)], pts[np.isfinite(pts)], rtol=1e-6)
+
+
+def test_stmap_convention_pixel_centres(tmp_path):
+    # The identity map of a 4x2 image: s = (i + 0.5) / 4, t = (j + 0.5) / 2, t down.
+    save_stmap(tmp_path / "id.exr", pixel_centres(4, 2).reshape(2, 4, 2), (4, 2))
+    px = read_pixels(tmp_path / "id.exr")
+    np.testing.assert_allclose(px[..., 0], [[0.125, 0.375, 0.625, 0.875]] * 2)
+    np.testing.assert_allclose(px[..., 1], [[0.25] * 4, [0.75] * 4])
+    assert (px[..., 3] == 1).all()
+
+
+def test_apply_map_reproduces_the_warp_byte_for_byte(scene):
+    d = scene["dir"]
+    assert main([scene["image"], str(d / "out.png"), "--src", scene["src"], "--dst", scene["dst"], "--save-map", str(d / "map.exr")]) == 0
+    assert main(["apply-map", str(d / "map.exr"), scene["image"], str(d / "again.png")]) == 0
+    a = read_pixels(d / "out.png").astype(int)
+    b = read_pixels(d / "again.png").astype(int)
+    # float32 storage of s, t moves a sample by at most ~1e-5 px: at most one level.
+    assert np.abs(a - b).max() <= 1
+    assert (np.abs(a - b) > 0).mean() < 0.01
+
+
+def test_openimageio_st_warp_agrees_with_warpcli(scene):
+    d = scene["dir"]
+    assert main([scene["image"], str(d / "out.png"), "--src", scene["src"], "--dst", scene["dst"], "--save-map", str(d / "map.exr")]) == 0
+    src_buf = oiio.ImageBuf(scene["image"])
+    st_buf = oiio.ImageBuf(str(d / "map.exr"))
+    res = oiio.ImageBufAlgo.st_warp(src_buf, st_buf, filtername="triangle")
+    assert not res.has_error, res.geterror()
+    theirs = np.round(res.get_pixels(oiio.FLOAT)[..., :3] * 255)
+    ours = read_pixels(d / "out.png").astype(float)
+    inv = load_stmap(d / "map.exr", (112, 96))
+    x, y = inv[..., 0], inv[..., 1]
+    # Compare where both sample the image's interior (at the border OpenImageIO
+    # blends with black, warpcli extends the edge pixels).
+    inner = np.isfinite(x) & (x > 1.5) & (x < 110.5) & (y > 1.5) & (y < 94.5)
+    assert inner.sum() > 3000
+    diff = np.abs(theirs[inner] - ours[inner])
+    assert diff.max() <= 1.0
+    outside = ~np.isfinite(x)
+    assert (theirs[outside] == 0).all() and (ours[outside] == 0).all()
+
+
+def test_forward_map_inverts_the_inverse_map(scene):
+    d = scene["dir"]
+    args = [scene["image"], str(d / "out.png"), "--src", scene["src"], "--dst", scene["dst"]]
+    assert main([*args, "--save-map", str(d / "inv.exr"), "--save-forward-map", str(d / "fwd.exr")]) == 0
+    inv = load_stmap(d / "inv.exr", (112, 96))  # output pixel -> input point
+    fwd = load_stmap(d / "fwd.exr", (112, 96))  # input pixel -> output point
+    # Following the inverse map from an output pixel, then the forward map from
+    # the input pixel nearest to it, lands back within about a pixel.
+    ok = np.isfinite(inv[..., 0])
+    r, c = np.nonzero(ok)
+    src_pt = inv[r, c]
+    i = np.clip(np.floor(src_pt[:, 1]).astype(int), 0, 95)
+    j = np.clip(np.floor(src_pt[:, 0]).astype(int), 0, 111)
+    there = fwd[i, j]
+    good = np.isfinite(there[:, 0])
+    back = there[good]
+    start = pixel_centres(112, 96).reshape(96, 112, 2)[r, c][good]
+    assert np.median(np.hypot(*(back - start).T)) < 1.0
+
+
+def test_nuke_orientation_is_flipped_t(scene):
+    d = scene["dir"]
+    args = [scene["image"], str(d / "o.png"), "--src", scene["src"], "--dst", scene["dst"]]
+    assert main([*args, "--save-map", str(d / "down.exr")]) == 0
+    assert main([*args[:1], str(d / "o2.png"), *args[2:], "--save-map", str(d / "up.exr"), "--stmap-t", "up"]) == 0
+    down = read_pixels(d / "down.exr")
+    up = read_pixels(d / "up.exr")
+    inside = down[..., 3] > 0
+    np.testing.assert_allclose(up[..., 1][inside], 1.0 - down[..., 1][inside], atol=1e-6)
+    # apply-map reads the orientation from the header, or as told.
+    assert main(["apply-map", str(d / "up.exr"), scene["image"], str(d / "a.png")]) == 0
+    assert main(["apply-map", str(d / "up.exr"), scene["image"], str(d / "b.png"), "--stmap-t", "down"]) == 0
+    assert np.abs(read_pixels(d / "a.png").astype(int) - read_pixels(d / "o.png").astype(int)).max() <= 1
+    assert not np.array_equal(read_pixels(d / "b.png"), read_pixels(d / "o.png"))
+
+
+def test_apply_map_bad_input(scene, capsys):
+    d = scene["dir"]
+    grey = write_png(d / "grey.png", np.zeros((8, 8), dtype=np.uint8))
+    before = sorted(p.name for p in d.iterdir())
+    assert main(["apply-map", str(d / "missing.exr"), scene["image"], str(d / "x.png")]) == 2
+    assert main(["apply-map", grey, scene["image"], str(d / "x.png")]) == 2
+    assert main(["apply-map", grey, scene["image"], scene["image"]]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3
+    assert "missing.exr" in err[0] and "no such file" in err[0]
+    assert "grey.png" in err[1] and "two channels" in err[1]
+    assert "overwrite" in err[2]
+    assert sorted(p.name for p in d.iterdir()) == before
+
+
+def test_integer_stmaps_are_normalized(tmp_path):
+    # A 16-bit STMap (s, t in 0..65535): the identity of a 2x1 image.
+    px = np.array([[[16384, 32768, 0], [49151, 32768, 0]]], dtype=np.uint16)
+    write_png(tmp_path / "m.png", px)
+    back = load_stmap(tmp_path / "m.png", (2, 1))
+    np.testing.assert_allclose(back, [[[0.5, 0.5], [1.5, 0.5]]], atol=1e-4)
