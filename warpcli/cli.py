@@ -75,6 +75,11 @@ def _parse_max_area(ctx, param, value):
 @click.option("--interp", type=click.Choice(_INTERPS), default="linear", show_default=True, help="Resampling filter.")
 @click.option("--size", callback=_parse_size, metavar="WxH", help="Output size in pixels.  [default: INPUT's size]")
 @click.option(
+    "--dtype",
+    type=click.Choice(("uint8", "uint16", "half", "float")),
+    help="Output pixel type (values keep their meaning: integer types span 0..1).  [default: INPUT's]",
+)
+@click.option(
     "--background",
     default="0",
     show_default=True,
@@ -120,7 +125,7 @@ def _parse_max_area(ctx, param, value):
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
-    paths, src_path, dst_path, src_label, dst_label, out_dir, out_name, interp, size, background, max_area,
+    paths, src_path, dst_path, src_label, dst_label, out_dir, out_name, interp, size, dtype, background, max_area,
     weights, report_path, grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t,
     verbose, quiet,
 ):  # fmt: skip
@@ -150,7 +155,7 @@ def warp(
             raise click.UsageError(f"{', '.join(used)} applies to a single warp, not to --out-dir")
         if not paths:
             raise click.UsageError("no INPUT given")
-        _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, interp, background, max_area, weights)
+        _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, interp, background, max_area, weights, dtype)
         return
     if len(paths) != 2:
         raise click.UsageError(f"expected INPUT and OUTPUT (or INPUTs with --out-dir DIR), got {len(paths)} path(s)")
@@ -165,6 +170,7 @@ def warp(
             dst_path,
             src_label=src_label,
             dst_label=dst_label,
+            dtype=dtype,
             save_map=save_map,
             save_forward_map=save_forward_map,
             stmap_t_up=stmap_t == "up",
@@ -191,7 +197,7 @@ def warp(
     )
 
 
-def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, interp, background, max_area, weights):
+def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, interp, background, max_area, weights, dtype):
     """Warp every input with one map; report failures one line each and go on."""
     from .errors import InputError
     from .pipeline import warp_batch
@@ -206,7 +212,7 @@ def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, i
 
     items = warp_batch(
         list(paths), out_dir, src_path, dst_path, pattern=out_name, src_label=src_label, dst_label=dst_label,
-        on_item=report, interp=interp, background=background, max_area=max_area, weights=weights,
+        on_item=report, interp=interp, background=background, max_area=max_area, weights=weights, dtype=dtype,
     )  # fmt: skip
     failed = [item for item in items if item.error is not None]
     if failed:

@@ -25,10 +25,17 @@ _OIIO_TYPES = {
     np.dtype(np.float64): "double",
 }
 
-# Attributes that describe the file rather than the picture, or that OpenImageIO
-# manages itself: they are not carried over to the output.
-_DROP_PREFIXES = ("oiio:", "png:", "jpeg:", "tiff:", "openexr:", "Exif:PixelXDimension", "Exif:PixelYDimension")
+# Attributes that describe the file rather than the picture, that OpenImageIO
+# manages itself, or that no longer hold for a warped image (a thumbnail of the
+# input; the orientation, which is applied on reading): not carried over.
+_DROP_PREFIXES = (
+    "oiio:", "png:", "jpeg:", "tiff:", "openexr:", "Exif:PixelXDimension", "Exif:PixelYDimension",
+    "thumbnail", "Orientation",
+)  # fmt: skip
 _KEEP = ("oiio:ColorSpace",)
+
+#: Output pixel types for ``convert_pixels`` (and ``--dtype``), by name.
+DTYPES = {"uint8": np.uint8, "uint16": np.uint16, "half": np.float16, "float": np.float32}
 
 
 @dataclass(frozen=True)
@@ -43,12 +50,17 @@ class RasterImage:
     alpha_channel : int or None
     attributes : tuple of (name, type name, value)
         Metadata to carry over to a derived image.
+    associated_alpha : bool
+        Whether colour is premultiplied by alpha (OpenEXR; TIFF marked so), or
+        straight as the file stores it (PNG, most TIFF): warpcli reads what
+        the file stores, premultiplies only to blend, and writes it back alike.
     """
 
     pixels: NDArray
     channel_names: tuple[str, ...] = ()
     alpha_channel: int | None = None
     attributes: tuple = field(default=(), repr=False)
+    associated_alpha: bool = True
 
     def __post_init__(self) -> None:
         if self.pixels.ndim != 3:
@@ -82,7 +94,12 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
         raise ImageInputError(f"{name}: no such file")
     if os.path.isdir(name):
         raise ImageInputError(f"{name}: is a directory, not an image")
-    inp = oiio.ImageInput.open(name)
+    # Ask for straight colour where the file stores it so (PNG): OpenImageIO
+    # would otherwise premultiply it in 8 bits, losing the colour of
+    # transparent pixels and precision at low alpha.
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(name, config)
     if inp is None:
         raise ImageInputError(f"{name}: cannot read image: {_oiio_error(oiio)}")
     try:
@@ -93,6 +110,11 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
     finally:
         inp.close()
     pixels = np.asarray(pixels)
+    if spec.get_int_attribute("Orientation", 1) != 1:
+        # Polygons are drawn on the image as displayed (labelme, for one,
+        # applies the orientation), so apply it and write the result upright.
+        buf = oiio.ImageBufAlgo.reorient(oiio.ImageBuf(name))
+        pixels = np.asarray(buf.get_pixels(oiio.TypeDesc(_OIIO_TYPES.get(pixels.dtype, "float"))))
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
     attrs = tuple(
@@ -101,7 +123,29 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
         if a.name in _KEEP or not a.name.startswith(_DROP_PREFIXES)
     )
     alpha = spec.alpha_channel if spec.alpha_channel >= 0 else None
-    return RasterImage(np.ascontiguousarray(pixels), tuple(spec.channelnames), alpha, attrs)
+    associated = spec.get_int_attribute("oiio:UnassociatedAlpha", 0) != 1
+    return RasterImage(np.ascontiguousarray(pixels), tuple(spec.channelnames), alpha, attrs, associated)
+
+
+def convert_pixels(pixels: NDArray, dtype: str) -> NDArray:
+    """Convert pixels to another type, keeping their meaning: integer types span 0..1.
+
+    >>> convert_pixels(np.array([0, 128, 255], dtype=np.uint8), "uint16").tolist()
+    [0, 32896, 65535]
+    >>> convert_pixels(np.array([-0.5, 0.5, 2.0], dtype=np.float32), "uint8").tolist()
+    [0, 128, 255]
+    """
+    target = np.dtype(DTYPES[dtype])
+    px = np.asarray(pixels)
+    if px.dtype == target:
+        return px
+    x = px.astype(np.float64)
+    if np.issubdtype(px.dtype, np.integer):
+        x /= np.iinfo(px.dtype).max
+    if np.issubdtype(target, np.integer):
+        top = np.iinfo(target).max
+        return np.clip(np.rint(x * top), 0, top).astype(target)
+    return x.astype(target)
 
 
 def check_output_path(
@@ -187,6 +231,8 @@ def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
     if image.channel_names:
         spec.channelnames = tuple(image.channel_names)
     spec.alpha_channel = -1 if image.alpha_channel is None else int(image.alpha_channel)
+    if image.alpha_channel is not None and not image.associated_alpha:
+        spec.attribute("oiio:UnassociatedAlpha", 1)  # store the straight colour as it is
     for attr_name, attr_type, value in image.attributes:
         try:
             spec.attribute(attr_name, oiio.TypeDesc(attr_type), value)

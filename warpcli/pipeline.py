@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import InputError, WarpError
-from .imageio import RasterImage, atomic_path, check_output_path, read_image, write_image
+from .imageio import RasterImage, atomic_path, check_output_path, convert_pixels, read_image, write_image
 from .mapping import BijectiveMap
 from .metrics import Distortion, distortion_at_pixels
 from .polygon import Polygon, check_pair, read_polygon
@@ -81,6 +81,7 @@ def warp_image(
     interp: str = DEFAULT_INTERP,
     background: float | ArrayLike = 0.0,
     alpha_channel: int | None = None,
+    associated_alpha: bool = False,
     max_area: float | None = None,
     weights: str = "cotan",
     warp_map: BijectiveMap | None = None,
@@ -103,7 +104,9 @@ def warp_image(
         the input, normalized: 0..1 spans an integer type's range, floats are
         taken as they are.
     alpha_channel : int or None
-        Index of an alpha channel, resampled premultiplied.
+        Index of an alpha channel: colour is resampled premultiplied.
+    associated_alpha : bool
+        Whether the colour is already premultiplied by alpha.
     max_area : float or None
         Largest mesh triangle area in square pixels (None: automatic).
     weights : {"cotan", "positive"}
@@ -151,7 +154,9 @@ def warp_image(
     inverse = pulled.inverse_map
     t1 = clock()
     stage("resampling")
-    out = resample(img, inverse, interp=interp, background=bg, alpha_channel=alpha_channel)
+    out = resample(
+        img, inverse, interp=interp, background=bg, alpha_channel=alpha_channel, associated_alpha=associated_alpha
+    )
     timings["compose"] = t1 - t0
     timings["resample"] = clock() - t1
     return WarpResult(out, fmap, inverse, timings, pulled.source_triangle, pulled.target_triangle)
@@ -172,6 +177,7 @@ def warp_file(
     stmap_t_up: bool = False,
     src_label: str | None = None,
     dst_label: str | None = None,
+    dtype: str | None = None,
     **options,
 ) -> WarpResult:
     """Read an image and two polygon files, warp, and write the result atomically.
@@ -195,6 +201,8 @@ def warp_file(
         Write STMaps with t running up (Nuke) instead of down (OpenImageIO).
     src_label, dst_label : str or None
         Which polygon to take from a polygon file holding several.
+    dtype : {"uint8", "uint16", "half", "float"} or None
+        Output pixel type; the input's by default.
     """
     clock = time.perf_counter
     stage = options.get("progress") or (lambda name: None)
@@ -217,12 +225,15 @@ def warp_file(
     _warn_if_outside(src, image.width, image.height, os.fspath(input_path))
     if not ((src.signed_area > 0) == (dst.signed_area > 0)):
         log.info("%s and %s run in opposite directions: the warp mirrors the image", src.name, dst.name)
-    result = warp_image(image.pixels, src, dst, alpha_channel=image.alpha_channel, **options)
+    result = warp_image(
+        image.pixels, src, dst, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha, **options
+    )
     t0 = clock()
     stage("writing")
+    out_pixels = result.pixels if dtype is None else convert_pixels(result.pixels, dtype)
     write_image(
         output_path,
-        RasterImage(result.pixels, image.channel_names, image.alpha_channel, image.attributes),
+        RasterImage(out_pixels, image.channel_names, image.alpha_channel, image.attributes, image.associated_alpha),
     )
     result.timings["read"] = t_read
     result.timings["write"] = clock() - t0
@@ -296,6 +307,7 @@ def warp_batch(
     src_label: str | None = None,
     dst_label: str | None = None,
     on_item: Callable[[BatchItem], None] | None = None,
+    dtype: str | None = None,
     **options,
 ) -> list[BatchItem]:
     """Warp many images with one map: ``out_dir/<pattern>`` for each input.
@@ -330,8 +342,12 @@ def warp_batch(
     for inp, out in zip(input_paths, outputs):
         try:
             image = read_image(inp)
-            result = warp_image(image.pixels, src, dst, alpha_channel=image.alpha_channel, warp_map=fmap, **options)
-            write_image(out, RasterImage(result.pixels, image.channel_names, image.alpha_channel, image.attributes))
+            result = warp_image(
+                image.pixels, src, dst, alpha_channel=image.alpha_channel,
+                associated_alpha=image.associated_alpha, warp_map=fmap, **options,
+            )  # fmt: skip
+            px = result.pixels if dtype is None else convert_pixels(result.pixels, dtype)
+            write_image(out, RasterImage(px, image.channel_names, image.alpha_channel, image.attributes, image.associated_alpha))
             item = BatchItem(os.fspath(inp), out)
         except WarpError as err:
             item = BatchItem(os.fspath(inp), out, err)
@@ -363,8 +379,11 @@ def apply_map_file(
     image = read_image(input_path)
     points = load_stmap(map_path, (image.width, image.height), t_up=t_up)
     bg = _background(background, image.pixels)
-    out = resample(image.pixels, points, interp=interp, background=bg, alpha_channel=image.alpha_channel)
-    write_image(output_path, RasterImage(out, image.channel_names, image.alpha_channel, image.attributes))
+    out = resample(
+        image.pixels, points, interp=interp, background=bg,
+        alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha,
+    )  # fmt: skip
+    write_image(output_path, RasterImage(out, image.channel_names, image.alpha_channel, image.attributes, image.associated_alpha))
     return out
 
 

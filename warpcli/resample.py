@@ -16,6 +16,7 @@ def resample(
     interp: str = "linear",
     background: ArrayLike = 0.0,
     alpha_channel: int | None = None,
+    associated_alpha: bool = False,
 ) -> NDArray:
     """Sample ``image`` at the source positions of the output pixels.
 
@@ -40,6 +41,10 @@ def resample(
     alpha_channel : int or None
         Index of the alpha channel. Colour is resampled premultiplied by
         alpha, so the colour of transparent pixels never bleeds into the result.
+    associated_alpha : bool
+        Whether colour is already premultiplied (then it is resampled as it
+        is); straight colour is premultiplied to blend and divided back after
+        (``nearest`` does not blend, so it takes pixels exactly as they are).
 
     Returns
     -------
@@ -66,6 +71,8 @@ def resample(
 
     src = img.astype(work_dtype, copy=True)
     alpha_scale = None
+    if associated_alpha or interp == "nearest":
+        alpha_channel = None  # nothing to premultiply
     if alpha_channel is not None:
         alpha_scale = _alpha_unit(img.dtype)
         a = src[:, :, alpha_channel] / alpha_scale
