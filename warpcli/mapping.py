@@ -112,11 +112,14 @@ class BijectiveMap:
         # solved on a second core while the target is meshed, then both
         # solves run at once. Each solve is independent, so the results do
         # not depend on the scheduling.
-        with ThreadPoolExecutor(max_workers=2) as pool:
+        with ThreadPoolExecutor(max_workers=3) as pool:
             solve0 = pool.submit(solve_harmonic, mesh_polygon(src, area0), theta, weights)
             mesh1 = mesh_polygon(dst, area1)
             t1 = clock()
             solve1 = pool.submit(solve_harmonic, mesh1, theta, weights)
+            # Loading the compiled kernels costs ~0.3 s of GIL-bound work in a
+            # fresh process; the solves release the GIL, so do it meanwhile.
+            pool.submit(_load_kernels)
             phi0, phi1 = solve0.result(), solve1.result()
         if check:
             phi0, phi1 = (_repaired(phi, poly) for phi, poly in ((phi0, src), (phi1, dst)))
@@ -287,6 +290,13 @@ def _through_theta(
         out[lost] = theta_boundary_to_polygon(out[lost], theta, other_poly.points)
     shape = (height, width)
     return GridPullBack(out.reshape(height, width, 2), where_other.reshape(shape), where_grid.reshape(shape))
+
+
+def _load_kernels() -> None:
+    """Load the compose and resample kernels before they are needed."""
+    from . import _kernels
+
+    _kernels.warm_up()
 
 
 def _repaired(phi: HarmonicMap, poly: Polygon) -> HarmonicMap:
