@@ -20,11 +20,8 @@ from numba import njit
 #: Same tolerance as warpcli.locate.BARY_TOL.
 _TOL = 1e-10
 
-# A walk that has not arrived after this many steps switches to the bucket search
-# (visibility walks terminate in Delaunay meshes but may cycle in others).
-_WALK_STEPS = 64
-
-#: ``status`` values written by `compose_grid`.
+#: ``status`` values written by `compose_grid`: outside the grid's mesh, found,
+#: and walk abandoned (the point is handed back for a bucket search).
 OUTSIDE, FOUND, LOST = 0, 1, 2
 
 
@@ -38,48 +35,35 @@ def _bary(coef, t, px, py):
 
 
 @njit(cache=True, nogil=True)
-def _bucket_find(coef, lo_x, lo_y, cell, rows, cols, indptr, ids, px, py):
-    """First triangle in the point's bucket containing it (as TriangleLocator.locate), or -1."""
-    gx = (px - lo_x) / cell
-    gy = (py - lo_y) / cell
-    tol = 1e-9 * max(rows, cols)
-    if not (gx >= -tol and gy >= -tol and gx <= cols + tol and gy <= rows + tol):
-        return -1
-    ix = min(max(int(math.floor(gx)), 0), cols - 1)
-    iy = min(max(int(math.floor(gy)), 0), rows - 1)
-    cid = iy * cols + ix
-    for j in range(indptr[cid], indptr[cid + 1]):
-        t = ids[j]
-        l0, l1, l2 = _bary(coef, t, px, py)
-        if l0 >= -_TOL and l1 >= -_TOL and l2 >= -_TOL:
-            return t
-    return -1
-
-
-@njit(cache=True, nogil=True)
 def compose_grid(
-    v1, tri1, coef1, val1,
+    v1, tri1, coef1, val1, order,
     tri0, coef0, nbr0, v0,
-    lo_x, lo_y, cell, rows, cols, indptr, ids,
-    width, height, out, status, where0, where1,
+    max_steps, width, height, out, status, where0, where1,
 ):  # fmt: skip
     """Pull every pixel centre of the output grid back through phi0^-1 o phi1.
 
-    Target triangles are scan-converted in index order, a pixel centre going
-    to the first (smallest-index) triangle containing it, as in
-    warpcli.locate.scan_convert. Its image theta = phi1(y) is then located in
-    phi0's image mesh by a visibility walk from the previous pixel's triangle
-    (neighbouring pixels land close together in Theta), falling back to the
-    bucket search, and x = phi0^-1(theta) is interpolated in the source mesh.
+    Target triangles are scan-converted in the given ``order`` (spatially
+    coherent, so that consecutive pixels are neighbours), a pixel centre on a
+    shared edge going to the first triangle in that order. Its image
+    theta = phi1(y) is then located in phi0's image mesh by a walk from the
+    previous pixel's triangle, and x = phi0^-1(theta) is interpolated in the
+    source mesh. The walk is Devillers' remembering stochastic walk: it
+    crosses a randomly chosen edge that the point lies beyond, which cannot
+    cycle even in a non-Delaunay mesh; the choices come from a fixed
+    pseudo-random sequence, so results are deterministic.
 
     Writes ``out[p]`` = x and ``status[p]`` = FOUND; for a pixel outside the
-    target, status OUTSIDE (out untouched); for a theta found in no triangle
-    (a rounding error at Theta's boundary), status LOST and ``out[p]`` = theta.
+    target, status OUTSIDE (out untouched); for a walk that leaves the mesh
+    (theta a rounding error outside it) or exceeds ``max_steps`` (a rare
+    cycle in a non-Delaunay mesh), status LOST and ``out[p]`` = theta, for
+    the caller's bucket search.
     ``where1[p]`` and ``where0[p]`` receive the target and source triangles
     (the latter -1 when LOST), for the Jacobians of the map.
     """
     hint = 0
-    for i in range(tri1.shape[0]):
+    rng = np.uint32(2463534242)
+    for ii in range(order.shape[0]):
+        i = order[ii]
         a = tri1[i, 0]
         b = tri1[i, 1]
         c = tri1[i, 2]
@@ -105,23 +89,27 @@ def compose_grid(
                 thy = l0 * val1[a, 1] + l1 * val1[b, 1] + l2 * val1[c, 1]
                 t = hint
                 found = -1
-                for _ in range(_WALK_STEPS):
+                for _ in range(max_steps):
                     m0, m1, m2 = _bary(coef0, t, thx, thy)
                     if m0 >= -_TOL and m1 >= -_TOL and m2 >= -_TOL:
                         found = t
                         break
-                    k = 0
-                    worst = m0
-                    if m1 < worst:
-                        k = 1
-                        worst = m1
-                    if m2 < worst:
-                        k = 2
+                    # Edges the point lies beyond (negative coordinate); pick
+                    # one of them with a xorshift draw.
+                    rng ^= rng << np.uint32(13)
+                    rng ^= rng >> np.uint32(17)
+                    rng ^= rng << np.uint32(5)
+                    first = int(rng % np.uint32(3))
+                    k = -1
+                    for j in range(3):
+                        kk = (first + j) % 3
+                        mk = m0 if kk == 0 else (m1 if kk == 1 else m2)
+                        if mk < -_TOL:
+                            k = kk
+                            break
                     t = nbr0[t, k]
                     if t < 0:
                         break
-                if found < 0:
-                    found = _bucket_find(coef0, lo_x, lo_y, cell, rows, cols, indptr, ids, thx, thy)
                 if found < 0:
                     status[pix] = LOST
                     out[pix, 0] = thx
@@ -194,12 +182,14 @@ def warm_up() -> None:
     xy = np.full((1, 2), 1.0)
     out = np.zeros((1, 1), dtype=np.float32)
     sample_linear(img, xy, out)
+    sample_nearest(img, xy, out)
     v = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]])
     tri = np.array([[0, 1, 2]], dtype=np.int64)
     coef = np.array([[0.0, 0.0, 0.5, 0.0, 0.0, 0.5]])
     nbr = np.full((1, 3), -1, dtype=np.int64)
     where = np.full(4, -1, dtype=np.int32)
+    order = np.zeros(1, dtype=np.int64)
     compose_grid(
-        v, tri, coef, v, tri, coef, nbr, v, 0.0, 0.0, 2.0, 1, 1, np.array([0, 1], dtype=np.int64),
-        np.zeros(1, dtype=np.int64), 2, 2, np.empty((4, 2)), np.zeros(4, dtype=np.int8), where, where.copy(),
+        v, tri, coef, v, order, tri, coef, nbr, v, 8, 2, 2, np.empty((4, 2)), np.zeros(4, dtype=np.int8),
+        where, where.copy(),
     )  # fmt: skip

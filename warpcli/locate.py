@@ -41,16 +41,19 @@ class TriangleLocator:
         self.triangles = t
         self._coef = _affine_coefficients(v, t)
         a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+        tmin = np.minimum(np.minimum(a, b), c)
+        tmax = np.maximum(np.maximum(a, b), c)
         lo = v.min(axis=0)
         hi = v.max(axis=0)
         span = np.maximum(hi - lo, 1e-300)
-        cell = math.sqrt(float(span[0] * span[1]) / max(len(t), 1))
-        cell = max(cell, float(span.max()) / 4096.0)
+        # Cells shaped like a typical triangle's bounding box, about one cell
+        # per triangle: a mesh of slivers (the harmonic image of a long thin
+        # polygon) would otherwise put thousands of triangles in every cell.
+        extent = np.maximum(np.median(tmax - tmin, axis=0), span * 1e-9)
+        scale = math.sqrt(float(span[0] * span[1]) / (max(len(t), 1) * float(extent[0] * extent[1])))
+        self._cell = np.maximum(scale * extent, span / 4096.0)
         self._lo = lo
-        self._cell = cell
-        self._shape = (int(span[1] // cell) + 1, int(span[0] // cell) + 1)  # rows (y), cols (x)
-        tmin = np.minimum(np.minimum(a, b), c)
-        tmax = np.maximum(np.maximum(a, b), c)
+        self._shape = (int(span[1] // self._cell[1]) + 1, int(span[0] // self._cell[0]) + 1)  # rows (y), cols (x)
         c0 = self._cell_xy(tmin)
         c1 = self._cell_xy(tmax)
         nx = c1[:, 0] - c0[:, 0] + 1
@@ -141,10 +144,11 @@ class TriangleLocator:
         """(M, 6) barycentric coefficients per triangle (see `_affine_coefficients`)."""
         return self._coef
 
-    def bucket_grid(self) -> tuple[float, float, float, int, int, NDArray[np.int64], NDArray[np.int64]]:
-        """``(lo_x, lo_y, cell, rows, cols, indptr, triangle_ids)``: the CSR bucket grid."""
+    def bucket_grid(self) -> tuple[float, float, float, float, int, int, NDArray[np.int64], NDArray[np.int64]]:
+        """``(lo_x, lo_y, cell_x, cell_y, rows, cols, indptr, triangle_ids)``: the CSR bucket grid."""
         lo_x, lo_y = (float(v) for v in self._lo)
-        return lo_x, lo_y, float(self._cell), self._shape[0], self._shape[1], self._indptr, self._tri_ids
+        cell_x, cell_y = (float(v) for v in self._cell)
+        return lo_x, lo_y, cell_x, cell_y, self._shape[0], self._shape[1], self._indptr, self._tri_ids
 
     @cached_property
     def neighbours(self) -> NDArray[np.int64]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
@@ -13,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import FoldOverError
 from .harmonic import HarmonicMap, solve_harmonic
-from .locate import TriangleLocator, _affine_coefficients, barycentric_combine
+from .locate import TriangleLocator, _affine_coefficients, barycentric_combine, triangle_neighbours
 from .mesh import auto_max_area, mesh_polygon
 from .polygon import Polygon, check_pair
 from .theta import regular_polygon
@@ -217,7 +218,7 @@ class BijectiveMap:
 
     def pull_back_grid(self, width: int, height: int) -> GridPullBack:
         """`inverse_grid` together with the triangles each pixel went through."""
-        return _through_theta(self.phi1, self.phi0, self._theta0_locator, self.theta, self.src, width, height)
+        return _through_theta(self.phi1, self.phi0, lambda: self._theta0_locator, self.theta, self.src, width, height)
 
     def forward_grid(self, width: int, height: int) -> NDArray[np.float64]:
         """`forward` at every pixel centre of a ``width`` x ``height`` source image.
@@ -227,7 +228,7 @@ class BijectiveMap:
         (height, width, 2) ndarray of float
             Target point of each source pixel centre; NaN outside the source.
         """
-        grid = _through_theta(self.phi0, self.phi1, self._theta1_locator, self.theta, self.dst, width, height)
+        grid = _through_theta(self.phi0, self.phi1, lambda: self._theta1_locator, self.theta, self.dst, width, height)
         return grid.inverse_map
 
     def to_theta_src(self, points: ArrayLike) -> NDArray[np.float64]:
@@ -259,7 +260,7 @@ class BijectiveMap:
 def _through_theta(
     phi_grid: HarmonicMap,
     phi_other: HarmonicMap,
-    other_locator: TriangleLocator,
+    other_locator: Callable[[], TriangleLocator],
     theta: NDArray[np.float64],
     other_poly: Polygon,
     width: int,
@@ -270,26 +271,48 @@ def _through_theta(
     One compiled pass (warpcli._kernels.compose_grid): phi_grid's mesh is
     scan-converted onto the pixel grid, and each pixel's image in Theta is
     located in phi_other's image mesh by a walk from the previous pixel's.
+    ``other_locator`` builds the bucket locator of that image mesh, needed
+    only for the rare walks that give up (slivers make it expensive to build).
     """
     from . import _kernels
 
     mesh = phi_grid.mesh
     tri = mesh.triangles.astype(np.int64)
+    other_tri = phi_other.mesh.triangles.astype(np.int64)
     out = np.empty((height * width, 2))
     status = np.zeros(height * width, dtype=np.int8)
     where_other = np.full(height * width, -1, dtype=np.int32)
     where_grid = np.full(height * width, -1, dtype=np.int32)
+    # A safety net only: the stochastic walk terminates on its own.
+    max_steps = len(other_tri) + 64
     _kernels.compose_grid(
-        mesh.vertices, tri, _affine_coefficients(mesh.vertices, tri), phi_grid.values,
-        other_locator.triangles, other_locator.coefficients, other_locator.neighbours, phi_other.mesh.vertices,
-        *other_locator.bucket_grid(), width, height, out, status, where_other, where_grid,
+        mesh.vertices, tri, _affine_coefficients(mesh.vertices, tri), phi_grid.values, _coherent_order(mesh.vertices, tri),
+        other_tri, _affine_coefficients(phi_other.values, other_tri), triangle_neighbours(other_tri),
+        phi_other.mesh.vertices, max_steps, width, height, out, status, where_other, where_grid,
     )  # fmt: skip
     out[status == _kernels.OUTSIDE] = np.nan
     lost = np.flatnonzero(status == _kernels.LOST)
     if lost.size:
-        out[lost] = theta_boundary_to_polygon(out[lost], theta, other_poly.points)
+        # Rare: the bucket search (built only now) for the walks that gave up,
+        # and Theta's exact boundary map for points a rounding error outside.
+        theta_pts = out[lost]
+        t, bary = other_locator().locate(theta_pts)
+        found = t >= 0
+        out[lost[found]] = barycentric_combine(phi_other.mesh.vertices, other_tri, t[found], bary[found])
+        where_other[lost[found]] = t[found]
+        rest = lost[~found]
+        out[rest] = theta_boundary_to_polygon(theta_pts[~found], theta, other_poly.points)
     shape = (height, width)
     return GridPullBack(out.reshape(height, width, 2), where_other.reshape(shape), where_grid.reshape(shape))
+
+
+def _coherent_order(vertices: NDArray[np.float64], triangles: NDArray[np.int64], band: float = 8.0) -> NDArray[np.int64]:
+    """Triangles in serpentine bands of ``band`` pixels: consecutive triangles are
+    neighbours, so each pixel's walk in Theta starts next to its goal."""
+    c = vertices[triangles].mean(axis=1)
+    row = np.floor(c[:, 1] / band)
+    x = np.where(row % 2 == 0, c[:, 0], -c[:, 0])
+    return np.lexsort((x, row)).astype(np.int64)
 
 
 def _load_kernels() -> None:
