@@ -17,14 +17,33 @@ def test_pixel_centres_follow_the_convention():
 
 
 def test_identical_polygons_leave_the_image_unchanged_inside():
+    from warpcli.resample import edge_coverage
+
     rng = np.random.default_rng(3)
     img = rng.integers(0, 256, (64, 64, 3), dtype=np.uint8)
     poly = star(cx=32, cy=32, r_in=12, r_out=30)
     res = warp_image(img, poly, poly, background=0)
     inside = np.isfinite(res.inverse_map[..., 0])
-    assert inside.sum() > 1000
-    np.testing.assert_array_equal(res.pixels[inside], img[inside])
-    assert (res.pixels[~inside] == 0).all()
+    edge = edge_coverage(poly, poly, 64, 64)
+    on_edge = np.zeros(64 * 64, bool)
+    on_edge[edge.pixels] = True
+    on_edge = on_edge.reshape(64, 64)
+    assert (inside & ~on_edge).sum() > 800
+    np.testing.assert_array_equal(res.pixels[inside & ~on_edge], img[inside & ~on_edge])
+    assert (res.pixels[~inside & ~on_edge] == 0).all()
+    # Edge pixels: the image weighted by the share of the pixel inside the
+    # polygon; a pixel whose centre is outside takes the colour at the
+    # nearest boundary point (bilinear there).
+    flat = res.pixels.reshape(-1, 3).astype(float)
+    centre_inside = inside.ravel()[edge.pixels]
+    colour = img.reshape(-1, 3)[edge.pixels].astype(float)
+    p = edge.source_points[~centre_inside]
+    colour[~centre_inside] = np.stack(
+        [map_coordinates(img[:, :, ch].astype(float), [p[:, 1] - 0.5, p[:, 0] - 0.5], order=1, mode="nearest") for ch in range(3)],
+        axis=1,
+    )
+    expected = edge.fraction[:, None] * colour
+    assert np.abs(flat[edge.pixels] - expected).max() <= 0.5 + 1e-6
 
 
 def test_triangle_warp_equals_an_independent_affine_warp():
@@ -32,7 +51,7 @@ def test_triangle_warp_equals_an_independent_affine_warp():
     img = rng.random((80, 90, 2)).astype(np.float32)
     src = np.array([[3.0, 4.0], [86.0, 10.0], [20.0, 77.0]])
     dst = np.array([[60.0, 2.0], [88.0, 70.0], [2.0, 40.0]])
-    res = warp_image(img, src, dst, interp="linear")
+    res = warp_image(img, src, dst, interp="linear", antialias=False)
     # The exact inverse: the affine map taking dst onto src.
     m = np.linalg.solve(np.hstack([dst, np.ones((3, 1))]), src)
     q = pixel_centres(90, 80)
@@ -48,13 +67,25 @@ def test_linear_image_data_is_reproduced_through_the_whole_warp():
     h, w = 96, 96
     r, c = np.mgrid[0:h, 0:w]
     img = np.stack([0.25 * c + 0.5 * r, -0.75 * c + 3.0], axis=2).astype(np.float32)
-    res = warp_image(img, l_shape(size=80), star(cx=48, cy=48, r_in=20, r_out=44)[::2], interp="linear")
-    x, y = res.inverse_map[..., 0], res.inverse_map[..., 1]
-    ok = (x >= 0.5) & (x <= w - 0.5) & (y >= 0.5) & (y <= h - 0.5)
-    expected0 = 0.25 * (x - 0.5) + 0.5 * (y - 0.5)
-    expected1 = -0.75 * (x - 0.5) + 3.0
-    np.testing.assert_allclose(res.pixels[ok, 0], expected0[ok], atol=1e-4)
-    np.testing.assert_allclose(res.pixels[ok, 1], expected1[ok], atol=1e-4)
+    for antialias, margin in ((False, 0.5), (True, 4.0)):
+        res = warp_image(
+            img, l_shape(size=80), star(cx=48, cy=48, r_in=20, r_out=44)[::2], interp="linear", antialias=antialias
+        )
+        x, y = res.inverse_map[..., 0], res.inverse_map[..., 1]
+        # Away from the image border (where samples are clamped) and, with
+        # antialiasing, away from the polygon's edge (blended with the background):
+        ok = (x >= margin) & (x <= w - margin) & (y >= margin) & (y <= h - margin)
+        if antialias:
+            from warpcli.resample import edge_coverage
+
+            edge = np.zeros(h * w, bool)
+            edge[edge_coverage(star(cx=48, cy=48, r_in=20, r_out=44)[::2], l_shape(size=80), w, h).pixels] = True
+            ok &= ~edge.reshape(h, w)
+        expected0 = 0.25 * (x - 0.5) + 0.5 * (y - 0.5)
+        expected1 = -0.75 * (x - 0.5) + 3.0
+        # A symmetric average of a linear function is its centre value: exact.
+        np.testing.assert_allclose(res.pixels[ok, 0], expected0[ok], atol=1e-4)
+        np.testing.assert_allclose(res.pixels[ok, 1], expected1[ok], atol=1e-4)
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float16, np.float32])
@@ -97,3 +128,74 @@ def test_warp_file_is_deterministic_and_keeps_metadata(tmp_path):
     warp_file(inp, tmp_path / "o2.png", a, b)
     assert (tmp_path / "o1.png").read_bytes() == (tmp_path / "o2.png").read_bytes()
     assert read_pixels(tmp_path / "o1.png").shape == (48, 48, 3)
+
+
+def test_antialiased_affine_warp_averages_the_footprint():
+    """An independent computation: a shrinking affine map averages k x k bilinear
+    samples over each pixel's parallelogram footprint, k = ceil(|J column|)."""
+    rng = np.random.default_rng(14)
+    img = rng.random((90, 90, 1)).astype(np.float64)
+    src = np.array([[2.0, 2.0], [88.0, 4.0], [6.0, 88.0]])
+    dst = np.array([[20.0, 20.0], [50.0, 24.0], [22.0, 52.0]])  # about a third of the size
+    res = warp_image(img, src, dst, interp="linear", antialias=True)
+    m = np.linalg.solve(np.hstack([dst, np.ones((3, 1))]), src)
+    j = m[:2].T  # source point = j @ q + offset
+    ku = int(np.ceil(np.hypot(*j[:, 0])))
+    kv = int(np.ceil(np.hypot(*j[:, 1])))
+    assert ku >= 2 and kv >= 2
+    q = pixel_centres(90, 90)
+    centre = np.hstack([q, np.ones((len(q), 1))]) @ m
+    acc = np.zeros(len(q))
+    for i in range(ku):
+        for k in range(kv):
+            off = j @ np.array([(i + 0.5) / ku - 0.5, (k + 0.5) / kv - 0.5])
+            p = centre + off
+            acc += map_coordinates(img[:, :, 0], [p[:, 1] - 0.5, p[:, 0] - 0.5], order=1, mode="nearest")
+    expected = (acc / (ku * kv)).reshape(90, 90)
+    from warpcli.resample import edge_coverage
+
+    edge = np.zeros(90 * 90, bool)
+    edge[edge_coverage(dst, src, 90, 90).pixels] = True
+    ok = np.isfinite(res.inverse_map[..., 0]) & ~edge.reshape(90, 90)
+    np.testing.assert_allclose(res.pixels[ok, 0], expected[ok], atol=1e-9)
+
+
+def test_edge_coverage_sums_to_the_polygon_area():
+    from warpcli.resample import edge_coverage
+
+    poly = star(cx=64, cy=64, r_in=25, r_out=58, phase=0.37)
+    edge = edge_coverage(poly, poly, 128, 128, samples=9)
+    res = warp_image(np.zeros((128, 128, 1), np.float32), poly, poly, antialias=False)
+    full = np.isfinite(res.inverse_map[..., 0]).ravel()
+    full[edge.pixels] = False  # interior pixels count 1, edge pixels their share
+    area = full.sum() + edge.fraction.sum()
+    assert area == pytest.approx(abs(Polygon(poly).signed_area), rel=0.002)
+
+
+def test_antialiasing_follows_the_map_where_it_shrinks():
+    """A fine checkerboard squeezed to a third: close to a 4x supersampled reference."""
+    import math
+
+    from warpcli.resample import edge_coverage
+
+    size = 150
+    r, c = np.mgrid[0:size, 0:size]
+    img = (((r // 3) + (c // 3)) % 2 * 255).astype(np.float32)[:, :, None]
+    a = 2 * math.pi * np.arange(6) / 6
+    src = np.stack([75 + 70 * np.cos(a), 75 + 70 * np.sin(a)], axis=1)
+    dst = np.stack([75 + 23 * np.cos(a + 0.2), 75 + 23 * np.sin(a + 0.2)], axis=1)
+    big = warp_image(img, src, dst * 4, size=(4 * size, 4 * size), antialias=False).pixels[:, :, 0]
+    reference = big.astype(float).reshape(size, 4, size, 4).mean(axis=(1, 3))
+    plain = warp_image(img, src, dst, antialias=False)
+    smooth = warp_image(img, src, dst, antialias=True)
+    inside = np.isfinite(plain.inverse_map[..., 0]).ravel()
+    inside[edge_coverage(dst, src, size, size).pixels] = False
+    inside = inside.reshape(size, size)
+
+    def rmse(x):
+        d = (x[:, :, 0].astype(float) - reference)[inside]
+        return float(np.sqrt((d * d).mean()))
+
+    assert rmse(plain.pixels) > 40  # aliasing: the unfiltered warp is far off
+    assert rmse(smooth.pixels) < 0.15 * rmse(plain.pixels)
+    assert rmse(smooth.pixels) < 8

@@ -96,6 +96,12 @@ def _parse_max_area(ctx, param, value):
     help="Largest mesh triangle area in square pixels; 1 is the paper's pixel density, auto keeps the map within ~0.01 px of it, faster.",
 )
 @click.option(
+    "--antialias/--no-antialias",
+    default=True,
+    show_default=True,
+    help="Smooth the target polygon's edge and, with linear, average each pixel over its footprint where the map shrinks.",
+)
+@click.option(
     "--weights",
     type=click.Choice(("cotan", "positive")),
     default="cotan",
@@ -126,7 +132,7 @@ def _parse_max_area(ctx, param, value):
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
     paths, src_path, dst_path, src_label, dst_label, out_dir, out_name, interp, size, dtype, background, max_area,
-    weights, report_path, grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t,
+    antialias, weights, report_path, grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t,
     verbose, quiet,
 ):  # fmt: skip
     """Warp INPUT so that polygon SRC goes onto polygon DST; write OUTPUT.
@@ -155,7 +161,10 @@ def warp(
             raise click.UsageError(f"{', '.join(used)} applies to a single warp, not to --out-dir")
         if not paths:
             raise click.UsageError("no INPUT given")
-        _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, interp, background, max_area, weights, dtype)
+        _batch(
+            paths, out_dir, out_name, src_path, dst_path, src_label, dst_label,
+            interp=interp, background=background, max_area=max_area, weights=weights, dtype=dtype, antialias=antialias,
+        )  # fmt: skip
         return
     if len(paths) != 2:
         raise click.UsageError(f"expected INPUT and OUTPUT (or INPUTs with --out-dir DIR), got {len(paths)} path(s)")
@@ -179,6 +188,7 @@ def warp(
             background=background,
             max_area=max_area,
             weights=weights,
+            antialias=antialias,
             report_path=report_path,
             grid_path=grid_path,
             heatmap_path=heatmap_path,
@@ -197,7 +207,7 @@ def warp(
     )
 
 
-def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, interp, background, max_area, weights, dtype):
+def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, **options):
     """Warp every input with one map; report failures one line each and go on."""
     from .errors import InputError
     from .pipeline import warp_batch
@@ -212,7 +222,7 @@ def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, i
 
     items = warp_batch(
         list(paths), out_dir, src_path, dst_path, pattern=out_name, src_label=src_label, dst_label=dst_label,
-        on_item=report, interp=interp, background=background, max_area=max_area, weights=weights, dtype=dtype,
+        on_item=report, **options,
     )  # fmt: skip
     failed = [item for item in items if item.error is not None]
     if failed:

@@ -16,9 +16,9 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import InputError, WarpError
 from .imageio import RasterImage, atomic_path, check_output_path, convert_pixels, read_image, write_image
 from .mapping import BijectiveMap
-from .metrics import Distortion, distortion_at_pixels
+from .metrics import Distortion, distortion_at_pixels, triangle_jacobians
 from .polygon import Polygon, check_pair, read_polygon
-from .resample import INTERPOLATIONS, resample
+from .resample import INTERPOLATIONS, Footprint, edge_coverage, resample
 
 log = logging.getLogger("warpcli")
 
@@ -84,6 +84,7 @@ def warp_image(
     associated_alpha: bool = False,
     max_area: float | None = None,
     weights: str = "cotan",
+    antialias: bool = True,
     warp_map: BijectiveMap | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> WarpResult:
@@ -112,6 +113,10 @@ def warp_image(
     weights : {"cotan", "positive"}
         Laplacian weights: the harmonic maps, or mean-value weights (see
         `BijectiveMap.between`).
+    antialias : bool
+        Antialias the target polygon's edge (``linear`` and ``cubic``), and
+        with ``linear`` average each pixel over its footprint in the source
+        where the map shrinks. ``nearest`` never blends.
     warp_map : BijectiveMap or None
         A map already built for these polygons, to reuse.
     progress : callable or None
@@ -154,9 +159,20 @@ def warp_image(
     inverse = pulled.inverse_map
     t1 = clock()
     stage("resampling")
+    footprint = coverage = None
+    if antialias and interp != "nearest":
+        coverage = edge_coverage(dst.points, src.points, width, height)
+        if interp == "linear":
+            footprint = Footprint(
+                pulled.source_triangle,
+                pulled.target_triangle,
+                np.linalg.inv(triangle_jacobians(fmap.phi0)),
+                triangle_jacobians(fmap.phi1),
+            )
     out = resample(
-        img, inverse, interp=interp, background=bg, alpha_channel=alpha_channel, associated_alpha=associated_alpha
-    )
+        img, inverse, interp=interp, background=bg, alpha_channel=alpha_channel,
+        associated_alpha=associated_alpha, footprint=footprint, coverage=coverage,
+    )  # fmt: skip
     timings["compose"] = t1 - t0
     timings["resample"] = clock() - t1
     return WarpResult(out, fmap, inverse, timings, pulled.source_triangle, pulled.target_triangle)
