@@ -40,8 +40,9 @@ def measure(size: int = 300, square: int = 3, shrink: float = 3.0) -> dict:
     t2 = time.perf_counter()
     big = warp_image(img, src, dst * 4, size=(4 * size, 4 * size), antialias=False).pixels[:, :, 0]
     reference = big.astype(np.float64).reshape(size, 4, size, 4).mean(axis=(1, 3))
-    inside = np.isfinite(warp_image(img, src, dst, antialias=False).inverse_map[..., 0]).ravel()
-    inside[edge_coverage(dst, src, size, size).pixels] = False
+    centre_in = np.isfinite(warp_image(img, src, dst, antialias=False).inverse_map[..., 0])
+    inside = centre_in.ravel()
+    inside[edge_coverage(dst, src, size, size, centre_in).pixels] = False
     inside = inside.reshape(size, size)
 
     def errors(x):

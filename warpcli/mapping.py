@@ -115,12 +115,12 @@ class BijectiveMap:
         # not depend on the scheduling.
         with ThreadPoolExecutor(max_workers=3) as pool:
             solve0 = pool.submit(solve_harmonic, mesh_polygon(src, area0), theta, weights)
-            mesh1 = mesh_polygon(dst, area1)
-            t1 = clock()
-            solve1 = pool.submit(solve_harmonic, mesh1, theta, weights)
             # Loading the compiled kernels costs ~0.3 s of GIL-bound work in a
             # fresh process; the solves release the GIL, so do it meanwhile.
             pool.submit(_load_kernels)
+            mesh1 = mesh_polygon(dst, area1)
+            t1 = clock()
+            solve1 = pool.submit(solve_harmonic, mesh1, theta, weights)
             phi0, phi1 = solve0.result(), solve1.result()
         if check:
             phi0, phi1 = (_repaired(phi, poly) for phi, poly in ((phi0, src), (phi1, dst)))

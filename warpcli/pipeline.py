@@ -161,7 +161,7 @@ def warp_image(
     stage("resampling")
     footprint = coverage = None
     if antialias and interp != "nearest":
-        coverage = edge_coverage(dst.points, src.points, width, height)
+        coverage = edge_coverage(dst.points, src.points, width, height, np.isfinite(inverse[..., 0]))
         if interp == "linear":
             footprint = Footprint(
                 pulled.source_triangle,
