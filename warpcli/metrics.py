@@ -10,23 +10,31 @@ from numpy.typing import NDArray
 from .harmonic import HarmonicMap
 
 
-def triangle_jacobians(phi: HarmonicMap) -> NDArray[np.float64]:
+def triangle_jacobians(phi: HarmonicMap, *, inverse: bool = False) -> NDArray[np.float64]:
     """(M, 2, 2): the constant Jacobian of the piecewise-linear map on each triangle.
 
-    ``J = [theta_1 - theta_0, theta_2 - theta_0] @ inv([v_1 - v_0, v_2 - v_0])``;
-    NaN for a degenerate mesh triangle.
+    ``J = G @ inv(E)`` with ``E = [v_1 - v_0, v_2 - v_0]`` (mesh) and
+    ``G = [theta_1 - theta_0, theta_2 - theta_0]`` (image) as columns; with
+    ``inverse``, the Jacobian of the inverse map, ``E @ inv(G)``. NaN or inf
+    for a degenerate triangle.
     """
     t = phi.mesh.triangles
     v = phi.mesh.vertices
     w = phi.values
     e = np.stack([v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]], axis=2)  # columns
     g = np.stack([w[t[:, 1]] - w[t[:, 0]], w[t[:, 2]] - w[t[:, 0]]], axis=2)
-    det = e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]
+    if inverse:
+        e, g = g, e
+    return g @ _inv2(e)
+
+
+def _inv2(m: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Inverses of a stack of 2x2 matrices, in closed form."""
+    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
     with np.errstate(divide="ignore", invalid="ignore"):
-        inv = np.stack(
-            [np.stack([e[:, 1, 1], -e[:, 0, 1]], axis=1), np.stack([-e[:, 1, 0], e[:, 0, 0]], axis=1)], axis=1
+        return np.stack(
+            [np.stack([m[:, 1, 1], -m[:, 0, 1]], axis=1), np.stack([-m[:, 1, 0], m[:, 0, 0]], axis=1)], axis=1
         ) / det[:, None, None]
-    return g @ inv
 
 
 def singular_values(j: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -166,7 +166,7 @@ def warp_image(
             footprint = Footprint(
                 pulled.source_triangle,
                 pulled.target_triangle,
-                np.linalg.inv(triangle_jacobians(fmap.phi0)),
+                triangle_jacobians(fmap.phi0, inverse=True),
                 triangle_jacobians(fmap.phi1),
             )
     out = resample(
