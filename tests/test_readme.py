@@ -1,0 +1,33 @@
+"""Every warp command in the README's shell examples runs as written."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+
+
+def readme_commands() -> list[str]:
+    text = open(os.path.join(ROOT, "README.md")).read()
+    lines = []
+    for block in re.findall(r"```sh\n(.*?)```", text, flags=re.S):
+        lines += [ln for ln in block.splitlines() if ln.startswith(("warp ", "mkdir "))]
+    return lines
+
+
+COMMANDS = readme_commands()
+
+
+def test_the_readme_has_examples():
+    assert len([c for c in COMMANDS if c.startswith("warp ")]) >= 6
+
+
+def test_readme_commands_run_in_order(tmp_path):
+    os.symlink(os.path.join(ROOT, "sample_images"), tmp_path / "sample_images")
+    env = dict(os.environ, PATH=os.path.dirname(sys.executable) + os.pathsep + os.environ.get("PATH", ""))
+    for command in COMMANDS:  # later ones may use earlier outputs (apply-map on a saved map)
+        done = subprocess.run(command, shell=True, cwd=tmp_path, env=env, capture_output=True, text=True)
+        assert done.returncode == 0, f"{command}\n{done.stderr}"
