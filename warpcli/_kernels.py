@@ -142,24 +142,14 @@ def sample_linear(img, xy, background, out):
             for ch in range(nc):
                 out[n, ch] = background[ch]
             continue
-        u = min(max(x - 0.5, 0.0), w - 1.0)
-        v = min(max(y - 0.5, 0.0), h - 1.0)
-        i0 = int(u)
-        j0 = int(v)
-        i1 = min(i0 + 1, w - 1)
-        j1 = min(j0 + 1, h - 1)
-        tu = u - i0
-        tv = v - j0
         for ch in range(nc):
-            top = img[j0, i0, ch] * (1.0 - tu) + img[j0, i1, ch] * tu
-            bottom = img[j1, i0, ch] * (1.0 - tu) + img[j1, i1, ch] * tu
-            out[n, ch] = top * (1.0 - tv) + bottom * tv
+            out[n, ch] = _bilinear(img, x, y, ch)
 
 
 @njit(cache=True, nogil=True)
-def _bilinear_into(img, x, y, acc, weight):
-    """acc += weight * bilinear sample of img at continuous (x, y), edges extended."""
-    h, w, nc = img.shape
+def _bilinear(img, x, y, ch):
+    """Bilinear sample of channel ch at continuous (x, y); the edge pixels extend."""
+    h, w, _ = img.shape
     u = min(max(x - 0.5, 0.0), w - 1.0)
     v = min(max(y - 0.5, 0.0), h - 1.0)
     i0 = int(u)
@@ -168,10 +158,9 @@ def _bilinear_into(img, x, y, acc, weight):
     j1 = min(j0 + 1, h - 1)
     tu = u - i0
     tv = v - j0
-    for ch in range(nc):
-        top = img[j0, i0, ch] * (1.0 - tu) + img[j0, i1, ch] * tu
-        bottom = img[j1, i0, ch] * (1.0 - tu) + img[j1, i1, ch] * tu
-        acc[ch] += weight * (top * (1.0 - tv) + bottom * tv)
+    top = img[j0, i0, ch] * (1.0 - tu) + img[j0, i1, ch] * tu
+    bottom = img[j1, i0, ch] * (1.0 - tu) + img[j1, i1, ch] * tu
+    return top * (1.0 - tv) + bottom * tv
 
 
 @njit(cache=True, nogil=True)
@@ -219,18 +208,8 @@ def sample_linear_aa(img, xy, where0, where1, j0inv, j1, kmax, background, out):
                 kv = min(kmax, int(math.ceil(math.sqrt(nv) - 0.3)))
         if ku == 1 and kv == 1:
             # One sample (most pixels): bilinear at the centre, straight into out.
-            u = min(max(x - 0.5, 0.0), w - 1.0)
-            v = min(max(y - 0.5, 0.0), h - 1.0)
-            i0 = int(u)
-            j0 = int(v)
-            i1 = min(i0 + 1, w - 1)
-            j1_ = min(j0 + 1, h - 1)
-            tu = u - i0
-            tv = v - j0
             for ch in range(nc):
-                top = img[j0, i0, ch] * (1.0 - tu) + img[j0, i1, ch] * tu
-                bottom = img[j1_, i0, ch] * (1.0 - tu) + img[j1_, i1, ch] * tu
-                out[n, ch] = top * (1.0 - tv) + bottom * tv
+                out[n, ch] = _bilinear(img, x, y, ch)
             continue
         for ch in range(nc):
             acc[ch] = 0.0
@@ -242,7 +221,8 @@ def sample_linear_aa(img, xy, where0, where1, j0inv, j1, kmax, background, out):
                 sx = x + a * su + b * sv
                 sy = y + c * su + d * sv
                 if sx >= 0.0 and sx <= w and sy >= 0.0 and sy <= h:
-                    _bilinear_into(img, sx, sy, acc, weight)
+                    for ch in range(nc):
+                        acc[ch] += weight * _bilinear(img, sx, sy, ch)
                 else:
                     for ch in range(nc):
                         acc[ch] += weight * background[ch]
