@@ -127,6 +127,16 @@ def compose_grid(
 
 
 @njit(cache=True, nogil=True)
+def _background_if_outside(x, y, w, h, background, out, n):
+    """Write the background into out[n] if (x, y) is outside [0, w] x [0, h] (or NaN)."""
+    if x >= 0.0 and x <= w and y >= 0.0 and y <= h:
+        return False
+    for ch in range(out.shape[1]):
+        out[n, ch] = background[ch]
+    return True
+
+
+@njit(cache=True, nogil=True)
 def sample_linear(img, xy, background, out):
     """Bilinear samples of ``img`` (H, W, C) at continuous points ``xy`` (N, 2).
 
@@ -138,9 +148,7 @@ def sample_linear(img, xy, background, out):
     for n in range(xy.shape[0]):
         x = xy[n, 0]
         y = xy[n, 1]
-        if not (x >= 0.0 and x <= w and y >= 0.0 and y <= h):
-            for ch in range(nc):
-                out[n, ch] = background[ch]
+        if _background_if_outside(x, y, w, h, background, out, n):
             continue
         for ch in range(nc):
             out[n, ch] = _bilinear(img, x, y, ch)
@@ -182,9 +190,7 @@ def sample_linear_aa(img, xy, where0, where1, j0inv, j1, kmax, background, out):
     for n in range(xy.shape[0]):
         x = xy[n, 0]
         y = xy[n, 1]
-        if not (x >= 0.0 and x <= w and y >= 0.0 and y <= h):
-            for ch in range(nc):
-                out[n, ch] = background[ch]
+        if _background_if_outside(x, y, w, h, background, out, n):
             continue
         t0 = where0[n]
         t1 = where1[n]
@@ -238,9 +244,7 @@ def sample_nearest(img, xy, background, out):
     for n in range(xy.shape[0]):
         x = xy[n, 0]
         y = xy[n, 1]
-        if not (x >= 0.0 and x <= w and y >= 0.0 and y <= h):
-            for ch in range(nc):
-                out[n, ch] = background[ch]
+        if _background_if_outside(x, y, w, h, background, out, n):
             continue
         i = min(int(x), w - 1)
         j = min(int(y), h - 1)
