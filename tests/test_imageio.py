@@ -20,6 +20,7 @@ def write(path, px, names=None, attrs=()):
         spec.channelnames = tuple(names)
     if names and "A" in names:
         spec.alpha_channel = list(names).index("A")
+        spec.attribute("oiio:UnassociatedAlpha", 1)  # store the values as given
     for name, kind, value in attrs:
         spec.attribute(name, oiio.TypeDesc(kind), value)
     out = oiio.ImageOutput.create(str(path))
@@ -166,3 +167,20 @@ def test_straight_alpha_png_blends_premultiplied_and_keeps_8_bit_colour(tmp_path
     same = write_polygon(tmp_path / "same.json", [[0, 0], [3, 0], [3, 4], [0, 4]])
     assert main([inp, str(tmp_path / "id.png"), "--src", same, "--dst", same, "--interp", "nearest"]) == 0
     np.testing.assert_array_equal(read_image(tmp_path / "id.png").pixels, px)
+
+
+def test_straight_alpha_written_to_openexr_is_premultiplied(tmp_path):
+    # OpenEXR colour is premultiplied by definition; PNG's is straight.
+    px = np.array([[[200, 100, 50, 128]] * 4] * 4, dtype=np.uint8)
+    inp = write(tmp_path / "in.png", px, names=("R", "G", "B", "A"))
+    sq = write_polygon(tmp_path / "sq.json", [[0, 0], [4, 0], [4, 4], [0, 4]])
+    out = tmp_path / "out.exr"
+    assert main([inp, str(out), "--src", sq, "--dst", sq, "--interp", "nearest", "--dtype", "float"]) == 0
+    _, back = spec_of(out)
+    a = 128 / 255
+    np.testing.assert_allclose(back[1, 1], [200 / 255 * a, 100 / 255 * a, 50 / 255 * a, a], rtol=1e-6)
+    # And back to PNG: straight colour again (within the one level lost by
+    # quantizing premultiplied colour to 8 bits before dividing by alpha).
+    assert main([str(out), str(tmp_path / "again.png"), "--src", sq, "--dst", sq, "--interp", "nearest", "--dtype", "uint8"]) == 0
+    back_png = read_image(tmp_path / "again.png").pixels[1, 1].astype(int)
+    assert np.abs(back_png - [200, 100, 50, 128]).max() <= 1

@@ -227,20 +227,23 @@ def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
         type_name = _OIIO_TYPES[px.dtype]
     except KeyError:
         raise ImageIOError(f"{shown_name}: unsupported pixel type {px.dtype}") from None
+    out = oiio.ImageOutput.create(filename)
+    if out is None:
+        raise ImageIOError(f"{shown_name}: cannot write: {_oiio_error(oiio)}")
     spec = oiio.ImageSpec(w, h, nc, type_name)
     if image.channel_names:
         spec.channelnames = tuple(image.channel_names)
     spec.alpha_channel = -1 if image.alpha_channel is None else int(image.alpha_channel)
     if image.alpha_channel is not None and not image.associated_alpha:
-        spec.attribute("oiio:UnassociatedAlpha", 1)  # store the straight colour as it is
+        if out.format_name() in _PREMULTIPLIED_FORMATS:
+            px = _premultiplied(px, image.alpha_channel)
+        else:
+            spec.attribute("oiio:UnassociatedAlpha", 1)  # store the straight colour as it is
     for attr_name, attr_type, value in image.attributes:
         try:
             spec.attribute(attr_name, oiio.TypeDesc(attr_type), value)
         except (TypeError, ValueError, RuntimeError):
             continue  # metadata OpenImageIO cannot round-trip is dropped, not fatal
-    out = oiio.ImageOutput.create(filename)
-    if out is None:
-        raise ImageIOError(f"{shown_name}: cannot write: {_oiio_error(oiio)}")
     try:
         if not out.open(filename, spec):
             raise ImageIOError(f"{shown_name}: cannot write: {out.geterror() or _oiio_error(oiio)}")
@@ -248,6 +251,23 @@ def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
             raise ImageIOError(f"{shown_name}: cannot write: {out.geterror() or _oiio_error(oiio)}")
     finally:
         out.close()
+
+
+# Formats whose colour is premultiplied by alpha by definition: straight colour
+# must be premultiplied before it is written there (OpenImageIO does not).
+_PREMULTIPLIED_FORMATS = ("openexr",)
+
+
+def _premultiplied(px: NDArray, alpha_channel: int) -> NDArray:
+    """Colour multiplied by alpha (0..1), in the pixels' own type."""
+    unit = float(np.iinfo(px.dtype).max) if np.issubdtype(px.dtype, np.integer) else 1.0
+    x = px.astype(np.float64)
+    a = x[:, :, alpha_channel : alpha_channel + 1] / unit
+    colour = [c for c in range(px.shape[2]) if c != alpha_channel]
+    x[:, :, colour] *= a
+    if np.issubdtype(px.dtype, np.integer):
+        return np.clip(np.rint(x), 0, unit).astype(px.dtype)
+    return x.astype(px.dtype)
 
 
 def _oiio_error(oiio) -> str:
