@@ -17,8 +17,11 @@ import math
 import numpy as np
 from numba import njit
 
-#: Same tolerance as warpcli.locate.BARY_TOL.
-_TOL = 1e-10
+from .locate import BARY_TOL
+
+# Numba freezes module globals at compile time: the one tolerance, shared with
+# the vectorized locator.
+_TOL = BARY_TOL
 
 #: ``status`` values written by `compose_grid`: outside the grid's mesh, found,
 #: and walk abandoned (the point is handed back for a bucket search).

@@ -30,8 +30,7 @@ MEASURES = {
 
 _OUTSIDE = np.array([40, 40, 40], dtype=np.uint8)
 _GRID = np.array([255, 255, 255], dtype=np.float64)
-_SRC_OUTLINE = (255, 40, 160)
-_DST_OUTLINE = (255, 40, 160)
+_OUTLINE = (255, 40, 160)
 
 
 def display_rgb(pixels: NDArray, alpha_channel: int | None = None) -> NDArray[np.uint8]:
@@ -84,8 +83,8 @@ def grid_figure(
     base[lines] = 0.25 * base[lines] + 0.75 * _GRID
     gridded = np.round(base).astype(np.uint8)
     warped = resample(gridded, inverse_map, interp="linear", background=_OUTSIDE)
-    left = draw_outline(gridded, src.points, _SRC_OUTLINE)
-    right = draw_outline(warped, dst.points, _DST_OUTLINE)
+    left = draw_outline(gridded, src.points, _OUTLINE)
+    right = draw_outline(warped, dst.points, _OUTLINE)
     return side_by_side(left, right)
 
 

@@ -9,6 +9,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from .mesh import TriMesh, triangle_areas
+from .polygon import signed_area
 
 
 @dataclass(frozen=True)
@@ -56,11 +57,7 @@ def flipped_triangles(
     triangle Theta's orientation, whichever way the polygon runs.
     """
     img = triangle_areas(values, mesh.triangles)
-    return img * np.sign(_shoelace(theta)) <= 0
-
-
-def _shoelace(p: NDArray[np.float64]) -> float:
-    return 0.5 * float(np.dot(p[:, 0], np.roll(p[:, 1], -1)) - np.dot(np.roll(p[:, 0], -1), p[:, 1]))
+    return img * np.sign(signed_area(theta)) <= 0
 
 
 def cotan_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.integer]) -> sp.csr_matrix:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -138,22 +137,6 @@ class TriangleLocator:
             more = ~inside & (left > 1)
             pending, first, left = pending[more], first[more] + 1, left[more] - 1
         return tri, bary
-
-    @property
-    def coefficients(self) -> NDArray[np.float64]:
-        """(M, 6) barycentric coefficients per triangle (see `_affine_coefficients`)."""
-        return self._coef
-
-    def bucket_grid(self) -> tuple[float, float, float, float, int, int, NDArray[np.int64], NDArray[np.int64]]:
-        """``(lo_x, lo_y, cell_x, cell_y, rows, cols, indptr, triangle_ids)``: the CSR bucket grid."""
-        lo_x, lo_y = (float(v) for v in self._lo)
-        cell_x, cell_y = (float(v) for v in self._cell)
-        return lo_x, lo_y, cell_x, cell_y, self._shape[0], self._shape[1], self._indptr, self._tri_ids
-
-    @cached_property
-    def neighbours(self) -> NDArray[np.int64]:
-        """(M, 3): the triangle across the edge opposite each corner, -1 on the boundary."""
-        return triangle_neighbours(self.triangles)
 
     def interpolate(self, values: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
         """Piecewise-linear interpolation of per-vertex ``values`` at ``points``.

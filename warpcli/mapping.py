@@ -316,7 +316,7 @@ def _coherent_order(vertices: NDArray[np.float64], triangles: NDArray[np.int64],
 
 
 def _load_kernels() -> None:
-    """Load the compose and resample kernels before they are needed."""
+    """Load the compiled kernels (see warpcli._kernels.warm_up) before they are needed."""
     from . import _kernels
 
     _kernels.warm_up()
