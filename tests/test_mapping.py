@@ -270,3 +270,18 @@ def test_forward_grid_equals_forward_at_pixel_centres_and_inverts():
     assert_same_points(grid, f.forward(pixel_centres(128, 128)).reshape(128, 128, 2))
     ok = np.isfinite(grid[..., 0])
     np.testing.assert_allclose(f.inverse(grid[ok]), pixel_centres(128, 128).reshape(128, 128, 2)[ok], atol=1e-7)
+
+
+def test_theta_points_a_rounding_error_outside_go_through_the_boundary_map():
+    """The fallback shared by inverse() and the grid pass: exact on the boundary."""
+    from warpcli.mapping import _from_theta
+
+    src = Polygon(star())
+    f = BijectiveMap.between(src, src)
+    w = f.theta
+    mid = 0.5 * (w + np.roll(w, -1, axis=0))
+    outward = mid * (1 + 1e-9)  # Theta is centred at the origin; beyond BARY_TOL
+    pts, tri = _from_theta(outward, f._theta0_locator, f.phi0, src)
+    expected = 0.5 * (src.points + np.roll(src.points, -1, axis=0))
+    np.testing.assert_allclose(pts, expected, atol=1e-9)
+    assert (tri == -1).all()

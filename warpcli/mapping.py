@@ -182,7 +182,7 @@ class BijectiveMap:
             the source polygon.
         """
         theta = self.to_theta_src(points)
-        return self._from_theta(theta, self._theta1_locator, self.phi1, self.dst)
+        return _from_theta(theta, self._theta1_locator, self.phi1, self.dst)[0]
 
     def inverse(self, points: ArrayLike) -> NDArray[np.float64]:
         """Map target points back to the source.
@@ -199,7 +199,7 @@ class BijectiveMap:
             outside the target polygon.
         """
         theta = self.to_theta_dst(points)
-        return self._from_theta(theta, self._theta0_locator, self.phi0, self.src)
+        return _from_theta(theta, self._theta0_locator, self.phi0, self.src)[0]
 
     def inverse_grid(self, width: int, height: int) -> NDArray[np.float64]:
         """`inverse` at every pixel centre of a ``width`` x ``height`` output image.
@@ -218,7 +218,7 @@ class BijectiveMap:
 
     def pull_back_grid(self, width: int, height: int) -> GridPullBack:
         """`inverse_grid` together with the triangles each pixel went through."""
-        return _through_theta(self.phi1, self.phi0, lambda: self._theta0_locator, self.theta, self.src, width, height)
+        return _through_theta(self.phi1, self.phi0, lambda: self._theta0_locator, self.src, width, height)
 
     def forward_grid(self, width: int, height: int) -> NDArray[np.float64]:
         """`forward` at every pixel centre of a ``width`` x ``height`` source image.
@@ -228,7 +228,7 @@ class BijectiveMap:
         (height, width, 2) ndarray of float
             Target point of each source pixel centre; NaN outside the source.
         """
-        grid = _through_theta(self.phi0, self.phi1, lambda: self._theta1_locator, self.theta, self.dst, width, height)
+        grid = _through_theta(self.phi0, self.phi1, lambda: self._theta1_locator, self.dst, width, height)
         return grid.inverse_map
 
     def to_theta_src(self, points: ArrayLike) -> NDArray[np.float64]:
@@ -239,29 +239,28 @@ class BijectiveMap:
         """phi1: target points to Theta (NaN outside the target polygon)."""
         return self._dst_locator.interpolate(self.phi1.values, _points(points))
 
-    def _from_theta(
-        self,
-        theta: NDArray[np.float64],
-        locator: TriangleLocator,
-        phi: HarmonicMap,
-        poly: Polygon,
-    ) -> NDArray[np.float64]:
-        """phi^-1: points of Theta back to the polygon phi is defined on."""
-        tri, bary = locator.locate(theta)
-        out = barycentric_combine(phi.mesh.vertices, phi.mesh.triangles, tri, bary)
-        # A point of Theta's boundary can miss the image triangles by a
-        # rounding error; the boundary map is known exactly, so invert it there.
-        lost = np.flatnonzero((tri < 0) & np.isfinite(theta).all(axis=1))
-        if lost.size:
-            out[lost] = theta_boundary_to_polygon(theta[lost], self.theta, poly.points)
-        return out
+def _from_theta(
+    theta: NDArray[np.float64], locator: TriangleLocator, phi: HarmonicMap, poly: Polygon
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """phi^-1 at points of Theta: the polygon's points, and the mesh triangle of each.
+
+    Each point is located in phi's image mesh and interpolated in the mesh. A
+    point of Theta's boundary can miss every image triangle by a rounding
+    error; the boundary map is known exactly, so it is inverted there instead
+    (triangle -1).
+    """
+    tri, bary = locator.locate(theta)
+    out = barycentric_combine(phi.mesh.vertices, phi.mesh.triangles, tri, bary)
+    lost = np.flatnonzero((tri < 0) & np.isfinite(theta).all(axis=1))
+    if lost.size:
+        out[lost] = theta_boundary_to_polygon(theta[lost], phi.theta, poly.points)
+    return out, tri
 
 
 def _through_theta(
     phi_grid: HarmonicMap,
     phi_other: HarmonicMap,
     other_locator: Callable[[], TriangleLocator],
-    theta: NDArray[np.float64],
     other_poly: Polygon,
     width: int,
     height: int,
@@ -295,13 +294,7 @@ def _through_theta(
     if lost.size:
         # Rare: the bucket search (built only now) for the walks that gave up,
         # and Theta's exact boundary map for points a rounding error outside.
-        theta_pts = out[lost]
-        t, bary = other_locator().locate(theta_pts)
-        found = t >= 0
-        out[lost[found]] = barycentric_combine(phi_other.mesh.vertices, other_tri, t[found], bary[found])
-        where_other[lost[found]] = t[found]
-        rest = lost[~found]
-        out[rest] = theta_boundary_to_polygon(theta_pts[~found], theta, other_poly.points)
+        out[lost], where_other[lost] = _from_theta(out[lost], other_locator(), phi_other, other_poly)
     shape = (height, width)
     return GridPullBack(out.reshape(height, width, 2), where_other.reshape(shape), where_grid.reshape(shape))
 
