@@ -15,10 +15,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import InputError, WarpError
 from .imageio import RasterImage, atomic_path, check_output_path, convert_pixels, read_image, write_image
-from .mapping import BijectiveMap
+from .mapping import BijectiveMap, GridPullBack
 from .metrics import Distortion, distortion_at_pixels, triangle_jacobians
 from .polygon import Polygon, check_pair, read_polygon
-from .resample import INTERPOLATIONS, Footprint, edge_coverage, resample
+from .resample import INTERPOLATIONS, EdgeCoverage, Footprint, edge_coverage, resample
 
 log = logging.getLogger("warpcli")
 
@@ -155,13 +155,32 @@ def warp_image(
     clock = time.perf_counter
     t0 = clock()
     stage("composing the map")
-    pulled = fmap.pull_back_grid(width, height)
-    inverse = pulled.inverse_map
+    plan = _sampling(fmap, width, height, interp, antialias)
     t1 = clock()
     stage("resampling")
+    out = _resample_with(plan, img, interp, bg, alpha_channel, associated_alpha)
+    timings["compose"] = t1 - t0
+    timings["resample"] = clock() - t1
+    pulled = plan.pulled
+    return WarpResult(out, fmap, pulled.inverse_map, timings, pulled.source_triangle, pulled.target_triangle)
+
+
+@dataclass(frozen=True)
+class _Sampling:
+    """What a warp needs of the map on an output grid, whatever the image: where each
+    pixel comes from and, with antialiasing, its footprint and the edge coverage."""
+
+    pulled: GridPullBack
+    footprint: Footprint | None
+    coverage: EdgeCoverage | None
+
+
+def _sampling(fmap: BijectiveMap, width: int, height: int, interp: str, antialias: bool) -> _Sampling:
+    pulled = fmap.pull_back_grid(width, height)
     footprint = coverage = None
     if antialias and interp != "nearest":
-        coverage = edge_coverage(dst.points, src.points, width, height, np.isfinite(inverse[..., 0]))
+        inside = np.isfinite(pulled.inverse_map[..., 0])
+        coverage = edge_coverage(fmap.dst.points, fmap.src.points, width, height, inside)
         if interp == "linear":
             footprint = Footprint(
                 pulled.source_triangle,
@@ -169,13 +188,23 @@ def warp_image(
                 triangle_jacobians(fmap.phi0, inverse=True),
                 triangle_jacobians(fmap.phi1),
             )
-    out = resample(
-        img, inverse, interp=interp, background=bg, alpha_channel=alpha_channel,
-        associated_alpha=associated_alpha, footprint=footprint, coverage=coverage,
+    return _Sampling(pulled, footprint, coverage)
+
+
+def _resample_with(
+    plan: _Sampling, img: NDArray, interp: str, bg: NDArray, alpha_channel: int | None, associated_alpha: bool
+) -> NDArray:
+    return resample(
+        img, plan.pulled.inverse_map, interp=interp, background=bg, alpha_channel=alpha_channel,
+        associated_alpha=associated_alpha, footprint=plan.footprint, coverage=plan.coverage,
     )  # fmt: skip
-    timings["compose"] = t1 - t0
-    timings["resample"] = clock() - t1
-    return WarpResult(out, fmap, inverse, timings, pulled.source_triangle, pulled.target_triangle)
+
+
+def _write_like(path: str | os.PathLike[str], image: RasterImage, pixels: NDArray, dtype: str | None = None) -> None:
+    """Write pixels made from ``image`` with its channel names, alpha, alpha convention
+    and metadata, converted to ``dtype`` if given."""
+    px = pixels if dtype is None else convert_pixels(pixels, dtype)
+    write_image(path, RasterImage(px, image.channel_names, image.alpha_channel, image.attributes, image.associated_alpha))
 
 
 def warp_file(
@@ -246,11 +275,7 @@ def warp_file(
     )
     t0 = clock()
     stage("writing")
-    out_pixels = result.pixels if dtype is None else convert_pixels(result.pixels, dtype)
-    write_image(
-        output_path,
-        RasterImage(out_pixels, image.channel_names, image.alpha_channel, image.attributes, image.associated_alpha),
-    )
+    _write_like(output_path, image, result.pixels, dtype)
     result.timings["read"] = t_read
     result.timings["write"] = clock() - t0
     if grid_path is not None or heatmap_path is not None:
@@ -323,12 +348,19 @@ def warp_batch(
     src_label: str | None = None,
     dst_label: str | None = None,
     on_item: Callable[[BatchItem], None] | None = None,
+    interp: str = DEFAULT_INTERP,
+    background: float | ArrayLike = 0.0,
+    size: tuple[int, int] | None = None,
+    antialias: bool = True,
+    max_area: float | None = None,
+    weights: str = "cotan",
     dtype: str | None = None,
-    **options,
 ) -> list[BatchItem]:
     """Warp many images with one map: ``out_dir/<pattern>`` for each input.
 
-    The map is computed once. Every output path is checked before any work
+    The options are those of `warp_image` and `warp_file`. The map is
+    computed once, and its pull-back onto each output size once (inputs of one
+    size share it). Every output path is checked before any work
     (a missing directory, an unknown format, two inputs with the same output,
     or an output that is one of the inputs is bad input, raised at once); an
     input that then fails (unreadable, not an image, a write error) is
@@ -353,17 +385,20 @@ def warp_batch(
     src = read_polygon(src_path, src_label)
     dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
-    fmap = BijectiveMap.between(src, dst, max_area=options.pop("max_area", None), weights=options.pop("weights", "cotan"))
+    if interp not in INTERPOLATIONS:
+        raise InputError(f"unknown interpolation {interp!r}; choose one of {', '.join(INTERPOLATIONS)}")
+    fmap = BijectiveMap.between(src, dst, max_area=max_area, weights=weights)
+    plans: dict[tuple[int, int], _Sampling] = {}
     items = []
     for inp, out in zip(input_paths, outputs):
         try:
             image = read_image(inp)
-            result = warp_image(
-                image.pixels, src, dst, alpha_channel=image.alpha_channel,
-                associated_alpha=image.associated_alpha, warp_map=fmap, **options,
-            )  # fmt: skip
-            px = result.pixels if dtype is None else convert_pixels(result.pixels, dtype)
-            write_image(out, RasterImage(px, image.channel_names, image.alpha_channel, image.attributes, image.associated_alpha))
+            shape = size if size is not None else (image.width, image.height)
+            if shape not in plans:
+                plans[shape] = _sampling(fmap, shape[0], shape[1], interp, antialias)
+            bg = _background(background, image.pixels)
+            px = _resample_with(plans[shape], image.pixels, interp, bg, image.alpha_channel, image.associated_alpha)
+            _write_like(out, image, px, dtype)
             item = BatchItem(os.fspath(inp), out)
         except WarpError as err:
             item = BatchItem(os.fspath(inp), out, err)
@@ -399,7 +434,7 @@ def apply_map_file(
         image.pixels, points, interp=interp, background=bg,
         alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha,
     )  # fmt: skip
-    write_image(output_path, RasterImage(out, image.channel_names, image.alpha_channel, image.attributes, image.associated_alpha))
+    _write_like(output_path, image, out)
     return out
 
 
