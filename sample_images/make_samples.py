@@ -53,62 +53,56 @@ def write_json(name: str, points: list, note: str) -> None:
         fh.write("\n")
 
 
-def write_png(name: str, pixels: np.ndarray) -> None:
+def write_png(path: str, pixels: np.ndarray) -> None:
+    """Write 8-bit pixels (H, W, C) as a PNG (a bare name lands in this folder)."""
     import OpenImageIO as oiio
 
+    path = os.path.join(HERE, path)
     h, w, c = pixels.shape
-    out = oiio.ImageOutput.create(os.path.join(HERE, name))
-    out.open(os.path.join(HERE, name), oiio.ImageSpec(w, h, c, "uint8"))
+    out = oiio.ImageOutput.create(path)
+    out.open(path, oiio.ImageSpec(w, h, c, "uint8"))
     out.write_image(pixels)
     out.close()
 
 
-def outline(pixels: np.ndarray, points: list, colour=(255, 40, 160)) -> np.ndarray:
-    """Draw a polygon's outline (3 px) onto a copy of an RGB image."""
-    from skimage.draw import line
-
-    out = pixels.copy()
-    # Pixel (r, c) has its centre at (c + 0.5, r + 0.5).
-    rc = np.round(np.asarray(points)[:, ::-1] - 0.5).astype(int)
-    for a, b in zip(rc, np.roll(rc, -1, axis=0)):
-        rr, cc = line(a[0], a[1], b[0], b[1])
-        for dr, dc in ((0, 0), (1, 0), (0, 1), (-1, 0), (0, -1)):  # 3 px wide
-            r, c = rr + dr, cc + dc
-            keep = (r >= 0) & (r < out.shape[0]) & (c >= 0) & (c < out.shape[1])
-            out[r[keep], c[keep]] = colour
-    return out
+#: (name, image, source polygon, target polygon) of each sample.
+SAMPLES = (
+    ("grid", "grid.png", "grid_L.json", "grid_hexagon.json"),
+    ("chelsea", "chelsea.png", "chelsea_ring.json", "chelsea_star.json"),
+)
 
 
-def read_rgb(path: str) -> np.ndarray:
-    import OpenImageIO as oiio
+def _warp(image: str, src: str, dst: str, out: str, *extra: str) -> None:
+    import subprocess
+    import sys
 
-    inp = oiio.ImageInput.open(path)
-    px = inp.read_image(oiio.UINT8)
-    inp.close()
-    return px[:, :, :3]
+    subprocess.run(
+        [sys.executable, "-m", "warpcli", os.path.join(HERE, image), out,
+         "--src", os.path.join(HERE, src), "--dst", os.path.join(HERE, dst), "-q", *extra],
+        check=True,
+    )  # fmt: skip
 
 
 def readme_figure() -> None:
     """before_after.png: each sample with its source polygon, then the warp result."""
-    import subprocess
-    import sys
     import tempfile
 
+    from warpcli.figures import display_rgb, draw_outline, side_by_side
+    from warpcli.imageio import read_image
+
+    def picture(path: str, polygon: str) -> np.ndarray:
+        """The image at 300 px tall, with the polygon's outline drawn at that size."""
+        img = read_image(path)
+        scale = 300 / img.height
+        points = np.asarray(json.load(open(os.path.join(HERE, polygon)))["points"]) * scale
+        return draw_outline(_resize(display_rgb(img.pixels, img.alpha_channel), scale), points, (255, 40, 160))
+
     rows = []
-    pairs = [("grid.png", "grid_L.json", "grid_hexagon.json"), ("chelsea.png", "chelsea_ring.json", "chelsea_star.json")]
     with tempfile.TemporaryDirectory() as tmp:
-        for image, src, dst in pairs:
+        for _, image, src, dst in SAMPLES:
             out = os.path.join(tmp, "out.png")
-            subprocess.run(
-                [sys.executable, "-m", "warpcli", os.path.join(HERE, image), "--src", os.path.join(HERE, src),
-                 "--dst", os.path.join(HERE, dst), "-q", out],
-                check=True,
-            )
-            load = lambda name: json.load(open(os.path.join(HERE, name)))["points"]  # noqa: E731
-            before = outline(read_rgb(os.path.join(HERE, image)), load(src))
-            after = outline(read_rgb(out), load(dst))
-            scale = 300 / before.shape[0]
-            rows.append(np.concatenate([_resize(before, scale), np.full((300, 8, 3), 255, np.uint8), _resize(after, scale)], axis=1))
+            _warp(image, src, dst, out)
+            rows.append(side_by_side(picture(os.path.join(HERE, image), src), picture(out, dst)))
     width = max(r.shape[1] for r in rows)
     rows = [np.pad(r, ((0, 8), (0, width - r.shape[1]), (0, 0)), constant_values=255) for r in rows]
     write_png("before_after.png", np.concatenate(rows, axis=0)[:-8])
@@ -116,20 +110,13 @@ def readme_figure() -> None:
 
 def map_pictures() -> None:
     """<sample>_grid.png and <sample>_heatmap.png: warp's own --grid and --heatmap output."""
-    import subprocess
-    import sys
     import tempfile
 
-    pairs = [("grid", "grid.png", "grid_L.json", "grid_hexagon.json"), ("chelsea", "chelsea.png", "chelsea_ring.json", "chelsea_star.json")]
     with tempfile.TemporaryDirectory() as tmp:
-        for name, image, src, dst in pairs:
-            subprocess.run(
-                [sys.executable, "-m", "warpcli", os.path.join(HERE, image), os.path.join(tmp, "out.png"),
-                 "--src", os.path.join(HERE, src), "--dst", os.path.join(HERE, dst), "-q",
-                 "--grid", os.path.join(HERE, f"{name}_grid.png"),
-                 "--heatmap", os.path.join(HERE, f"{name}_heatmap.png")],
-                check=True,
-            )
+        for name, image, src, dst in SAMPLES:
+            _warp(image, src, dst, os.path.join(tmp, "out.png"),
+                  "--grid", os.path.join(HERE, f"{name}_grid.png"),
+                  "--heatmap", os.path.join(HERE, f"{name}_heatmap.png"))  # fmt: skip
 
 
 def _resize(px: np.ndarray, scale: float) -> np.ndarray:

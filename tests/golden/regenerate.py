@@ -20,7 +20,7 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "..", "sample_images"))
 
-from make_samples import grid_image  # noqa: E402
+from make_samples import grid_image, write_png  # noqa: E402
 
 #: name -> (src polygon, dst polygon, extra CLI options)
 CASES = {
@@ -42,21 +42,11 @@ def write_inputs(folder: str) -> None:
 
     px = grid_image(128, 8)
     out = os.path.join(folder, "grid.png")
-    write_png_to(out, px)
+    write_png(out, px)
     for name, (src, dst, _) in CASES.items():
         for suffix, pts in (("src", src), ("dst", dst)):
             with open(os.path.join(folder, f"{name}.{suffix}.json"), "w") as fh:
                 json.dump(pts, fh)
-
-
-def write_png_to(path: str, pixels) -> None:
-    import OpenImageIO as oiio
-
-    h, w, c = pixels.shape
-    out = oiio.ImageOutput.create(path)
-    out.open(path, oiio.ImageSpec(w, h, c, "uint8"))
-    out.write_image(pixels)
-    out.close()
 
 
 def warp_command(folder: str, name: str, output: str) -> list[str]:
