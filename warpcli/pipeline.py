@@ -142,8 +142,7 @@ def warp_image(
     src = src if isinstance(src, Polygon) else Polygon(src, name="src")
     dst = dst if isinstance(dst, Polygon) else Polygon(dst, name="dst")
     check_pair(src, dst)
-    if interp not in INTERPOLATIONS:
-        raise InputError(f"unknown interpolation {interp!r}; choose one of {', '.join(INTERPOLATIONS)}")
+    _check_interp(interp)
     width, height = size if size is not None else (img.shape[1], img.shape[0])
     bg = _background(background, img)
 
@@ -385,8 +384,7 @@ def warp_batch(
     src = read_polygon(src_path, src_label)
     dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
-    if interp not in INTERPOLATIONS:
-        raise InputError(f"unknown interpolation {interp!r}; choose one of {', '.join(INTERPOLATIONS)}")
+    _check_interp(interp)
     fmap = BijectiveMap.between(src, dst, max_area=max_area, weights=weights)
     plans: dict[tuple[int, int], _Sampling] = {}
     items = []
@@ -436,6 +434,11 @@ def apply_map_file(
     )  # fmt: skip
     _write_like(output_path, image, out)
     return out
+
+
+def _check_interp(interp: str) -> None:
+    if interp not in INTERPOLATIONS:
+        raise InputError(f"unknown interpolation {interp!r}; choose one of {', '.join(INTERPOLATIONS)}")
 
 
 def _background(background: float | ArrayLike, img: NDArray) -> NDArray[np.float64]:
