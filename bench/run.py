@@ -304,20 +304,26 @@ class Runner:
 # Accuracy
 
 
+def mesh_triangles(fmap) -> int:
+    """Triangles of both FEM meshes of a map, from what the method reports."""
+    info = fmap.describe()
+    return info["source_mesh"]["triangles"] + info["target_mesh"]["triangles"]
+
+
 def map_accuracy(src_path: str, dst_path: str, w: int, h: int) -> dict:
     """Error of the default map against one on a mesh 4x finer (max area / 4), in pixels."""
-    import warpcli.mapping as wm
-    from warpcli.mesh import auto_max_area
-    from warpcli.pipeline import pixel_centres
+    from warpcli.grid import pixel_centres
+    from warpcli.maps.compose import BijectiveMap
+    from warpcli.maps.fem.mesh import auto_max_area
     from warpcli.polygon import read_polygon
 
     # The very polygons the warp command reads.
     src = read_polygon(src_path)
     dst = read_polygon(dst_path)
     t0 = time.perf_counter()
-    coarse = wm.BijectiveMap.between(src, dst, max_area=None)
-    fine = wm.BijectiveMap.between(src, dst, max_area=(auto_max_area(src) / 4.0, auto_max_area(dst) / 4.0))
-    tri = lambda m: m.phi0.mesh.n_triangles + m.phi1.mesh.n_triangles  # noqa: E731
+    coarse = BijectiveMap.between(src, dst, max_area=None)
+    fine = BijectiveMap.between(src, dst, max_area=(auto_max_area(src) / 4.0, auto_max_area(dst) / 4.0))
+    tri = mesh_triangles
     note = ""
     t_build = time.perf_counter() - t0
     pts = pixel_centres(w, h)
@@ -718,7 +724,7 @@ def main(argv=None) -> int:
                         res = warp_file(img_path, base + "_inproc.png", src, dst)
                         for k, v in res.timings.items():
                             row.stages.setdefault(k, []).append(v)
-                        row.triangles = res.map.phi0.mesh.n_triangles + res.map.phi1.mesh.n_triangles
+                        row.triangles = mesh_triangles(res.map)
                         del res
                         if rep == 0 and os.path.exists(base + "_cli.png"):
                             row.cli_matches = bool(

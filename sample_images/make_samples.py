@@ -87,8 +87,8 @@ def readme_figure() -> None:
     """before_after.png: each sample with its source polygon, then the warp result."""
     import tempfile
 
-    from warpcli.figures import display_rgb, draw_outline, side_by_side
-    from warpcli.imageio import read_image
+    from warpcli.raster.imageio import read_image
+    from warpcli.report.figures import display_rgb, draw_outline, side_by_side
 
     def picture(path: str, polygon: str) -> np.ndarray:
         """The image at 300 px tall, with the polygon's outline drawn at that size."""

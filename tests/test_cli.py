@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from helpers import read_pixels, write_png, write_polygon
 from warpcli import __version__
 from warpcli.cli import main, warp
-from warpcli.mesh import MAX_TRIANGLES
+from warpcli.maps.fem.mesh import MAX_TRIANGLES
 
 SRC = [[8.0, 8.0], [56.0, 8.0], [56.0, 56.0], [8.0, 56.0]]
 DST = [[4.0, 10.0], [60.0, 6.0], [50.0, 58.0], [10.0, 50.0]]

@@ -8,7 +8,7 @@ import pytest
 
 from helpers import write_polygon
 from warpcli.cli import main
-from warpcli.imageio import convert_pixels, read_image
+from warpcli.raster.imageio import convert_pixels, read_image
 
 TYPES = {np.dtype(np.uint8): "uint8", np.dtype(np.uint16): "uint16", np.dtype(np.float16): "half", np.dtype(np.float32): "float"}
 

@@ -8,7 +8,7 @@ from scipy.ndimage import map_coordinates
 
 from helpers import l_shape, read_pixels, regular, similarity, star, write_png, write_polygon
 from warpcli import Polygon, warp_file, warp_image
-from warpcli.pipeline import pixel_centres
+from warpcli.grid import pixel_centres
 
 
 def test_pixel_centres_follow_the_convention():
@@ -17,14 +17,15 @@ def test_pixel_centres_follow_the_convention():
 
 
 def test_identical_polygons_leave_the_image_unchanged_inside():
-    from warpcli.resample import edge_coverage
+    from warpcli.boundary import edge_points
+    from warpcli.raster.resample import edge_coverage
 
     rng = np.random.default_rng(3)
     img = rng.integers(0, 256, (64, 64, 3), dtype=np.uint8)
     poly = star(cx=32, cy=32, r_in=12, r_out=30)
     res = warp_image(img, poly, poly, background=0)
     inside = np.isfinite(res.inverse_map[..., 0])
-    edge = edge_coverage(poly, poly, 64, 64, inside)
+    edge = edge_coverage(poly, 64, 64, inside)
     on_edge = np.zeros(64 * 64, bool)
     on_edge[edge.pixels] = True
     on_edge = on_edge.reshape(64, 64)
@@ -37,7 +38,7 @@ def test_identical_polygons_leave_the_image_unchanged_inside():
     flat = res.pixels.reshape(-1, 3).astype(float)
     centre_inside = inside.ravel()[edge.pixels]
     colour = img.reshape(-1, 3)[edge.pixels].astype(float)
-    p = edge.source_points[~centre_inside]
+    p = edge_points(poly, edge.edge, edge.t)[~centre_inside]  # identity: the boundary point itself
     colour[~centre_inside] = np.stack(
         [map_coordinates(img[:, :, ch].astype(float), [p[:, 1] - 0.5, p[:, 0] - 0.5], order=1, mode="nearest") for ch in range(3)],
         axis=1,
@@ -76,10 +77,10 @@ def test_linear_image_data_is_reproduced_through_the_whole_warp():
         # antialiasing, away from the polygon's edge (blended with the background):
         ok = (x >= margin) & (x <= w - margin) & (y >= margin) & (y <= h - margin)
         if antialias:
-            from warpcli.resample import edge_coverage
+            from warpcli.raster.resample import edge_coverage
 
             edge = np.zeros(h * w, bool)
-            edge[edge_coverage(star(cx=48, cy=48, r_in=20, r_out=44)[::2], l_shape(size=80), w, h, np.isfinite(x)).pixels] = True
+            edge[edge_coverage(star(cx=48, cy=48, r_in=20, r_out=44)[::2], w, h, np.isfinite(x)).pixels] = True
             ok &= ~edge.reshape(h, w)
         expected0 = 0.25 * (x - 0.5) + 0.5 * (y - 0.5)
         expected1 = -0.75 * (x - 0.5) + 3.0
@@ -152,20 +153,20 @@ def test_antialiased_affine_warp_averages_the_footprint():
             p = centre + off
             acc += map_coordinates(img[:, :, 0], [p[:, 1] - 0.5, p[:, 0] - 0.5], order=1, mode="nearest")
     expected = (acc / (ku * kv)).reshape(90, 90)
-    from warpcli.resample import edge_coverage
+    from warpcli.raster.resample import edge_coverage
 
     edge = np.zeros(90 * 90, bool)
-    edge[edge_coverage(dst, src, 90, 90, np.isfinite(res.inverse_map[..., 0])).pixels] = True
+    edge[edge_coverage(dst, 90, 90, np.isfinite(res.inverse_map[..., 0])).pixels] = True
     ok = np.isfinite(res.inverse_map[..., 0]) & ~edge.reshape(90, 90)
     np.testing.assert_allclose(res.pixels[ok, 0], expected[ok], atol=1e-9)
 
 
 def test_edge_coverage_sums_to_the_polygon_area():
-    from warpcli.resample import edge_coverage
+    from warpcli.raster.resample import edge_coverage
 
     poly = star(cx=64, cy=64, r_in=25, r_out=58, phase=0.37)
     res = warp_image(np.zeros((128, 128, 1), np.float32), poly, poly, antialias=False)
-    edge = edge_coverage(poly, poly, 128, 128, np.isfinite(res.inverse_map[..., 0]))
+    edge = edge_coverage(poly, 128, 128, np.isfinite(res.inverse_map[..., 0]))
     full = np.isfinite(res.inverse_map[..., 0]).ravel()
     full[edge.pixels] = False  # interior pixels count 1, edge pixels their share
     area = full.sum() + edge.fraction.sum()
@@ -176,7 +177,7 @@ def test_antialiasing_follows_the_map_where_it_shrinks():
     """A fine checkerboard squeezed to a third: close to a 4x supersampled reference."""
     import math
 
-    from warpcli.resample import edge_coverage
+    from warpcli.raster.resample import edge_coverage
 
     size = 150
     r, c = np.mgrid[0:size, 0:size]
@@ -190,7 +191,7 @@ def test_antialiasing_follows_the_map_where_it_shrinks():
     smooth = warp_image(img, src, dst, antialias=True)
     centre_in = np.isfinite(plain.inverse_map[..., 0])
     inside = centre_in.ravel()
-    inside[edge_coverage(dst, src, size, size, centre_in).pixels] = False
+    inside[edge_coverage(dst, size, size, centre_in).pixels] = False
     inside = inside.reshape(size, size)
 
     def rmse(x):

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warpcli.pipeline import pixel_centres
-from warpcli.resample import resample
+from warpcli.grid import pixel_centres
+from warpcli.raster.resample import resample
 
 
 def identity_map(w: int, h: int) -> np.ndarray:

@@ -37,13 +37,13 @@ def test_sample_warp_end_to_end(image, src, dst, tmp_path):
     after = read_pixels(outs[0])
     assert after.shape == before.shape and after.dtype == before.dtype
     # Outside the target polygon, away from its antialiased edge: the default background, 0.
-    from warpcli.resample import edge_coverage
+    from warpcli.raster.resample import edge_coverage
 
     f = BijectiveMap.between(read_polygon(src_p), read_polygon(dst_p))
     h, w = before.shape[:2]
     centre_in = np.isfinite(f.inverse_grid(w, h)[..., 0])
     inside = centre_in.ravel()
-    inside[edge_coverage(f.dst.points, f.src.points, w, h, centre_in).pixels] = True
+    inside[edge_coverage(f.dst.points, w, h, centre_in).pixels] = True
     assert (after.reshape(h * w, -1)[~inside] == 0).all()
     # Just inside each target vertex, the output shows what the input has just
     # inside the corresponding source vertex (the vertices correspond).

@@ -8,8 +8,8 @@ import pytest
 
 from helpers import read_pixels, regular, star, write_png, write_polygon
 from warpcli.cli import main
-from warpcli.pipeline import pixel_centres
-from warpcli.stmap import load_stmap, save_stmap
+from warpcli.grid import pixel_centres
+from warpcli.raster.stmap import load_stmap, save_stmap
 
 
 @pytest.fixture

@@ -1,39 +1,72 @@
 """warpcli: smooth bijective image warping between polygons (Schneider & Hormann 2015).
 
 The public names below are imported on first use, so that ``import warpcli``
-(and ``warp --help``) stays instant.
+(and ``warp --help``) stays instant; type checkers and IDEs see them through
+the ``TYPE_CHECKING`` imports.
 """
 
 from __future__ import annotations
 
 import importlib
+from typing import TYPE_CHECKING
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 _EXPORTS = {
-    "BijectiveMap": "mapping",
+    "BatchItem": "pipeline",
+    "BijectiveMap": "maps.compose",
+    "Certificate": "maps.base",
     "FoldOverError": "errors",
-    "HarmonicMap": "harmonic",
     "ImageIOError": "errors",
     "ImageInputError": "errors",
     "InputError": "errors",
+    "MapOptions": "options",
     "MeshingError": "errors",
     "Polygon": "polygon",
     "PolygonError": "errors",
-    "RasterImage": "imageio",
-    "TriMesh": "mesh",
+    "PullBack": "maps.compose",
+    "RasterImage": "raster.imageio",
+    "Theta": "maps.theta",
+    "ThetaMap": "maps.base",
     "WarpError": "errors",
+    "WarpOptions": "options",
     "WarpResult": "pipeline",
-    "mesh_polygon": "mesh",
-    "read_image": "imageio",
+    "apply_map_file": "pipeline",
+    "build_map": "maps.compose",
+    "build_report": "report",
+    "load_stmap": "raster.stmap",
+    "pixel_centres": "grid",
+    "read_image": "raster.imageio",
     "read_polygon": "polygon",
-    "solve_harmonic": "harmonic",
+    "save_stmap": "raster.stmap",
+    "warp_batch": "pipeline",
     "warp_file": "pipeline",
     "warp_image": "pipeline",
-    "write_image": "imageio",
+    "write_image": "raster.imageio",
 }
 
 __all__ = sorted([*_EXPORTS, "__version__"])
+
+if TYPE_CHECKING:
+    from .errors import (
+        FoldOverError,
+        ImageInputError,
+        ImageIOError,
+        InputError,
+        MeshingError,
+        PolygonError,
+        WarpError,
+    )
+    from .grid import pixel_centres
+    from .maps.base import Certificate, ThetaMap
+    from .maps.compose import BijectiveMap, PullBack, build_map
+    from .maps.theta import Theta
+    from .options import MapOptions, WarpOptions
+    from .pipeline import BatchItem, WarpResult, apply_map_file, warp_batch, warp_file, warp_image
+    from .polygon import Polygon, read_polygon
+    from .raster.imageio import RasterImage, read_image, write_image
+    from .raster.stmap import load_stmap, save_stmap
+    from .report import build_report
 
 
 def __getattr__(name: str):

@@ -11,6 +11,12 @@ import time
 import click
 
 from . import __version__
+from .errors import InputError, WarpError
+from .maps.registry import METHODS, THETAS
+from .options import DTYPES, HEATMAP_MEASURES, INTERPOLATIONS, STMAP_T, WEIGHTS
+
+#: Exit statuses; decided here and nowhere else.
+EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 EXIT_CODES = """\b
 Exit status:
@@ -24,7 +30,12 @@ WARP_EPILOG = EXIT_CODES + """
 Also: warp apply-map MAP.exr INPUT OUTPUT applies a saved map (see warp apply-map --help).
 """
 
-_INTERPS = ("nearest", "linear", "cubic")
+CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
+
+
+def exit_code(err: WarpError) -> int:
+    """The exit status for an error: 2 for bad input, 1 for a failure while processing."""
+    return EXIT_BAD_INPUT if isinstance(err, InputError) else EXIT_FAILURE
 
 
 def _parse_size(ctx, param, value):
@@ -61,10 +72,56 @@ def _parse_max_area(ctx, param, value):
     return area
 
 
-@click.command(
-    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
-    epilog=WARP_EPILOG,
-)
+def interp_option(f):
+    return click.option(
+        "--interp", type=click.Choice(INTERPOLATIONS), default="linear", show_default=True, help="Resampling filter."
+    )(f)
+
+
+def background_option(help_text: str):
+    return click.option(
+        "--background", default="0", show_default=True, callback=_parse_background, metavar="V[,V...]", help=help_text
+    )
+
+
+def dtype_option(f):
+    return click.option(
+        "--dtype",
+        type=click.Choice(DTYPES),
+        help="Output pixel type (values keep their meaning: integer types span 0..1).  [default: INPUT's]",
+    )(f)
+
+
+def quiet_option(f):
+    return click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")(f)
+
+
+class _Command(click.Command):
+    """A command whose usage line reads "warp ..." also when it is the group's default."""
+
+    def format_usage(self, ctx, formatter):
+        formatter.write_usage(ctx.command_path.strip(), " ".join(self.collect_usage_pieces(ctx)))
+
+
+class DefaultGroup(click.Group):
+    """A group whose first argument is a subcommand's name, or else the default command's."""
+
+    def __init__(self, *args, default: str, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.default = default
+
+    def parse_args(self, ctx, args):
+        if not (args and args[0] in self.commands):
+            args = [self.default, *args]
+        return super().parse_args(ctx, args)
+
+    def resolve_command(self, ctx, args):
+        name, cmd, rest = super().resolve_command(ctx, args)
+        # The default command's usage and messages read "warp ...", not "warp warp ...".
+        return ("" if name == self.default else name), cmd, rest
+
+
+@click.command(cls=_Command, context_settings=CONTEXT, epilog=WARP_EPILOG)
 @click.argument("paths", metavar="INPUT OUTPUT | INPUT... --out-dir DIR", nargs=-1, type=click.Path(dir_okay=True))
 @click.option("--src", "src_path", required=True, type=click.Path(), help="Source polygon file (JSON, labelme or GeoJSON), in INPUT's pixel coordinates.")
 @click.option("--dst", "dst_path", required=True, type=click.Path(), help="Target polygon file (JSON, labelme or GeoJSON), in OUTPUT's pixel coordinates.")
@@ -72,20 +129,23 @@ def _parse_max_area(ctx, param, value):
 @click.option("--dst-label", help="Which polygon of a labelme or GeoJSON --dst file holding several.")
 @click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
 @click.option("--out-name", default="{name}", show_default=True, help="Batch output file name: {name}, {stem}, {ext} of the input (the extension picks the format).")
-@click.option("--interp", type=click.Choice(_INTERPS), default="linear", show_default=True, help="Resampling filter.")
+@interp_option
 @click.option("--size", callback=_parse_size, metavar="WxH", help="Output size in pixels.  [default: INPUT's size]")
+@dtype_option
+@background_option("Value of pixels outside DST: one for all channels or one per channel, 0..1 for integer images.")
 @click.option(
-    "--dtype",
-    type=click.Choice(("uint8", "uint16", "half", "float")),
-    help="Output pixel type (values keep their meaning: integer types span 0..1).  [default: INPUT's]",
+    "--method",
+    type=click.Choice(tuple(METHODS)),
+    default="fem",
+    show_default=True,
+    help="How the harmonic maps are computed: " + "; ".join(f"{k}: {v.help}" for k, v in METHODS.items()) + ".",
 )
 @click.option(
-    "--background",
-    default="0",
+    "--theta",
+    type=click.Choice(tuple(THETAS)),
+    default="regular",
     show_default=True,
-    callback=_parse_background,
-    metavar="V[,V...]",
-    help="Value of pixels outside DST: one for all channels or one per channel, 0..1 for integer images.",
+    help="The convex intermediate polygon: " + "; ".join(f"{k}: {v.help}" for k, v in THETAS.items()) + ".",
 )
 @click.option(
     "--max-area",
@@ -103,7 +163,7 @@ def _parse_max_area(ctx, param, value):
 )
 @click.option(
     "--weights",
-    type=click.Choice(("cotan", "positive")),
+    type=click.Choice(WEIGHTS),
     default="cotan",
     show_default=True,
     help="Laplacian weights: cotan solves the harmonic maps; positive (mean-value) is one-to-one on any mesh but not harmonic.",
@@ -113,7 +173,7 @@ def _parse_max_area(ctx, param, value):
 @click.option("--heatmap", "heatmap_path", type=click.Path(dir_okay=False), help="Write the per-pixel distortion of the map in colour, with a legend.")
 @click.option(
     "--heatmap-measure",
-    type=click.Choice(("conformal", "isometric", "det")),
+    type=click.Choice(HEATMAP_MEASURES),
     default="conformal",
     show_default=True,
     help="What --heatmap shows.",
@@ -122,18 +182,18 @@ def _parse_max_area(ctx, param, value):
 @click.option("--save-forward-map", type=click.Path(dir_okay=False), help="Write the forward map (input pixel -> output point) as an STMap.")
 @click.option(
     "--stmap-t",
-    type=click.Choice(("down", "up")),
+    type=click.Choice(STMAP_T),
     default="down",
     show_default=True,
     help="Which way an STMap's t runs: down (OpenImageIO st_warp) or up (Nuke STMap).",
 )
 @click.option("-v", "--verbose", count=True, help="Report progress and timings on stderr (-vv for more).")
-@click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
+@quiet_option
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
-    paths, src_path, dst_path, src_label, dst_label, out_dir, out_name, interp, size, dtype, background, max_area,
-    antialias, weights, report_path, grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t,
-    verbose, quiet,
+    paths, src_path, dst_path, src_label, dst_label, out_dir, out_name, interp, size, dtype, background, method, theta,
+    max_area, antialias, weights, report_path, grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map,
+    stmap_t, verbose, quiet,
 ):  # fmt: skip
     """Warp INPUT so that polygon SRC goes onto polygon DST; write OUTPUT.
 
@@ -151,6 +211,12 @@ def warp(
       warp frames/*.png --src a.json --dst b.json --out-dir warped/ -q
     """
     _configure_logging(verbose, quiet)
+    from .options import MapOptions, WarpOptions
+
+    options = WarpOptions(
+        MapOptions(method=method, theta=theta, max_area=max_area, weights=weights),
+        interp=interp, background=tuple(background), antialias=antialias, size=size, dtype=dtype,
+    )  # fmt: skip
     if out_dir is not None:
         single_only = {
             "--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path,
@@ -161,10 +227,7 @@ def warp(
             raise click.UsageError(f"{', '.join(used)} applies to a single warp, not to --out-dir")
         if not paths:
             raise click.UsageError("no INPUT given")
-        _batch(
-            paths, out_dir, out_name, src_path, dst_path, src_label, dst_label,
-            interp=interp, background=background, max_area=max_area, weights=weights, dtype=dtype, antialias=antialias,
-        )  # fmt: skip
+        _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, options)
         return
     if len(paths) != 2:
         raise click.UsageError(f"expected INPUT and OUTPUT (or INPUTs with --out-dir DIR), got {len(paths)} path(s)")
@@ -177,18 +240,12 @@ def warp(
             output_path,
             src_path,
             dst_path,
+            options,
             src_label=src_label,
             dst_label=dst_label,
-            dtype=dtype,
             save_map=save_map,
             save_forward_map=save_forward_map,
             stmap_t_up=stmap_t == "up",
-            size=size,
-            interp=interp,
-            background=background,
-            max_area=max_area,
-            weights=weights,
-            antialias=antialias,
             report_path=report_path,
             grid_path=grid_path,
             heatmap_path=heatmap_path,
@@ -200,16 +257,12 @@ def warp(
     log = logging.getLogger("warpcli")
     for stage, seconds in result.timings.items():
         log.info("%-9s %7.3f s", stage, seconds)
-    log.debug(
-        "source mesh %d vertices, target mesh %d vertices",
-        result.map.phi0.mesh.n_vertices,
-        result.map.phi1.mesh.n_vertices,
-    )
+    for key, value in result.map.describe().items():
+        log.debug("%s: %s", key.replace("_", " "), value)
 
 
-def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, **options):
+def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, options):
     """Warp every input with one map; report failures one line each and go on."""
-    from .errors import InputError
     from .pipeline import warp_batch
 
     log = logging.getLogger("warpcli")
@@ -221,35 +274,31 @@ def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, *
             click.echo(f"warp: error: {item.error}", err=True)
 
     items = warp_batch(
-        list(paths), out_dir, src_path, dst_path, pattern=out_name, src_label=src_label, dst_label=dst_label,
-        on_item=report, **options,
+        list(paths), out_dir, src_path, dst_path, options, pattern=out_name, src_label=src_label,
+        dst_label=dst_label, on_item=report,
     )  # fmt: skip
     failed = [item for item in items if item.error is not None]
     if failed:
         log.warning("%d of %d inputs failed", len(failed), len(items))
-        code = 2 if all(isinstance(item.error, InputError) for item in failed) else 1
-        raise click.exceptions.Exit(code)
+        raise click.exceptions.Exit(max(exit_code(item.error) for item in failed))
 
 
-@click.command(
-    "apply-map",
-    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
-    epilog=EXIT_CODES,
-)
+@click.command("apply-map", context_settings=CONTEXT, epilog=EXIT_CODES)
 @click.argument("map_path", metavar="MAP", type=click.Path())
 @click.argument("input_path", metavar="INPUT", type=click.Path())
 @click.argument("output_path", metavar="OUTPUT", type=click.Path())
-@click.option("--interp", type=click.Choice(_INTERPS), default="linear", show_default=True, help="Resampling filter.")
-@click.option("--background", default="0", show_default=True, callback=_parse_background, metavar="V[,V...]", help="Value of pixels where the map is undefined.")
+@interp_option
+@background_option("Value of pixels where the map is undefined.")
+@dtype_option
 @click.option(
     "--stmap-t",
-    type=click.Choice(("auto", "down", "up")),
+    type=click.Choice(("auto", *STMAP_T)),
     default="auto",
     show_default=True,
     help="Which way the map's t runs; auto: as its header says (warpcli writes it), else down.",
 )
-@click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
-def apply_map(map_path, input_path, output_path, interp, background, stmap_t, quiet):
+@quiet_option
+def apply_map(map_path, input_path, output_path, interp, background, dtype, stmap_t, quiet):
     """Warp INPUT with a map saved by warp --save-map (or any STMap); write OUTPUT.
 
     MAP holds, for each OUTPUT pixel, the normalized point (s, t) of INPUT it
@@ -260,10 +309,12 @@ def apply_map(map_path, input_path, output_path, interp, background, stmap_t, qu
       warp apply-map map.exr frame_0002.png warped_0002.png
     """
     _configure_logging(0, quiet)
+    from .options import WarpOptions
     from .pipeline import apply_map_file
 
     t_up = None if stmap_t == "auto" else stmap_t == "up"
-    apply_map_file(map_path, input_path, output_path, interp=interp, background=background, t_up=t_up)
+    options = WarpOptions(interp=interp, background=tuple(background), dtype=dtype)
+    apply_map_file(map_path, input_path, output_path, options, t_up=t_up)
 
 
 class Progress:
@@ -331,32 +382,33 @@ def _configure_logging(verbose: int, quiet: bool) -> None:
     log.propagate = False
 
 
+cli = DefaultGroup("warp", commands={"warp": warp, "apply-map": apply_map}, default="warp", context_settings=CONTEXT)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the ``warp`` command; return its exit status instead of raising."""
-    from .errors import WarpError
-
     args = list(sys.argv[1:] if argv is None else argv)
-    command, prog = (apply_map, "warp apply-map") if args[:1] == ["apply-map"] else (warp, "warp")
-    if command is apply_map:
-        args = args[1:]
+    prog = "warp apply-map" if args[:1] == ["apply-map"] else "warp"
+    if not args:
+        ctx = warp.make_context("warp", ["--help"], resilient_parsing=True)
+        click.echo(warp.get_usage(ctx), err=True)
+        click.echo("Try 'warp --help' for help; 'warp apply-map --help' for saved maps.", err=True)
+        return EXIT_BAD_INPUT
     try:
         # Without standalone mode click returns an Exit's code instead of raising it.
-        code = command.main(args=args, prog_name=prog, standalone_mode=False)
-    except click.exceptions.Exit as done:  # --help, --version
+        code = cli.main(args=args, prog_name="warp", standalone_mode=False)
+    except click.exceptions.Exit as done:  # --help, --version, a batch's status
         return done.exit_code
     except click.ClickException as err:
         click.echo(f"warp: error: {err.format_message()} (see '{prog} --help')", err=True)
-        return err.exit_code
-    except click.exceptions.Abort:
+        return EXIT_BAD_INPUT if err.exit_code == 2 else err.exit_code
+    except (click.exceptions.Abort, KeyboardInterrupt):
         click.echo("warp: interrupted", err=True)
-        return 130
+        return EXIT_INTERRUPTED
     except WarpError as err:
         click.echo(f"warp: error: {err}", err=True)
-        return err.exit_code
-    except KeyboardInterrupt:
-        click.echo("warp: interrupted", err=True)
-        return 130
-    return code if isinstance(code, int) else 0
+        return exit_code(err)
+    return code if isinstance(code, int) else EXIT_OK
 
 
 def run() -> None:

@@ -1,25 +1,21 @@
-"""One exception tree for warpcli; the CLI maps it to exit codes."""
+"""One exception tree for warpcli. The CLI alone decides exit codes (2 for `InputError`, 1 otherwise)."""
 
 from __future__ import annotations
 
 
 class WarpError(Exception):
-    """Base of every error warpcli raises on purpose.
+    """Base of every error warpcli raises on purpose."""
 
-    ``exit_code`` is what the command-line tool exits with: 1 for a failure
-    while processing, 2 for bad input or usage.
+
+class InputError(WarpError, ValueError):
+    """Bad input or bad arguments: the caller can fix it (the CLI exits with 2).
+
+    Every InputError is a `ValueError`; those about files are also `OSError`s
+    (`ImageInputError`).
     """
 
-    exit_code = 1
 
-
-class InputError(WarpError):
-    """The user's input is unusable (exit status 2)."""
-
-    exit_code = 2
-
-
-class PolygonError(InputError, ValueError):
+class PolygonError(InputError):
     """A polygon file is missing, malformed, or describes an invalid polygon."""
 
 
@@ -28,7 +24,7 @@ class ImageIOError(WarpError, OSError):
 
 
 class ImageInputError(ImageIOError, InputError):
-    """An input image, or an output path, is unusable (exit status 2)."""
+    """An input image, or an output path, is unusable."""
 
 
 class MeshingError(WarpError):
@@ -36,4 +32,4 @@ class MeshingError(WarpError):
 
 
 class FoldOverError(WarpError):
-    """A discrete map is not one-to-one, so warping would fold the image."""
+    """A map is not one-to-one, so warping would fold the image."""

@@ -1,4 +1,4 @@
-"""Pipeline: polygons -> meshes -> harmonic maps -> composed map -> resampled image."""
+"""Pipeline: polygons -> maps onto Theta -> composed map -> resampled image; the calls the CLI makes."""
 
 from __future__ import annotations
 
@@ -7,23 +7,28 @@ import json
 import logging
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import InputError, WarpError
-from .imageio import RasterImage, atomic_path, check_output_path, convert_pixels, read_image, write_image
-from .mapping import BijectiveMap, GridPullBack
-from .metrics import Distortion, distortion_at_pixels, triangle_jacobians
+from .maps.compose import BijectiveMap
+from .options import WarpOptions
 from .polygon import Polygon, check_pair, read_polygon
-from .resample import INTERPOLATIONS, EdgeCoverage, Footprint, edge_coverage, resample
+from .raster.imageio import RasterImage, atomic_path, check_output_path, convert_pixels, read_image, write_image
+from .raster.pixels import unit
+from .raster.resample import EdgeCoverage, edge_coverage, resample
+from .report import build_report
+from .report.metrics import Distortion, distortion
+
+__all__ = [
+    "BatchItem", "WarpResult", "apply_map_file", "build_report", "output_name", "warp_batch", "warp_file", "warp_image",
+]  # fmt: skip
 
 log = logging.getLogger("warpcli")
-
-#: The default resampling filter.
-DEFAULT_INTERP = "linear"
 
 
 @dataclass(frozen=True)
@@ -33,14 +38,16 @@ class WarpResult:
     Attributes
     ----------
     pixels : (H, W, C) ndarray
-        The warped image, in the input's pixel type.
+        The warped image, in the input's pixel type (H, W: the output's
+        height and width).
     map : BijectiveMap
     inverse_map : (H, W, 2) ndarray of float
         Source position of every output pixel centre; NaN outside the target.
+    jacobian : (H, W, 2, 2) ndarray of float or None
+        Jacobian of the inverse map at every output pixel (d source / d
+        output); NaN outside the target.
     timings : dict of str to float
         Seconds per stage.
-    source_triangle, target_triangle : (H, W) ndarray of int32
-        Mesh triangles each output pixel went through (-1 outside).
     report : dict or None
         The report of `build_report`, when `warp_file` was asked for one.
     """
@@ -48,45 +55,41 @@ class WarpResult:
     pixels: NDArray
     map: BijectiveMap
     inverse_map: NDArray[np.float64]
+    jacobian: NDArray[np.float64] | None = field(default=None, repr=False)
     timings: dict[str, float] = field(default_factory=dict)
-    source_triangle: NDArray[np.int32] | None = field(default=None, repr=False)
-    target_triangle: NDArray[np.int32] | None = field(default=None, repr=False)
     report: dict | None = None
 
     def distortion(self) -> Distortion:
-        """Distortion of the map at every output pixel (NaN outside the target)."""
-        if self.source_triangle is None or self.target_triangle is None:
-            raise ValueError("this result carries no per-pixel triangles")
-        return distortion_at_pixels(self.map.phi0, self.map.phi1, self.source_triangle, self.target_triangle)
+        """Distortion of the map at every output pixel (flattened, row-major; NaN outside the target).
+
+        Raises
+        ------
+        ValueError
+            If the result kept no Jacobians.
+        """
+        if self.jacobian is None:
+            raise ValueError("this result kept no Jacobians")
+        return distortion(self.jacobian)
 
 
-def pixel_centres(width: int, height: int) -> NDArray[np.float64]:
-    """Centres of a ``width`` x ``height`` pixel grid, row by row, as (H*W, 2) points.
-
-    >>> pixel_centres(2, 1).tolist()
-    [[0.5, 0.5], [1.5, 0.5]]
-    """
-    x = np.arange(width, dtype=np.float64) + 0.5
-    y = np.arange(height, dtype=np.float64) + 0.5
-    xx, yy = np.meshgrid(x, y)
-    return np.stack([xx.ravel(), yy.ravel()], axis=1)
+def _options(options: WarpOptions | None, changes: dict[str, Any]) -> WarpOptions:
+    opts = options if options is not None else WarpOptions()
+    if not isinstance(opts, WarpOptions):
+        raise InputError(f"options must be WarpOptions, got {type(opts).__name__}")
+    return opts.changed(**changes) if changes else opts
 
 
 def warp_image(
     image: ArrayLike,
     src: Polygon | ArrayLike,
     dst: Polygon | ArrayLike,
+    options: WarpOptions | None = None,
     *,
-    size: tuple[int, int] | None = None,
-    interp: str = DEFAULT_INTERP,
-    background: float | ArrayLike = 0.0,
     alpha_channel: int | None = None,
     associated_alpha: bool = False,
-    max_area: float | None = None,
-    weights: str = "cotan",
-    antialias: bool = True,
     warp_map: BijectiveMap | None = None,
     progress: Callable[[str], None] | None = None,
+    **changes: Any,
 ) -> WarpResult:
     """Warp an image so that polygon ``src`` goes onto polygon ``dst``.
 
@@ -97,34 +100,35 @@ def warp_image(
     src, dst : Polygon or (n, 2) array_like of float
         Corresponding polygons: ``src`` in the input image's coordinates, ``dst``
         in the output's (x right, y down, pixel centres at +0.5).
-    size : (width, height) or None
-        Output size; the input's by default.
-    interp : {"nearest", "linear", "cubic"}
-    background : float or (C,) array_like
-        Value of output pixels outside ``dst`` or whose pre-image lies outside
-        the input, normalized: 0..1 spans an integer type's range, floats are
-        taken as they are.
+    options : WarpOptions or None
+        Map, resampling and output options; the defaults otherwise.
     alpha_channel : int or None
         Index of an alpha channel: colour is resampled premultiplied.
     associated_alpha : bool
         Whether the colour is already premultiplied by alpha.
-    max_area : float or None
-        Largest mesh triangle area in square pixels (None: automatic).
-    weights : {"cotan", "positive"}
-        Laplacian weights: the harmonic maps, or mean-value weights (see
-        `BijectiveMap.between`).
-    antialias : bool
-        Antialias the target polygon's edge (``linear`` and ``cubic``), and
-        with ``linear`` average each pixel over its footprint in the source
-        where the map shrinks. ``nearest`` never blends.
     warp_map : BijectiveMap or None
-        A map already built for these polygons, to reuse.
+        A map already built between these polygons, to reuse.
     progress : callable or None
         Called with the name of each stage as it starts.
+    **changes
+        Fields of `WarpOptions` or `MapOptions` to change, e.g.
+        ``interp="cubic"`` or ``max_area=4``.
 
     Returns
     -------
     WarpResult
+
+    Raises
+    ------
+    InputError
+        For a bad image shape, polygons or options (also a `ValueError`).
+    FoldOverError
+        If the map would fold the image (never written).
+
+    References
+    ----------
+    Schneider & Hormann, Smooth bijective maps between arbitrary planar
+    polygons, CAGD 2015, eq. (2) and §4.1.
 
     Examples
     --------
@@ -133,69 +137,72 @@ def warp_image(
     >>> warp_image(img, tri, tri).pixels.shape
     (8, 8, 1)
     """
-    timings: dict[str, float] = {}
+    opts = _options(options, changes)
     img = np.asarray(image)
     if img.ndim == 2:
         img = img[:, :, None]
-    if img.ndim != 3:
-        raise ValueError(f"image must be (H, W) or (H, W, C), got shape {img.shape}")
+    if img.ndim != 3 or 0 in img.shape:
+        raise InputError(f"image must be a non-empty (H, W) or (H, W, C) array, got shape {img.shape}")
+    if img.dtype.kind not in "uif":
+        raise InputError(f"image must hold numbers, got dtype {img.dtype}")
     src = src if isinstance(src, Polygon) else Polygon(src, name="src")
     dst = dst if isinstance(dst, Polygon) else Polygon(dst, name="dst")
     check_pair(src, dst)
-    _check_interp(interp)
-    width, height = size if size is not None else (img.shape[1], img.shape[0])
-    bg = _background(background, img)
-
+    width, height = opts.size if opts.size is not None else (img.shape[1], img.shape[0])
+    bg = _background(opts.background, img)
     stage = progress or (lambda name: None)
+    timings: dict[str, float] = {}
     fmap = warp_map
     if fmap is None:
-        stage("meshing and solving")
-        fmap = BijectiveMap.between(src, dst, max_area=max_area, weights=weights, timings=timings)
+        stage("building the map")
+        fmap = BijectiveMap.between(src, dst, opts.map)
+        timings.update(fmap.timings)
+    elif not (_same_polygon(fmap.src, src) and _same_polygon(fmap.dst, dst)):
+        raise InputError("warp_map was built between other polygons than src and dst")
     clock = time.perf_counter
     t0 = clock()
     stage("composing the map")
-    plan = _sampling(fmap, width, height, interp, antialias)
+    plan = _sampling(fmap, width, height, opts, keep_jacobian=True)
     t1 = clock()
     stage("resampling")
-    out = _resample_with(plan, img, interp, bg, alpha_channel, associated_alpha)
+    out = _resample_with(plan, img, opts, bg, alpha_channel, associated_alpha)
     timings["compose"] = t1 - t0
     timings["resample"] = clock() - t1
-    pulled = plan.pulled
-    return WarpResult(out, fmap, pulled.inverse_map, timings, pulled.source_triangle, pulled.target_triangle)
+    return WarpResult(out, fmap, plan.pull.points, plan.pull.jacobian, timings)
+
+
+def _same_polygon(a: Polygon, b: Polygon) -> bool:
+    return a.points.shape == b.points.shape and bool(np.array_equal(a.points, b.points))
 
 
 @dataclass(frozen=True)
 class _Sampling:
     """What a warp needs of the map on an output grid, whatever the image: where each
-    pixel comes from and, with antialiasing, its footprint and the edge coverage."""
+    pixel comes from, the Jacobians there, and the edge coverage."""
 
-    pulled: GridPullBack
-    footprint: Footprint | None
+    pull: Any  # warpcli.maps.compose.PullBack
     coverage: EdgeCoverage | None
+    footprints: bool  # resample with the Jacobians (antialiasing where the map shrinks)
 
 
-def _sampling(fmap: BijectiveMap, width: int, height: int, interp: str, antialias: bool) -> _Sampling:
-    pulled = fmap.pull_back_grid(width, height)
-    footprint = coverage = None
-    if antialias and interp != "nearest":
-        inside = np.isfinite(pulled.inverse_map[..., 0])
-        coverage = edge_coverage(fmap.dst.points, fmap.src.points, width, height, inside)
-        if interp == "linear":
-            footprint = Footprint(
-                pulled.source_triangle,
-                pulled.target_triangle,
-                triangle_jacobians(fmap.phi0, inverse=True),
-                triangle_jacobians(fmap.phi1),
-            )
-    return _Sampling(pulled, footprint, coverage)
+def _sampling(fmap: BijectiveMap, width: int, height: int, opts: WarpOptions, *, keep_jacobian: bool) -> _Sampling:
+    footprints = opts.antialias and opts.interp == "linear"
+    pull = fmap.pull_back(width, height, jacobian=keep_jacobian or footprints)
+    coverage = None
+    if opts.antialias and opts.interp != "nearest":
+        inside = np.isfinite(pull.points[..., 0])
+        cov = edge_coverage(fmap.dst.points, width, height, inside)
+        coverage = dataclasses.replace(cov, source_points=fmap.inverse_boundary(cov.edge, cov.t))
+    return _Sampling(pull, coverage, footprints)
 
 
 def _resample_with(
-    plan: _Sampling, img: NDArray, interp: str, bg: NDArray, alpha_channel: int | None, associated_alpha: bool
+    plan: _Sampling, img: NDArray, opts: WarpOptions, bg: NDArray, alpha_channel: int | None, associated_alpha: bool
 ) -> NDArray:
     return resample(
-        img, plan.pulled.inverse_map, interp=interp, background=bg, alpha_channel=alpha_channel,
-        associated_alpha=associated_alpha, footprint=plan.footprint, coverage=plan.coverage,
+        img, plan.pull.points, interp=opts.interp, background=bg, alpha_channel=alpha_channel,
+        associated_alpha=associated_alpha, jacobian=plan.pull.jacobian if plan.footprints else None,
+        coverage=plan.coverage,
     )  # fmt: skip
 
 
@@ -211,6 +218,7 @@ def warp_file(
     output_path: str | os.PathLike[str],
     src_path: str | os.PathLike[str],
     dst_path: str | os.PathLike[str],
+    options: WarpOptions | None = None,
     *,
     report_path: str | os.PathLike[str] | None = None,
     grid_path: str | os.PathLike[str] | None = None,
@@ -221,35 +229,58 @@ def warp_file(
     stmap_t_up: bool = False,
     src_label: str | None = None,
     dst_label: str | None = None,
-    dtype: str | None = None,
-    **options,
+    progress: Callable[[str], None] | None = None,
+    **changes: Any,
 ) -> WarpResult:
     """Read an image and two polygon files, warp, and write the result atomically.
 
     Everything that can be checked before the work starts is checked first
     (polygons, input image, every output path), so bad input fails fast and
-    leaves no file behind. ``options`` are those of `warp_image`.
+    leaves no file behind.
 
     Parameters
     ----------
+    input_path, output_path : path-like
+        The image to warp and where to write the result (format by extension).
+    src_path, dst_path : path-like
+        Polygon files (plain JSON, labelme or GeoJSON).
+    options : WarpOptions or None
+        As for `warp_image`; ``**changes`` change its fields.
     report_path : path-like or None
         Write the JSON report of `build_report` there; ``"-"`` computes it
         (``result.report``) without writing a file.
     grid_path, heatmap_path : path-like or None
-        Write `warpcli.figures.grid_figure` / `heatmap_figure` there.
+        Write `warpcli.report.figures.grid_figure` / `heatmap_figure` there.
     heatmap_measure : {"conformal", "isometric", "det"}
     save_map, save_forward_map : path-like or None
         Write the inverse map (output pixel -> input point) or the forward map
-        (input pixel -> output point) as an STMap (see `warpcli.stmap`).
+        (input pixel -> output point) as an STMap (see `warpcli.raster.stmap`).
     stmap_t_up : bool
         Write STMaps with t running up (Nuke) instead of down (OpenImageIO).
     src_label, dst_label : str or None
         Which polygon to take from a polygon file holding several.
-    dtype : {"uint8", "uint16", "half", "float"} or None
-        Output pixel type; the input's by default.
+    progress : callable or None
+        Called with the name of each stage as it starts.
+
+    Returns
+    -------
+    WarpResult
+
+    Raises
+    ------
+    InputError
+        For bad polygons, images, options or output paths (a `PolygonError`
+        or `ImageInputError` names the file).
+    WarpError
+        If processing fails (a write error, a map that would fold).
     """
+    opts = _options(options, changes)
+    from .options import HEATMAP_MEASURES
+
+    if heatmap_measure not in HEATMAP_MEASURES:
+        raise InputError(f"unknown heatmap measure {heatmap_measure!r}; choose one of {', '.join(HEATMAP_MEASURES)}")
     clock = time.perf_counter
-    stage = options.get("progress") or (lambda name: None)
+    stage = progress or (lambda name: None)
     inputs = (input_path, src_path, dst_path)
     extra = [p for p in (grid_path, heatmap_path, save_map, save_forward_map) if p is not None]
     for path in (output_path, *extra):
@@ -270,15 +301,16 @@ def warp_file(
     if not ((src.signed_area > 0) == (dst.signed_area > 0)):
         log.info("%s and %s run in opposite directions: the warp mirrors the image", src.name, dst.name)
     result = warp_image(
-        image.pixels, src, dst, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha, **options
-    )
+        image.pixels, src, dst, opts, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha,
+        progress=progress,
+    )  # fmt: skip
     t0 = clock()
     stage("writing")
-    _write_like(output_path, image, result.pixels, dtype)
+    _write_like(output_path, image, result.pixels, opts.dtype)
     result.timings["read"] = t_read
     result.timings["write"] = clock() - t0
     if grid_path is not None or heatmap_path is not None:
-        from . import figures
+        from .report import figures
 
         t0 = clock()
         stage("drawing figures")
@@ -290,7 +322,7 @@ def warp_file(
             write_image(heatmap_path, RasterImage(figures.heatmap_figure(values, heatmap_measure)))
         result.timings["figures"] = clock() - t0
     if save_map is not None or save_forward_map is not None:
-        from .stmap import save_stmap
+        from .raster.stmap import save_stmap
 
         t0 = clock()
         stage("saving maps")
@@ -326,6 +358,13 @@ def output_name(input_path: str | os.PathLike[str], pattern: str = "{name}") -> 
     """The output file name for an input: ``pattern`` with ``{name}`` (the input's
     file name), ``{stem}`` (without extension) and ``{ext}`` (with its dot).
 
+    Raises
+    ------
+    InputError
+        If the pattern uses anything else.
+
+    Examples
+    --------
     >>> output_name("shots/frame_0001.png", "{stem}_warped.exr")
     'frame_0001_warped.exr'
     """
@@ -338,38 +377,55 @@ def output_name(input_path: str | os.PathLike[str], pattern: str = "{name}") -> 
 
 
 def warp_batch(
-    input_paths: list[str | os.PathLike[str]],
+    input_paths: Sequence[str | os.PathLike[str]],
     out_dir: str | os.PathLike[str],
     src_path: str | os.PathLike[str],
     dst_path: str | os.PathLike[str],
+    options: WarpOptions | None = None,
     *,
     pattern: str = "{name}",
     src_label: str | None = None,
     dst_label: str | None = None,
     on_item: Callable[[BatchItem], None] | None = None,
-    interp: str = DEFAULT_INTERP,
-    background: float | ArrayLike = 0.0,
-    size: tuple[int, int] | None = None,
-    antialias: bool = True,
-    max_area: float | None = None,
-    weights: str = "cotan",
-    dtype: str | None = None,
+    **changes: Any,
 ) -> list[BatchItem]:
     """Warp many images with one map: ``out_dir/<pattern>`` for each input.
 
-    The options are those of `warp_image` and `warp_file`. The map is
-    computed once, and its pull-back onto each output size once (inputs of one
-    size share it). Every output path is checked before any work
-    (a missing directory, an unknown format, two inputs with the same output,
-    or an output that is one of the inputs is bad input, raised at once); an
-    input that then fails (unreadable, not an image, a write error) is
-    reported through ``on_item`` and the rest still go through.
+    The map is computed once, and its pull-back onto each output size once
+    (inputs of one size share it).
+
+    Parameters
+    ----------
+    input_paths : sequence of path-like
+        The images.
+    out_dir : path-like
+        An existing directory.
+    src_path, dst_path : path-like
+        Polygon files.
+    options : WarpOptions or None
+        As for `warp_image`; ``**changes`` change its fields.
+    pattern : str
+        Output file name, see `output_name`.
+    src_label, dst_label : str or None
+        Which polygon to take from a polygon file holding several.
+    on_item : callable or None
+        Called with each `BatchItem` as it is done.
 
     Returns
     -------
     list of BatchItem
         In input order.
+
+    Raises
+    ------
+    InputError
+        At once, before any work, for bad polygons or options, a missing
+        directory, an unknown format, two inputs with the same output, or an
+        output that is one of the inputs. An input that fails later
+        (unreadable, not an image, a write error) is reported through
+        ``on_item`` and in its item, and the rest still go through.
     """
+    opts = _options(options, changes)
     directory = os.fspath(out_dir)
     if not os.path.isdir(directory):
         raise InputError(f"{directory}: output directory does not exist")
@@ -384,19 +440,18 @@ def warp_batch(
     src = read_polygon(src_path, src_label)
     dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
-    _check_interp(interp)
-    fmap = BijectiveMap.between(src, dst, max_area=max_area, weights=weights)
+    fmap = BijectiveMap.between(src, dst, opts.map)
     plans: dict[tuple[int, int], _Sampling] = {}
     items = []
     for inp, out in zip(input_paths, outputs):
         try:
             image = read_image(inp)
-            shape = size if size is not None else (image.width, image.height)
+            shape = opts.size if opts.size is not None else (image.width, image.height)
             if shape not in plans:
-                plans[shape] = _sampling(fmap, shape[0], shape[1], interp, antialias)
-            bg = _background(background, image.pixels)
-            px = _resample_with(plans[shape], image.pixels, interp, bg, image.alpha_channel, image.associated_alpha)
-            _write_like(out, image, px, dtype)
+                plans[shape] = _sampling(fmap, shape[0], shape[1], opts, keep_jacobian=False)
+            bg = _background(opts.background, image.pixels)
+            px = _resample_with(plans[shape], image.pixels, opts, bg, image.alpha_channel, image.associated_alpha)
+            _write_like(out, image, px, opts.dtype)
             item = BatchItem(os.fspath(inp), out)
         except WarpError as err:
             item = BatchItem(os.fspath(inp), out, err)
@@ -410,35 +465,45 @@ def apply_map_file(
     map_path: str | os.PathLike[str],
     input_path: str | os.PathLike[str],
     output_path: str | os.PathLike[str],
+    options: WarpOptions | None = None,
     *,
-    interp: str = DEFAULT_INTERP,
-    background: float | ArrayLike = 0.0,
     t_up: bool | None = None,
+    **changes: Any,
 ) -> NDArray:
-    """Warp an image with a saved STMap (see `warpcli.stmap`); the output has the map's size.
+    """Warp an image with a saved STMap (see `warpcli.raster.stmap`); the output has the map's size.
+
+    Parameters
+    ----------
+    map_path, input_path, output_path : path-like
+    options : WarpOptions or None
+        ``interp``, ``background`` and ``dtype`` are used; ``**changes``
+        change them.
+    t_up : bool or None
+        Which way the map's t runs; None: as its header says.
 
     Returns
     -------
     ndarray
         The warped pixels, as written.
-    """
-    from .stmap import load_stmap
 
+    Raises
+    ------
+    InputError
+        For a bad map, image or output path.
+    """
+    from .raster.stmap import load_stmap
+
+    opts = _options(options, changes)
     check_output_path(output_path, inputs=(input_path, map_path))
     image = read_image(input_path)
     points = load_stmap(map_path, (image.width, image.height), t_up=t_up)
-    bg = _background(background, image.pixels)
+    bg = _background(opts.background, image.pixels)
     out = resample(
-        image.pixels, points, interp=interp, background=bg,
+        image.pixels, points, interp=opts.interp, background=bg,
         alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha,
     )  # fmt: skip
-    _write_like(output_path, image, out)
+    _write_like(output_path, image, out, opts.dtype)
     return out
-
-
-def _check_interp(interp: str) -> None:
-    if interp not in INTERPOLATIONS:
-        raise InputError(f"unknown interpolation {interp!r}; choose one of {', '.join(INTERPOLATIONS)}")
 
 
 def _background(background: float | ArrayLike, img: NDArray) -> NDArray[np.float64]:
@@ -447,35 +512,7 @@ def _background(background: float | ArrayLike, img: NDArray) -> NDArray[np.float
     bg = np.asarray(background, dtype=np.float64).ravel()
     if bg.size not in (1, nc):
         raise InputError(f"background has {bg.size} values but the image has {nc} channels")
-    if np.issubdtype(img.dtype, np.integer):
-        bg = bg * np.iinfo(img.dtype).max
-    return bg
-
-
-def build_report(result: WarpResult) -> dict:
-    """The map's mesh sizes, fold-over count, Jacobian and distortion (the paper's Table 2).
-
-    Distortion is sampled at the output pixels: each stands for the source
-    area it pulls back (see `warpcli.metrics.distortion_at_pixels`), so the
-    means are area-weighted means over the source polygon, and the maxima
-    and ``min_jacobian_det`` are taken over the sampled points.
-    """
-    clock = time.perf_counter
-    t0 = clock()
-    summary = result.distortion().summary()
-    f = result.map
-    timings = dict(result.timings)
-    timings["metrics"] = clock() - t0
-    return {
-        "vertices": f.src.n,
-        "source_mesh": {"vertices": f.phi0.mesh.n_vertices, "triangles": f.phi0.mesh.n_triangles},
-        "target_mesh": {"vertices": f.phi1.mesh.n_vertices, "triangles": f.phi1.mesh.n_triangles},
-        "flipped_triangles": f.flipped_triangles(),
-        "min_jacobian_det": summary["min_jacobian_det"],
-        "conformal": summary["conformal"],
-        "isometric": summary["isometric"],
-        "timings": {k: round(v, 4) for k, v in timings.items()},
-    }
+    return bg * unit(img.dtype)
 
 
 def _warn_if_outside(src: Polygon, width: int, height: int, image_name: str) -> None:

@@ -1,4 +1,4 @@
-"""Mesh stage: graded quality constrained Delaunay meshes of a polygon, over `triangle`."""
+"""FEM meshing: graded quality constrained Delaunay meshes of a polygon, over `triangle`."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import MeshingError, PolygonError
-from .polygon import Polygon
+from ...errors import InputError, MeshingError, PolygonError
+from ...polygon import Polygon
 
 #: Refuse to build a mesh of more than this many triangles when the user sets
 #: the density: its direct solve would take many minutes and several GB.
@@ -129,15 +129,16 @@ def mesh_polygon(polygon: Polygon, max_area: float, *, grade: bool = True) -> Tr
 
     Raises
     ------
-    PolygonError
-        If the mesh would exceed ``MAX_TRIANGLES`` triangles.
+    InputError
+        If ``max_area`` is not positive, or the mesh would exceed
+        ``MAX_TRIANGLES`` triangles (a `PolygonError`).
     MeshingError
         If `triangle` fails.
     """
     import triangle as tr
 
     if not (max_area > 0 and math.isfinite(max_area)):
-        raise MeshingError(f"{polygon.name}: maximum triangle area must be positive, got {max_area}")
+        raise InputError(f"{polygon.name}: maximum triangle area must be positive and finite, got {max_area}")
     area = abs(polygon.signed_area)
     # A quality mesh with area bound A has triangles of about A/2 on average.
     estimate = 2.0 * area / max_area

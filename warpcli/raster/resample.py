@@ -1,4 +1,4 @@
-"""Resample stage: turning an inverse coordinate map into an output image."""
+"""Resample stage: turning an inverse coordinate map (and its Jacobians) into an output image."""
 
 from __future__ import annotations
 
@@ -7,8 +7,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-#: Interpolation filters by name, with their spline order in scipy.ndimage.
-INTERPOLATIONS = {"nearest": 0, "linear": 1, "cubic": 3}
+from ..errors import InputError
+from ..options import INTERPOLATIONS
+from .pixels import unit
+
+#: With antialiasing, a footprint is covered by at most this many samples per side.
+MAX_FOOTPRINT_SAMPLES = 16
 
 
 def resample(
@@ -19,7 +23,7 @@ def resample(
     background: ArrayLike = 0.0,
     alpha_channel: int | None = None,
     associated_alpha: bool = False,
-    footprint: Footprint | None = None,
+    jacobian: ArrayLike | None = None,
     coverage: EdgeCoverage | None = None,
 ) -> NDArray:
     """Sample ``image`` at the source positions of the output pixels.
@@ -49,9 +53,11 @@ def resample(
         Whether colour is already premultiplied (then it is resampled as it
         is); straight colour is premultiplied to blend and divided back after
         (``nearest`` does not blend, so it takes pixels exactly as they are).
-    footprint : Footprint or None
-        With ``linear``: average each pixel over its footprint in the source
-        (antialiasing where the map shrinks; see warpcli._kernels.sample_linear_aa).
+    jacobian : (H2, W2, 2, 2) array_like of float or None
+        With ``linear``: the Jacobian of the inverse map at each output pixel
+        (d source / d output; NaN where unknown), to average each pixel over
+        its footprint in the source (antialiasing where the map shrinks; see
+        `warpcli.raster._kernels.sample_linear_aa`).
     coverage : EdgeCoverage or None
         Antialias the target polygon's edge: the fraction of each edge pixel
         inside the polygon goes into alpha (with an alpha channel) or blends
@@ -62,9 +68,14 @@ def resample(
     (H2, W2, C) ndarray of the input's dtype
         Integer results are rounded and clipped to the type's range; float
         results are neither clipped nor quantized.
+
+    Raises
+    ------
+    InputError
+        If ``interp`` is unknown or the arrays' shapes do not fit.
     """
     if interp not in INTERPOLATIONS:
-        raise ValueError(f"interp must be one of {sorted(INTERPOLATIONS)}, got {interp!r}")
+        raise InputError(f"unknown interpolation {interp!r}; choose one of {', '.join(INTERPOLATIONS)}")
     from . import _kernels
 
     img = np.asarray(image)
@@ -72,6 +83,8 @@ def resample(
         img = img[:, :, None]
     h, w, nc = img.shape
     coords = np.asarray(inverse_map, dtype=np.float64)
+    if coords.ndim != 3 or coords.shape[2] != 2:
+        raise InputError(f"inverse_map must be (H, W, 2), got shape {coords.shape}")
     out_shape = coords.shape[:2]
     points = np.ascontiguousarray(coords.reshape(-1, 2))
     if coverage is not None:
@@ -94,7 +107,7 @@ def resample(
         src = img.astype(work_dtype, copy=True)
     else:
         src = np.ascontiguousarray(img)
-    alpha_scale = _alpha_unit(img.dtype)
+    alpha_scale = unit(img.dtype)
     if alpha_channel_blend is not None:
         a = src[:, :, alpha_channel_blend] / alpha_scale
         for c in range(nc):
@@ -114,13 +127,13 @@ def resample(
             out[valid, c] = map_coordinates(src[:, :, c], idx, order=3, mode="nearest", prefilter=True)
     elif interp == "nearest":
         _kernels.sample_nearest(src, points, bg, out)
-    elif footprint is None:
+    elif jacobian is None:
         _kernels.sample_linear(src, points, bg, out)
     else:
-        f = footprint
-        _kernels.sample_linear_aa(
-            src, points, f.where0.ravel(), f.where1.ravel(), f.j0inv, f.j1, f.max_samples, bg, out
-        )  # fmt: skip
+        jac = np.ascontiguousarray(np.asarray(jacobian, dtype=np.float64).reshape(-1, 2, 2))
+        if len(jac) != len(points):
+            raise InputError(f"jacobian has {len(jac)} entries for {len(points)} output pixels")
+        _kernels.sample_linear_aa(src, points, jac, MAX_FOOTPRINT_SAMPLES, bg, out)
     if alpha_channel_blend is not None:
         a = out[:, alpha_channel_blend] / alpha_scale
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -146,45 +159,33 @@ _NATIVE = (np.dtype(np.uint8), np.dtype(np.uint16), np.dtype(np.float32), np.dty
 
 
 @dataclass(frozen=True)
-class Footprint:
-    """Per-pixel Jacobians of the inverse map, as triangle pairs.
-
-    The Jacobian at output pixel p is ``j0inv[where0[p]] @ j1[where1[p]]``
-    (-1 entries: no Jacobian, sampled at the centre only).
-    """
-
-    where0: NDArray[np.int32]
-    where1: NDArray[np.int32]
-    j0inv: NDArray[np.float64]
-    j1: NDArray[np.float64]
-    max_samples: int = 16
-
-
-@dataclass(frozen=True)
 class EdgeCoverage:
     """Output pixels crossed by the target polygon's edge.
 
     Attributes
     ----------
-    pixels : (K,) flat pixel indices (row-major)
-    fraction : (K,) share of each pixel inside the polygon, in (0, 1)
-    source_points : (K, 2) source point to sample for a pixel whose centre is
-        outside the polygon: the pre-image of the nearest boundary point.
+    pixels : (K,) ndarray of int64
+        Flat pixel indices (row-major).
+    fraction : (K,) ndarray of float
+        Share of each pixel inside the polygon, in (0, 1).
+    edge, t : (K,) ndarrays of int and float
+        The nearest point of the boundary to each pixel centre: parameter t
+        along polygon edge i.
+    source_points : (K, 2) ndarray of float or None
+        The source point to sample for a pixel whose centre is outside the
+        polygon: the pre-image of that nearest boundary point (by the exact
+        boundary map; filled in by the caller, who knows the map).
     """
 
     pixels: NDArray[np.int64]
     fraction: NDArray[np.float64]
-    source_points: NDArray[np.float64]
+    edge: NDArray[np.intp]
+    t: NDArray[np.float64]
+    source_points: NDArray[np.float64] | None = None
 
 
-def edge_coverage(
-    dst: NDArray[np.float64],
-    src: NDArray[np.float64],
-    width: int,
-    height: int,
-    inside: NDArray[np.bool_],
-) -> EdgeCoverage:
-    """Coverage of the pixels along polygon ``dst``'s boundary, with boundary pre-images.
+def edge_coverage(dst: NDArray[np.float64], width: int, height: int, inside: NDArray[np.bool_]) -> EdgeCoverage:
+    """Coverage of the pixels along polygon ``dst``'s boundary, and their nearest boundary points.
 
     A pixel's share inside the polygon is taken as ``clip(1/2 + s, 0, 1)``,
     s the signed distance (in pixels, positive inside) from its centre to the
@@ -193,14 +194,14 @@ def edge_coverage(
     corner effects (the usual distance-field antialiasing). Only edges near a
     pixel are measured: each edge is sampled every half pixel and offers
     itself to the 3 x 3 pixels around each sample, so the cost is linear in
-    the perimeter. The pre-image of the nearest boundary point follows the
-    boundary map exactly: parameter t along edge i of ``dst`` comes from
-    parameter t along edge i of ``src``.
+    the perimeter.
 
     Parameters
     ----------
-    dst, src : (n, 2) arrays
-        Target and source polygons (vertex i corresponds to vertex i).
+    dst : (n, 2) array of float
+        The target polygon.
+    width, height : int
+        Output size in pixels.
     inside : (height, width) bool array
         Whether each pixel centre lies inside ``dst``.
     """
@@ -236,16 +237,7 @@ def edge_coverage(
     sign = np.where(inside.ravel()[pix], 1.0, -1.0)
     frac = np.clip(0.5 + sign * dist, 0.0, 1.0)
     keep = (frac > 0) & (frac < 1)
-    pix, edge, t, frac = pix[keep], edge[keep], t[keep], frac[keep]
-    src_pts = (1 - t[:, None]) * src[edge] + t[:, None] * src[(edge + 1) % n]
-    return EdgeCoverage(pix, frac, src_pts)
-
-
-def _alpha_unit(dtype: np.dtype) -> float:
-    """The value of an opaque alpha in this pixel type."""
-    if np.issubdtype(dtype, np.integer):
-        return float(np.iinfo(dtype).max)
-    return 1.0
+    return EdgeCoverage(pix[keep], frac[keep], edge[keep], t[keep])
 
 
 def _to_dtype(values: NDArray, dtype: np.dtype) -> NDArray:

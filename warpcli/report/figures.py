@@ -7,8 +7,9 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from .polygon import Polygon
-from .resample import resample
+from ..polygon import Polygon
+from ..raster.pixels import to_unit
+from ..raster.resample import resample
 
 # Viridis, sampled at nine evenly spaced points (perceptually uniform,
 # readable in grey and by colour-blind viewers).
@@ -39,10 +40,9 @@ def display_rgb(pixels: NDArray, alpha_channel: int | None = None) -> NDArray[np
     px = np.asarray(pixels)
     if px.ndim == 2:
         px = px[:, :, None]
-    if np.issubdtype(px.dtype, np.integer):
-        x = px.astype(np.float64) / np.iinfo(px.dtype).max
-    else:
-        x = np.clip(np.nan_to_num(px.astype(np.float64)), 0.0, 1.0)
+    x = to_unit(px)
+    if not np.issubdtype(px.dtype, np.integer):
+        x = np.clip(np.nan_to_num(x), 0.0, 1.0)
     a = None
     if alpha_channel is not None:
         a = x[:, :, alpha_channel : alpha_channel + 1]

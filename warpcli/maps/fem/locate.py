@@ -1,4 +1,4 @@
-"""Point location in triangle meshes: a uniform bucket grid, fully vectorized."""
+"""FEM point location in triangle meshes: a uniform bucket grid, fully vectorized."""
 
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ class TriangleLocator:
         t = np.asarray(triangles, dtype=np.int64)
         self.vertices = v
         self.triangles = t
-        self._coef = _affine_coefficients(v, t)
+        self._coef = affine_coefficients(v, t)
         a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
         tmin = np.minimum(np.minimum(a, b), c)
         tmax = np.maximum(np.maximum(a, b), c)
@@ -193,7 +193,7 @@ def barycentric_combine(
     return out
 
 
-def _affine_coefficients(v: NDArray[np.float64], t: NDArray[np.int64]) -> NDArray[np.float64]:
+def affine_coefficients(v: NDArray[np.float64], t: NDArray[np.int64]) -> NDArray[np.float64]:
     """Per triangle ``(ax, ay, k0, k1, k2, k3)``: l1 = dx*k0 + dy*k1, l2 = dx*k2 + dy*k3.
 
     (dx, dy) = p - a; degenerate triangles get NaN coefficients, so no point

@@ -1,40 +1,11 @@
-"""Metrics: Jacobians of the composed map, distortion (the paper's Table 2), fold-over counts."""
+"""Metrics: distortion of a map from its Jacobians (the paper's §4.3 and Table 2)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
-
-from .harmonic import HarmonicMap
-
-
-def triangle_jacobians(phi: HarmonicMap, *, inverse: bool = False) -> NDArray[np.float64]:
-    """(M, 2, 2): the constant Jacobian of the piecewise-linear map on each triangle.
-
-    ``J = G @ inv(E)`` with ``E = [v_1 - v_0, v_2 - v_0]`` (mesh) and
-    ``G = [theta_1 - theta_0, theta_2 - theta_0]`` (image) as columns; with
-    ``inverse``, the Jacobian of the inverse map, ``E @ inv(G)``. NaN or inf
-    for a degenerate triangle.
-    """
-    t = phi.mesh.triangles
-    v = phi.mesh.vertices
-    w = phi.values
-    e = np.stack([v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]], axis=2)  # columns
-    g = np.stack([w[t[:, 1]] - w[t[:, 0]], w[t[:, 2]] - w[t[:, 0]]], axis=2)
-    if inverse:
-        e, g = g, e
-    return g @ _inv2(e)
-
-
-def _inv2(m: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Inverses of a stack of 2x2 matrices, in closed form."""
-    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.stack(
-            [np.stack([m[:, 1, 1], -m[:, 0, 1]], axis=1), np.stack([-m[:, 1, 0], m[:, 0, 0]], axis=1)], axis=1
-        ) / det[:, None, None]
+from numpy.typing import ArrayLike, NDArray
 
 
 def singular_values(j: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -91,32 +62,37 @@ class Distortion:
         }
 
 
-def distortion_at_pixels(
-    phi0: HarmonicMap, phi1: HarmonicMap, tri0: NDArray[np.integer], tri1: NDArray[np.integer]
-) -> Distortion:
-    """Distortion of f = phi1^-1 o phi0 at output pixels with known triangles.
+def distortion(inverse_jacobian: ArrayLike) -> Distortion:
+    """Distortion of f (source -> target) from Jacobians of f^-1 at sampled target points.
 
-    An output pixel y in target triangle T1, whose pre-image lies in source
-    triangle T0, sees the inverse map with Jacobian
-    ``J_inv = J_phi0(T0)^-1 @ J_phi1(T1)``. Both measures are invariant under
-    inversion (the singular values of J_f are the reciprocals of those of
-    J_inv, swapped), so they are computed from J_inv; each pixel stands for
-    ``|det J_inv|`` square pixels of the source, which weights the means so
-    that they are means over the source polygon.
+    Both measures are invariant under inversion (the singular values of J_f
+    are the reciprocals of those of J_f^-1, swapped), so they are computed
+    from J_f^-1, which is known exactly at every output pixel; each sample
+    stands for ``|det J_f^-1|`` square pixels of the source, which weights the
+    means so that they are means over the source polygon.
 
     Parameters
     ----------
-    tri0, tri1 : array_like of int
-        Source and target triangle of each sampled output pixel (-1: no
-        Jacobian, NaN results).
+    inverse_jacobian : (..., 2, 2) array_like of float
+        d source / d target at each sample; NaN where unknown (outside the
+        target: NaN results).
+
+    Returns
+    -------
+    Distortion
+        One entry per sample, flattened.
+
+    References
+    ----------
+    Schneider & Hormann, CAGD 2015, §4.3 (conformal and isometric distortion)
+    and Table 2.
     """
-    t0 = np.asarray(tri0).ravel()
-    t1 = np.asarray(tri1).ravel()
-    keep = np.flatnonzero((t0 >= 0) & (t1 >= 0))
-    j_inv = np.linalg.solve(triangle_jacobians(phi0)[t0[keep]], triangle_jacobians(phi1)[t1[keep]])
+    j = np.asarray(inverse_jacobian, dtype=np.float64).reshape(-1, 2, 2)
+    keep = np.flatnonzero(np.isfinite(j).all(axis=(1, 2)))
+    j_inv = j[keep]
     s1, s2 = singular_values(j_inv)
     det_inv = j_inv[:, 0, 0] * j_inv[:, 1, 1] - j_inv[:, 0, 1] * j_inv[:, 1, 0]
-    out = [np.full(t0.shape, np.nan) for _ in range(4)]
+    out = [np.full(len(j), np.nan) for _ in range(4)]
     with np.errstate(divide="ignore", invalid="ignore"):
         out[0][keep] = s1 / s2 + s2 / s1
         out[1][keep] = np.maximum(s1, 1.0 / s2)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from helpers import comb, star
-from warpcli.locate import TriangleLocator, barycentric_combine, triangle_neighbours
-from warpcli.mesh import mesh_polygon
+from warpcli.maps.fem.locate import TriangleLocator, barycentric_combine, triangle_neighbours
+from warpcli.maps.fem.mesh import mesh_polygon
 from warpcli.polygon import Polygon
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from helpers import comb, l_shape, spiral, star
 from warpcli.errors import PolygonError
-from warpcli.mesh import AUTO_MAX_TRIANGLES, MAX_TRIANGLES, auto_max_area, mesh_polygon, triangle_areas
+from warpcli.maps.fem.mesh import AUTO_MAX_TRIANGLES, MAX_TRIANGLES, auto_max_area, mesh_polygon, triangle_areas
 from warpcli.polygon import Polygon
 
 SHAPES = {"star": star(), "L": l_shape(), "comb": comb(), "spiral": spiral()}

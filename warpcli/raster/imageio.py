@@ -1,4 +1,4 @@
-"""Image I/O stage: OpenImageIO read/write keeping pixel type, channels and metadata."""
+"""Image I/O: OpenImageIO read/write keeping pixel type, channels and metadata."""
 
 from __future__ import annotations
 
@@ -10,7 +10,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import ImageInputError, ImageIOError
+from ..errors import ImageInputError, ImageIOError
+from ..options import DTYPES as DTYPE_NAMES
+from .pixels import from_unit, to_unit
 
 # numpy dtype -> OpenImageIO type name.
 _OIIO_TYPES = {
@@ -35,7 +37,7 @@ _DROP_PREFIXES = (
 _KEEP = ("oiio:ColorSpace",)
 
 #: Output pixel types for ``convert_pixels`` (and ``--dtype``), by name.
-DTYPES = {"uint8": np.uint8, "uint16": np.uint16, "half": np.float16, "float": np.float32}
+DTYPES = dict(zip(DTYPE_NAMES, (np.uint8, np.uint16, np.float16, np.float32)))
 
 
 @dataclass(frozen=True)
@@ -139,13 +141,7 @@ def convert_pixels(pixels: NDArray, dtype: str) -> NDArray:
     px = np.asarray(pixels)
     if px.dtype == target:
         return px
-    x = px.astype(np.float64)
-    if np.issubdtype(px.dtype, np.integer):
-        x /= np.iinfo(px.dtype).max
-    if np.issubdtype(target, np.integer):
-        top = np.iinfo(target).max
-        return np.clip(np.rint(x * top), 0, top).astype(target)
-    return x.astype(target)
+    return from_unit(to_unit(px), target)
 
 
 def check_output_path(
@@ -260,14 +256,10 @@ _PREMULTIPLIED_FORMATS = ("openexr",)
 
 def _premultiplied(px: NDArray, alpha_channel: int) -> NDArray:
     """Colour multiplied by alpha (0..1), in the pixels' own type."""
-    unit = float(np.iinfo(px.dtype).max) if np.issubdtype(px.dtype, np.integer) else 1.0
-    x = px.astype(np.float64)
-    a = x[:, :, alpha_channel : alpha_channel + 1] / unit
+    x = to_unit(px)
     colour = [c for c in range(px.shape[2]) if c != alpha_channel]
-    x[:, :, colour] *= a
-    if np.issubdtype(px.dtype, np.integer):
-        return np.clip(np.rint(x), 0, unit).astype(px.dtype)
-    return x.astype(px.dtype)
+    x[:, :, colour] *= x[:, :, alpha_channel : alpha_channel + 1]
+    return from_unit(x, px.dtype)
 
 
 def _oiio_error(oiio) -> str:

@@ -1,50 +1,16 @@
-"""Harmonic stage: cotangent Laplacian and the Dirichlet solve for a map onto Theta."""
+"""FEM solve: the cotangent (or mean-value) Laplacian and the Dirichlet solve for a map onto Theta (§3.1.1)."""
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
+from ...boundary import edge_points
+from ...errors import InputError
+from ...options import WEIGHTS
+from ...polygon import signed_area
 from .mesh import TriMesh, triangle_areas
-from .polygon import signed_area
-
-
-@dataclass(frozen=True)
-class HarmonicMap:
-    """A discrete (piecewise-linear) harmonic map of a mesh onto Theta.
-
-    Attributes
-    ----------
-    mesh : TriMesh
-    values : (N, 2) ndarray of float
-        Image in Theta of every mesh vertex.
-    theta : (n, 2) ndarray of float
-        The convex polygon the map goes onto.
-    weights : str
-        The Laplacian's edge weights, ``"cotan"`` or ``"positive"``.
-    """
-
-    mesh: TriMesh
-    values: NDArray[np.float64]
-    theta: NDArray[np.float64]
-    weights: str = "cotan"
-
-    def __post_init__(self) -> None:
-        if self.values.shape != self.mesh.vertices.shape:
-            raise ValueError(
-                f"values has shape {self.values.shape} but the mesh has {self.mesh.vertices.shape}"
-            )
-
-    def flipped(self) -> NDArray[np.bool_]:
-        """Per triangle: whether its image is degenerate or has the wrong orientation.
-
-        A polygon oriented against Theta gives a mirror image, which is not
-        counted as flipped.
-        """
-        return flipped_triangles(self.mesh, self.values, self.theta)
 
 
 def flipped_triangles(
@@ -133,20 +99,13 @@ def mean_value_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.in
     return (sp.diags(np.asarray(w_mat.sum(axis=1)).ravel()) - w_mat).tocsr()
 
 
-#: Edge weights of the discrete Laplacian, by name.
-WEIGHTS = ("cotan", "positive")
-
-
 def boundary_values(mesh: TriMesh, theta: NDArray[np.float64]) -> NDArray[np.float64]:
     """Piecewise-linear Dirichlet data: a node at parameter t on edge i goes to
     ``(1 - t) w_i + t w_{i+1}`` (Section 2, linear boundary behaviour)."""
-    n = len(theta)
-    e = mesh.boundary_edge
-    t = mesh.boundary_t[:, None]
-    return (1.0 - t) * theta[e] + t * theta[(e + 1) % n]
+    return edge_points(theta, mesh.boundary_edge, mesh.boundary_t)
 
 
-def solve_harmonic(mesh: TriMesh, theta: NDArray[np.float64], weights: str = "cotan") -> HarmonicMap:
+def solve_dirichlet(mesh: TriMesh, theta: NDArray[np.float64], weights: str = "cotan") -> NDArray[np.float64]:
     """Solve the discrete Dirichlet problem for both coordinates (Section 3.1.1).
 
     Parameters
@@ -160,7 +119,8 @@ def solve_harmonic(mesh: TriMesh, theta: NDArray[np.float64], weights: str = "co
 
     Returns
     -------
-    HarmonicMap
+    (N, 2) ndarray of float
+        The image in Theta of every mesh vertex.
     """
     from scipy.sparse.linalg import splu
 
@@ -172,7 +132,7 @@ def solve_harmonic(mesh: TriMesh, theta: NDArray[np.float64], weights: str = "co
     is_b[mesh.boundary] = True
     interior = np.flatnonzero(~is_b)
     if weights not in WEIGHTS:
-        raise ValueError(f"weights must be one of {WEIGHTS}, got {weights!r}")
+        raise InputError(f"unknown weights {weights!r}; choose one of {', '.join(WEIGHTS)}")
     if interior.size:
         if weights == "cotan":
             k = cotan_laplacian(mesh.vertices, mesh.triangles)
@@ -191,4 +151,4 @@ def solve_harmonic(mesh: TriMesh, theta: NDArray[np.float64], weights: str = "co
             options={"SymmetricMode": weights == "cotan"},
         )
         values[interior] = lu.solve(np.ascontiguousarray(rhs))
-    return HarmonicMap(mesh, values, theta, weights)
+    return values

@@ -19,8 +19,9 @@ import os
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import ImageInputError
+from ..errors import ImageInputError
 from .imageio import RasterImage, read_image, write_image
+from .pixels import to_unit
 
 #: Header attributes: what the map is ("inverse": output -> input, "forward":
 #: input -> output) and which way t runs ("down" or "up").
@@ -91,9 +92,7 @@ def load_stmap(
     """
     name = os.fspath(path)
     img = read_image(name)
-    px = img.pixels.astype(np.float64)
-    if np.issubdtype(img.pixels.dtype, np.integer):
-        px /= np.iinfo(img.pixels.dtype).max  # an integer STMap spans 0..1
+    px = to_unit(img.pixels)  # an integer STMap spans 0..1
     if px.shape[2] < 2:
         raise ImageInputError(f"{name}: an STMap needs two channels (s, t), this image has {px.shape[2]}")
     if t_up is None:

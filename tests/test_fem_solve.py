@@ -1,4 +1,4 @@
-"""Tests of warpcli.harmonic: the cotangent Laplacian and the Dirichlet solve."""
+"""Tests of warpcli.maps.fem.solve: the cotangent Laplacian and the Dirichlet solve."""
 
 from __future__ import annotations
 
@@ -6,12 +6,19 @@ import numpy as np
 import pytest
 
 from helpers import comb, l_shape, regular, spiral, star
-from warpcli.harmonic import boundary_values, cotan_laplacian, solve_harmonic
-from warpcli.mesh import mesh_polygon
+from warpcli.maps.fem import FEMMap
+from warpcli.maps.fem.mesh import mesh_polygon
+from warpcli.maps.fem.solve import boundary_values, cotan_laplacian, mean_value_laplacian, solve_dirichlet
+from warpcli.maps.theta import Theta, regular_polygon
 from warpcli.polygon import Polygon
-from warpcli.theta import regular_polygon
 
 SHAPES = {"star": star(), "L": l_shape(), "comb": comb(), "spiral": spiral()}
+
+
+def solve_harmonic(poly, max_area, theta, weights="cotan"):
+    """The FEM map of ``poly`` meshed at ``max_area`` onto ``theta`` (an (n, 2) array)."""
+    mesh = mesh_polygon(poly, max_area)
+    return FEMMap(poly, Theta(theta), mesh, solve_dirichlet(mesh, theta, weights), weights)
 
 
 def test_laplacian_of_right_triangle_by_hand():
@@ -42,7 +49,7 @@ def test_laplacian_symmetric_zero_row_sums_nonnegative_interior_weights(name):
 def test_boundary_interpolated_and_no_flips(name):
     poly = Polygon(SHAPES[name])
     theta = regular_polygon(poly.n)
-    phi = solve_harmonic(mesh_polygon(poly, 4.0), theta)
+    phi = solve_harmonic(poly, 4.0, theta)
     np.testing.assert_allclose(phi.values[phi.mesh.boundary], boundary_values(phi.mesh, theta), atol=0)
     corners = phi.mesh.boundary[phi.mesh.boundary_t == 0]
     np.testing.assert_allclose(phi.values[corners], theta[phi.mesh.boundary_edge[phi.mesh.boundary_t == 0]], atol=1e-15)
@@ -53,7 +60,7 @@ def test_linear_functions_are_reproduced_exactly():
     """P1 FEM reproduces linear data: a triangle goes onto Theta affinely."""
     tri = Polygon([[10.0, 12.0], [90.0, 30.0], [40.0, 100.0]])
     theta = regular_polygon(3)
-    phi = solve_harmonic(mesh_polygon(tri, 3.0), theta)
+    phi = solve_harmonic(tri, 3.0, theta)
     # The affine map sending the polygon's vertices to Theta's.
     src = np.hstack([tri.points, np.ones((3, 1))])
     coef = np.linalg.solve(src, theta)
@@ -63,7 +70,7 @@ def test_linear_functions_are_reproduced_exactly():
 
 def test_interior_values_are_discrete_harmonic():
     poly = Polygon(star())
-    phi = solve_harmonic(mesh_polygon(poly, 4.0), regular_polygon(poly.n))
+    phi = solve_harmonic(poly, 4.0, regular_polygon(poly.n))
     k = cotan_laplacian(phi.mesh.vertices, phi.mesh.triangles)
     residual = k @ phi.values
     interior = np.setdiff1d(np.arange(phi.mesh.n_vertices), phi.mesh.boundary)
@@ -73,13 +80,11 @@ def test_interior_values_are_discrete_harmonic():
 def test_mirrored_polygon_maps_without_flips():
     """A polygon oriented against Theta gives an orientation-reversing map, not a flip."""
     poly = Polygon(regular(7)[::-1])
-    phi = solve_harmonic(mesh_polygon(poly, 4.0), regular_polygon(7))
+    phi = solve_harmonic(poly, 4.0, regular_polygon(7))
     assert not phi.flipped().any()
 
 
 def test_mean_value_weights_are_positive_and_reproduce_linear_functions():
-    from warpcli.harmonic import mean_value_laplacian
-
     mesh = mesh_polygon(Polygon(star()), 6.0)
     k = mean_value_laplacian(mesh.vertices, mesh.triangles)
     coo = k.tocoo()
@@ -95,14 +100,14 @@ def test_mean_value_weights_are_positive_and_reproduce_linear_functions():
 def test_positive_weights_never_flip_and_interpolate_the_boundary(name):
     poly = Polygon(SHAPES[name])
     theta = regular_polygon(poly.n)
-    phi = solve_harmonic(mesh_polygon(poly, 4.0), theta, "positive")
+    phi = solve_harmonic(poly, 4.0, theta, "positive")
     assert not phi.flipped().any()
     np.testing.assert_allclose(phi.values[phi.mesh.boundary], boundary_values(phi.mesh, theta), atol=0)
 
 
 def test_positive_weights_map_a_triangle_affinely():
     tri = Polygon([[10.0, 12.0], [90.0, 30.0], [40.0, 100.0]])
-    phi = solve_harmonic(mesh_polygon(tri, 3.0), regular_polygon(3), "positive")
+    phi = solve_harmonic(tri, 3.0, regular_polygon(3), "positive")
     coef = np.linalg.solve(np.hstack([tri.points, np.ones((3, 1))]), regular_polygon(3))
     expected = np.hstack([phi.mesh.vertices, np.ones((phi.mesh.n_vertices, 1))]) @ coef
     np.testing.assert_allclose(phi.values, expected, atol=1e-12)

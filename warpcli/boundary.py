@@ -1,0 +1,68 @@
+"""Boundary correspondence: points at a parameter along polygon edges, and back.
+
+The boundary data of every map is defined edge by edge (the paper's §2): the
+point at parameter t along edge i of a polygon (from vertex i to vertex i + 1,
+mod n) corresponds to the point at parameter t along edge i of Theta. These
+are the one place that computes it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+
+def edge_points(vertices: ArrayLike, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
+    """``(1 - t) v[edge] + t v[edge + 1]``: points at parameter t along polygon edges.
+
+    Parameters
+    ----------
+    vertices : (n, 2) array_like of float
+        The polygon, closed implicitly (edge n - 1 runs back to vertex 0).
+    edge : (K,) array_like of int
+    t : (K,) array_like of float
+
+    Returns
+    -------
+    (K, 2) ndarray of float
+
+    Examples
+    --------
+    >>> edge_points([[0, 0], [4, 0], [4, 2]], [0, 2], [0.25, 0.5]).tolist()
+    [[1.0, 0.0], [2.0, 1.0]]
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    e = np.asarray(edge, dtype=np.intp)
+    s = np.asarray(t, dtype=np.float64)[:, None]
+    return (1.0 - s) * v[e] + s * v[(e + 1) % len(v)]
+
+
+def nearest_edge(
+    points: ArrayLike, vertices: ArrayLike
+) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
+    """The nearest point of a polygon's boundary to each point: edge, parameter, distance.
+
+    Cost and memory are K x n: for few points (rounding-error fallbacks) or
+    polygons with few vertices.
+
+    Parameters
+    ----------
+    points : (K, 2) array_like of float
+    vertices : (n, 2) array_like of float
+
+    Returns
+    -------
+    edge : (K,) ndarray of int
+    t : (K,) ndarray of float in [0, 1]
+    distance : (K,) ndarray of float
+    """
+    q = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    a = np.asarray(vertices, dtype=np.float64)
+    d = np.roll(a, -1, axis=0) - a
+    rel = q[:, None, :] - a[None, :, :]
+    t = np.clip(np.einsum("kij,ij->ki", rel, d) / np.einsum("ij,ij->i", d, d), 0.0, 1.0)
+    near = a[None] + t[..., None] * d[None]
+    dist2 = ((q[:, None, :] - near) ** 2).sum(axis=2)
+    e = np.argmin(dist2, axis=1)
+    rows = np.arange(len(q))
+    return e, t[rows, e], np.sqrt(dist2[rows, e])

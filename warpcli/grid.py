@@ -1,0 +1,81 @@
+"""Pixel grids: the coordinate convention, pixel centres, and which centres a polygon covers.
+
+Coordinates are continuous image coordinates: x right, y down, the origin at
+the top-left corner of the top-left pixel, so pixel (row r, column c) covers
+``[c, c+1] x [r, r+1]`` and has its centre at ``(c + 0.5, r + 0.5)``. Sizes are
+``(width, height)``; arrays of pixels have shape ``(height, width, ...)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+
+def pixel_centres(width: int, height: int, rows: tuple[int, int] | None = None) -> NDArray[np.float64]:
+    """Centres of a ``width`` x ``height`` pixel grid, row by row, as (K, 2) points.
+
+    Parameters
+    ----------
+    width, height : int
+        Grid size in pixels.
+    rows : (int, int) or None
+        Only rows ``r0 <= r < r1``.
+
+    Returns
+    -------
+    (K, 2) ndarray of float
+        K = width * (number of rows).
+
+    Examples
+    --------
+    >>> pixel_centres(2, 1).tolist()
+    [[0.5, 0.5], [1.5, 0.5]]
+    """
+    r0, r1 = rows if rows is not None else (0, height)
+    x = np.arange(width, dtype=np.float64) + 0.5
+    y = np.arange(r0, r1, dtype=np.float64) + 0.5
+    xx, yy = np.meshgrid(x, y)
+    return np.stack([xx.ravel(), yy.ravel()], axis=1)
+
+
+def covered_rows(bounds: tuple[float, float, float, float], height: int) -> tuple[int, int]:
+    """Rows ``(r0, r1)`` whose pixel centres can lie in a box ``(xmin, ymin, xmax, ymax)``.
+
+    >>> covered_rows((0.0, 2.0, 5.0, 4.5), 10)
+    (2, 5)
+    """
+    _, ymin, _, ymax = bounds
+    r0 = max(0, math.ceil(ymin - 0.5))
+    r1 = min(height, math.floor(ymax - 0.5) + 1)
+    return (r0, max(r0, r1))
+
+
+def inside_polygon(points: ArrayLike, vertices: ArrayLike) -> NDArray[np.bool_]:
+    """Whether each point lies inside a polygon (even-odd rule; points on the boundary vary).
+
+    Parameters
+    ----------
+    points : (K, 2) array_like of float
+    vertices : (n, 2) array_like of float
+
+    Returns
+    -------
+    (K,) ndarray of bool
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    a = np.asarray(vertices, dtype=np.float64)
+    b = np.roll(a, -1, axis=0)
+    inside = np.zeros(len(p), dtype=bool)
+    # Blocks of points keep the K x n temporaries small.
+    block = max(1, (1 << 22) // max(len(a), 1))
+    for s in range(0, len(p), block):
+        x = p[s : s + block, 0:1]
+        y = p[s : s + block, 1:2]
+        crosses = (a[:, 1] > y) != (b[:, 1] > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xint = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+        inside[s : s + block] = (crosses & (x < xint)).sum(axis=1) % 2 == 1
+    return inside

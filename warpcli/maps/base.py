@@ -1,0 +1,219 @@
+"""The map interface: a map of a polygon onto the convex polygon Theta, whatever the method.
+
+Every method of the paper's §3.1 (FEM, and later BEM and MFS) implements
+`ThetaMap`; `warpcli.maps.compose.BijectiveMap` composes two of them and never
+looks inside. What crosses the seam is points and Jacobians, never mesh
+triangles.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import ClassVar, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..boundary import edge_points
+from ..errors import InputError
+from ..grid import inside_polygon, pixel_centres
+from ..polygon import Polygon
+from .theta import Theta
+
+
+class Mapped(NamedTuple):
+    """Points carried through a map, with the map's Jacobian there if asked for.
+
+    Attributes
+    ----------
+    points : (K, 2) ndarray of float
+        NaN where the map is not defined (outside its domain).
+    jacobian : (K, 2, 2) ndarray of float or None
+        ``jacobian[k, a, b]`` = d out_a / d in_b at point k; NaN where unknown.
+    """
+
+    points: NDArray[np.float64]
+    jacobian: NDArray[np.float64] | None = None
+
+
+class GridSample(NamedTuple):
+    """A map evaluated at the pixel centres of a grid that lie in its domain.
+
+    Attributes
+    ----------
+    pixels : (K,) ndarray of int64
+        Flat (row-major) indices of those pixels in the whole grid, in the
+        order they were visited (spatially coherent: consecutive pixels are
+        neighbours, which makes a following `ThetaMap.inverse` with
+        ``coherent=True`` fast).
+    values : (K, 2) ndarray of float
+        The map at each of those pixel centres.
+    jacobian : (K, 2, 2) ndarray of float or None
+        Its Jacobian there, if asked for.
+    """
+
+    pixels: NDArray[np.int64]
+    values: NDArray[np.float64]
+    jacobian: NDArray[np.float64] | None = None
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """Evidence that a map is one-to-one.
+
+    Attributes
+    ----------
+    flipped : int
+        Elements (triangles, or sample points for a smooth map) where the
+        map's Jacobian vanishes or has the wrong sign.
+    checked : int
+        How many elements were checked.
+    kind : str
+        What an element is: ``"triangles"`` (exact for a piecewise-linear map)
+        or ``"samples"``.
+    """
+
+    flipped: int
+    checked: int
+    kind: str
+
+    @property
+    def ok(self) -> bool:
+        """True when nothing flipped."""
+        return self.flipped == 0
+
+
+@dataclass(eq=False)
+class ThetaMap(ABC):
+    """A map phi of a simple polygon onto a convex polygon Theta, with its inverse.
+
+    phi takes the polygon's vertex i to Theta's vertex i and each edge onto the
+    corresponding edge (linear boundary data, the paper's §2). Implementations
+    approximate the harmonic map with those boundary values (§3.1) and are made
+    by a method's ``build`` (see `warpcli.maps.registry.METHODS`).
+
+    Attributes
+    ----------
+    polygon : Polygon
+        The domain.
+    theta : Theta
+        The image.
+    timings : dict of str to float
+        Seconds spent building the map, per stage.
+
+    References
+    ----------
+    Schneider & Hormann, Smooth bijective maps between arbitrary planar
+    polygons, CAGD 2015, §2-§3.
+    """
+
+    polygon: Polygon
+    theta: Theta
+    timings: dict[str, float] = field(default_factory=dict, kw_only=True)
+
+    #: The method's registry name.
+    method: ClassVar[str] = ""
+
+    @abstractmethod
+    def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
+        """phi at points of the polygon.
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+            Points in the polygon's coordinates.
+        jacobian : bool
+            Also return the Jacobian of phi there.
+
+        Returns
+        -------
+        Mapped
+            Points of Theta; NaN for points outside the polygon.
+        """
+
+    @abstractmethod
+    def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
+        """phi^-1 at points of Theta.
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+            Points of Theta.
+        jacobian : bool
+            Also return the Jacobian of phi^-1 there.
+        coherent : bool
+            A hint that consecutive points are close together (as in a
+            `GridSample`), which a method may use to search faster.
+
+        Returns
+        -------
+        Mapped
+            Points of the polygon; NaN for points outside Theta.
+        """
+
+    @abstractmethod
+    def certify(self) -> Certificate:
+        """Check that the map is one-to-one (see `Certificate`)."""
+
+    def evaluate_grid(
+        self, width: int, height: int, rows: tuple[int, int] | None = None, *, jacobian: bool = False
+    ) -> GridSample:
+        """phi at the pixel centres of a ``width`` x ``height`` grid that lie in the polygon.
+
+        The fast path of the composition. This default evaluates the centres
+        inside the polygon in row-major order; methods override it with
+        something faster.
+
+        Parameters
+        ----------
+        width, height : int
+            Grid size in pixels (the polygon lives in this grid's coordinates).
+        rows : (int, int) or None
+            Only rows ``r0 <= r < r1``.
+        jacobian : bool
+            Also return the Jacobian of phi.
+
+        Returns
+        -------
+        GridSample
+        """
+        r0, r1 = rows if rows is not None else (0, height)
+        centres = pixel_centres(width, height, (r0, r1))
+        inside = np.flatnonzero(inside_polygon(centres, self.polygon.points))
+        mapped = self.evaluate(centres[inside], jacobian=jacobian)
+        ok = np.isfinite(mapped.points[:, 0])
+        pixels = (inside[ok] + r0 * width).astype(np.int64)
+        jac = mapped.jacobian[ok] if mapped.jacobian is not None else None
+        return GridSample(pixels, mapped.points[ok], jac)
+
+    def to_theta_parameter(self, t: ArrayLike) -> NDArray[np.float64]:
+        """The boundary behaviour: the parameter along Theta's edge i of parameter t along the polygon's edge i.
+
+        Linear boundary data (the paper's default, §2): the same parameter.
+        """
+        return np.asarray(t, dtype=np.float64)
+
+    def from_theta_parameter(self, s: ArrayLike) -> NDArray[np.float64]:
+        """The inverse of `to_theta_parameter`."""
+        return np.asarray(s, dtype=np.float64)
+
+    def boundary_to_theta(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
+        """The boundary data: the image in Theta of the point at parameter t on polygon edge i."""
+        return edge_points(self.theta.points, edge, self.to_theta_parameter(t))
+
+    def boundary_from_theta(self, edge: ArrayLike, s: ArrayLike) -> NDArray[np.float64]:
+        """The inverse boundary data: the polygon point that goes to parameter s on Theta's edge i."""
+        return edge_points(self.polygon.points, edge, self.from_theta_parameter(s))
+
+    def describe(self) -> dict:
+        """What only this method knows, for the report (for FEM: the mesh's size)."""
+        return {}
+
+
+def as_points(points: ArrayLike) -> NDArray[np.float64]:
+    """Points as a (K, 2) float array, or `InputError`."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise InputError(f"points must be a (K, 2) array, got shape {p.shape}")
+    return p

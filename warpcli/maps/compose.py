@@ -1,0 +1,325 @@
+"""Composition: the bijection f = phi1^-1 o phi0 between two polygons (eq. (2)), and the policy that builds it."""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import FoldOverError, InputError
+from ..grid import covered_rows
+from ..options import MapOptions
+from ..polygon import Polygon, check_pair
+from .base import ThetaMap, as_points
+from .registry import METHODS, THETAS
+
+#: The composition works through the output grid in bands of about this many
+#: pixels, so its temporary arrays stay small whatever the image size.
+BAND_PIXELS = 1 << 18
+
+
+@dataclass(frozen=True)
+class PullBack:
+    """The inverse map f^-1 at every pixel centre of an output grid.
+
+    Attributes
+    ----------
+    points : (H, W, 2) ndarray of float
+        Source point of each output pixel centre; NaN outside the target.
+    jacobian : (H, W, 2, 2) ndarray of float or None
+        Jacobian of f^-1 there (d source / d target), if asked for; NaN where
+        unknown.
+    """
+
+    points: NDArray[np.float64]
+    jacobian: NDArray[np.float64] | None = None
+
+
+class BijectiveMap:
+    """The smooth bijective map f between two polygons, as two maps onto one Theta.
+
+    ``forward`` takes source points to the target, ``inverse`` takes target
+    points back to the source: f = phi1^-1 o phi0 and f^-1 = phi0^-1 o phi1
+    (the paper's eq. (2)), for any two `ThetaMap` of the same Theta, whatever
+    the method that made them. Build one with `BijectiveMap.between`.
+
+    Parameters
+    ----------
+    phi0 : ThetaMap
+        The source polygon onto Theta.
+    phi1 : ThetaMap
+        The target polygon onto the same Theta.
+
+    Raises
+    ------
+    InputError
+        If the maps go onto different Thetas, or the polygons' vertex counts differ.
+
+    References
+    ----------
+    Schneider & Hormann, Smooth bijective maps between arbitrary planar
+    polygons, CAGD 2015, eq. (2).
+    """
+
+    def __init__(self, phi0: ThetaMap, phi1: ThetaMap) -> None:
+        check_pair(phi0.polygon, phi1.polygon)
+        if not phi0.theta.same_as(phi1.theta):
+            raise InputError(
+                f"{phi0.polygon.name} and {phi1.polygon.name} are mapped onto different Thetas "
+                f"({phi0.theta.name}, {phi1.theta.name}); f = phi1^-1 o phi0 needs one"
+            )
+        self.phi0 = phi0
+        self.phi1 = phi1
+        self.timings: dict[str, float] = {}
+
+    @classmethod
+    def between(
+        cls, src: Polygon, dst: Polygon, options: MapOptions | None = None, **changes: Any
+    ) -> BijectiveMap:
+        """Build the map between two polygons (see `build_map`).
+
+        Parameters
+        ----------
+        src, dst : Polygon
+            Corresponding polygons: vertex i of ``src`` goes to vertex i of ``dst``.
+        options : MapOptions or None
+            How to build it; the defaults otherwise.
+        **changes
+            Fields of `MapOptions` to change, e.g. ``max_area=4``.
+
+        Returns
+        -------
+        BijectiveMap
+
+        Raises
+        ------
+        InputError
+            If the options are bad or the polygons do not correspond.
+        FoldOverError
+            If the map would fold (never handed back).
+        """
+        opts = options or MapOptions()
+        if changes:
+            import dataclasses
+
+            try:
+                opts = dataclasses.replace(opts, **changes)
+            except TypeError as err:
+                raise InputError(f"unknown map option: {err}") from None
+        return build_map(src, dst, opts)
+
+    @property
+    def src(self) -> Polygon:
+        """The source polygon."""
+        return self.phi0.polygon
+
+    @property
+    def dst(self) -> Polygon:
+        """The target polygon."""
+        return self.phi1.polygon
+
+    @property
+    def theta(self):
+        """The intermediate convex polygon (`warpcli.maps.theta.Theta`)."""
+        return self.phi0.theta
+
+    @property
+    def orientation_preserving(self) -> bool:
+        """False when the polygons run in opposite directions: f is then a mirror image."""
+        return (self.src.signed_area > 0) == (self.dst.signed_area > 0)
+
+    def certificates(self):
+        """The two maps' `warpcli.maps.base.Certificate`, (source, target)."""
+        return self.phi0.certify(), self.phi1.certify()
+
+    def flipped_triangles(self) -> int:
+        """Elements (triangles, or samples) where either map flips: 0 for a bijection."""
+        return sum(c.flipped for c in self.certificates())
+
+    def check_bijective(self) -> None:
+        """Raise `FoldOverError` unless both maps are certified one-to-one."""
+        c0, c1 = self.certificates()
+        if not (c0.ok and c1.ok):
+            raise FoldOverError(
+                f"the maps flip {c0.flipped} {c0.kind} of {self.src.name} and {c1.flipped} {c1.kind} of "
+                f"{self.dst.name}; the warp would fold the image over itself"
+            )
+
+    def forward(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Map source points to the target.
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+            Points in the source image's coordinates.
+
+        Returns
+        -------
+        (K, 2) ndarray of float
+            Their images in the target's coordinates; NaN outside the source polygon.
+        """
+        return self.phi1.inverse(self.phi0.evaluate(as_points(points)).points).points
+
+    def inverse(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Map target points back to the source.
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+            Points in the target (output) image's coordinates.
+
+        Returns
+        -------
+        (K, 2) ndarray of float
+            Their pre-images in the source's coordinates; NaN outside the target polygon.
+        """
+        return self.phi0.inverse(self.phi1.evaluate(as_points(points)).points).points
+
+    def forward_jacobian(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Jacobian of f at source points: ``J_phi1(f(x))^-1 J_phi0(x)``.
+
+        Returns
+        -------
+        (K, 2, 2) ndarray of float
+            NaN outside the source polygon.
+        """
+        a = self.phi0.evaluate(as_points(points), jacobian=True)
+        b = self.phi1.inverse(a.points, jacobian=True)
+        return matmul2(b.jacobian, a.jacobian)
+
+    def inverse_jacobian(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Jacobian of f^-1 at target points: ``J_phi0(x)^-1 J_phi1(y)``.
+
+        Returns
+        -------
+        (K, 2, 2) ndarray of float
+            NaN outside the target polygon.
+        """
+        a = self.phi1.evaluate(as_points(points), jacobian=True)
+        b = self.phi0.inverse(a.points, jacobian=True)
+        return matmul2(b.jacobian, a.jacobian)
+
+    def inverse_boundary(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
+        """The exact boundary map backwards: the source point of parameter t on target edge i."""
+        return self.phi0.boundary_from_theta(edge, self.phi1.to_theta_parameter(t))
+
+    def pull_back(self, width: int, height: int, *, jacobian: bool = True) -> PullBack:
+        """f^-1 (and its Jacobian) at every pixel centre of a ``width`` x ``height`` output grid.
+
+        Works through the rows the target polygon covers in bands: phi1 on
+        the band's pixel grid (`ThetaMap.evaluate_grid`), then phi0^-1 of
+        those points of Theta in the order they were found (coherent).
+
+        Parameters
+        ----------
+        width, height : int
+            Output size in pixels (the target polygon's coordinates).
+        jacobian : bool
+            Also compute the Jacobian of f^-1 per pixel.
+
+        Returns
+        -------
+        PullBack
+        """
+        return _through_theta(self.phi1, self.phi0, width, height, jacobian)
+
+    def inverse_grid(self, width: int, height: int) -> NDArray[np.float64]:
+        """`inverse` at every pixel centre of a ``width`` x ``height`` output image.
+
+        Returns
+        -------
+        (height, width, 2) ndarray of float
+            Source point of each output pixel centre; NaN outside the target.
+        """
+        return self.pull_back(width, height, jacobian=False).points
+
+    def forward_grid(self, width: int, height: int) -> NDArray[np.float64]:
+        """`forward` at every pixel centre of a ``width`` x ``height`` source image.
+
+        Returns
+        -------
+        (height, width, 2) ndarray of float
+            Target point of each source pixel centre; NaN outside the source.
+        """
+        return _through_theta(self.phi0, self.phi1, width, height, False).points
+
+    def describe(self) -> dict:
+        """What the methods add to a report, prefixed by ``source_`` and ``target_``."""
+        out = {f"source_{k}": v for k, v in self.phi0.describe().items()}
+        out.update({f"target_{k}": v for k, v in self.phi1.describe().items()})
+        return out
+
+
+def _through_theta(phi_grid: ThetaMap, phi_other: ThetaMap, width: int, height: int, jacobian: bool) -> PullBack:
+    """phi_other^-1 o phi_grid at every pixel centre of the grid phi_grid's polygon lives on."""
+    points = np.full((height * width, 2), np.nan)
+    jac = np.full((height * width, 2, 2), np.nan) if jacobian else None
+    r0, r1 = covered_rows(phi_grid.polygon.bounds, height)
+    band = max(1, BAND_PIXELS // width)
+    for start in range(r0, r1, band):
+        rows = (start, min(start + band, r1))
+        g = phi_grid.evaluate_grid(width, height, rows, jacobian=jacobian)
+        m = phi_other.inverse(g.values, jacobian=jacobian, coherent=True)
+        points[g.pixels] = m.points
+        if jac is not None:
+            jac[g.pixels] = matmul2(m.jacobian, g.jacobian)
+    shape = (height, width)
+    return PullBack(points.reshape(*shape, 2), None if jac is None else jac.reshape(*shape, 2, 2))
+
+
+def matmul2(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a @ b`` for stacks of 2x2 matrices, written out (the same rounding everywhere)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    for i in range(2):
+        for j in range(2):
+            out[..., i, j] = a[..., i, 0] * b[..., 0, j] + a[..., i, 1] * b[..., 1, j]
+    return out
+
+
+def build_map(src: Polygon, dst: Polygon, options: MapOptions | None = None) -> BijectiveMap:
+    """The construction policy: choose Theta, build both maps concurrently, certify.
+
+    Parameters
+    ----------
+    src, dst : Polygon
+        Corresponding polygons (vertex i of ``src`` goes to vertex i of ``dst``).
+    options : MapOptions or None
+        The method and Theta strategy by name, and their parameters.
+
+    Returns
+    -------
+    BijectiveMap
+        Its ``timings`` hold the seconds of each stage of building, summed
+        over both maps (they are built at once, so the sum can exceed the wall
+        time).
+
+    Raises
+    ------
+    InputError
+        If the polygons do not correspond or the options are bad.
+    FoldOverError
+        If, with ``options.check``, either map is not certified one-to-one.
+    """
+    opts = options or MapOptions()
+    check_pair(src, dst)
+    theta = THETAS[opts.theta].load()(src, dst, opts)
+    method = METHODS[opts.method].load()
+    # The target is built here while the source is built on a second thread,
+    # and the method's kernels load on a third: solvers (SuperLU) release the
+    # GIL. Each map is independent, so the results do not depend on the
+    # scheduling.
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        source = pool.submit(method.build, src, theta, opts, "source")
+        pool.submit(method.prepare)
+        phi1 = method.build(dst, theta, opts, "target")
+        phi0 = source.result()
+    result = BijectiveMap(phi0, phi1)
+    for phi in (phi0, phi1):
+        for stage, seconds in phi.timings.items():
+            result.timings[stage] = result.timings.get(stage, 0.0) + seconds
+    if opts.check:
+        result.check_bijective()
+    return result

@@ -1,0 +1,278 @@
+"""FEM (the paper's §3.1.1): piecewise-linear harmonic maps on graded constrained Delaunay meshes.
+
+- `mesh`: graded quality meshes over `triangle`;
+- `solve`: cotangent / mean-value Laplacians and the Dirichlet solve;
+- `locate`: point location (bucket grid, triangle neighbours);
+- `_kernels`: compiled scan conversion and walks for pixel grids.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ...boundary import nearest_edge
+from ...options import MapOptions
+from ...polygon import Polygon
+from ..base import Certificate, GridSample, Mapped, ThetaMap, as_points
+from ..theta import Theta
+from .locate import TriangleLocator, affine_coefficients, barycentric_combine, triangle_neighbours
+from .mesh import TriMesh, auto_max_area, mesh_polygon
+from .solve import flipped_triangles, solve_dirichlet
+
+log = logging.getLogger("warpcli")
+
+__all__ = ["FEMMap", "build", "prepare", "triangle_jacobians"]
+
+
+@dataclass(eq=False)
+class FEMMap(ThetaMap):
+    """A discrete (piecewise-linear) harmonic map of a triangle mesh onto Theta.
+
+    Linear on every triangle of ``mesh``: vertex k goes to ``values[k]``.
+    Build one with `build`.
+
+    Parameters
+    ----------
+    polygon : Polygon
+    theta : Theta
+    mesh : TriMesh
+        A mesh of ``polygon`` (triangles oriented like it).
+    values : (N, 2) ndarray of float
+        Image in Theta of every mesh vertex.
+    weights : {"cotan", "positive"}
+        The Laplacian's edge weights it was solved with.
+
+    References
+    ----------
+    Schneider & Hormann, CAGD 2015, §3.1.1 (FEM) and §3.2 (inverting a
+    piecewise-linear map).
+    """
+
+    mesh: TriMesh
+    values: NDArray[np.float64]
+    weights: str = "cotan"
+
+    method = "fem"
+
+    def __post_init__(self) -> None:
+        if self.values.shape != self.mesh.vertices.shape:
+            raise ValueError(f"values has shape {self.values.shape} but the mesh has {self.mesh.vertices.shape}")
+
+    # Lookup tables, built on first use.
+
+    @cached_property
+    def _triangles(self) -> NDArray[np.int64]:
+        return self.mesh.triangles.astype(np.int64)
+
+    @cached_property
+    def _domain_locator(self) -> TriangleLocator:
+        return TriangleLocator(self.mesh.vertices, self.mesh.triangles)
+
+    @cached_property
+    def _image_locator(self) -> TriangleLocator:
+        return TriangleLocator(self.values, self.mesh.triangles)
+
+    @cached_property
+    def _jacobians(self) -> NDArray[np.float64]:
+        return triangle_jacobians(self.mesh.vertices, self.values, self.mesh.triangles)
+
+    @cached_property
+    def _inverse_jacobians(self) -> NDArray[np.float64]:
+        return triangle_jacobians(self.values, self.mesh.vertices, self.mesh.triangles)
+
+    def flipped(self) -> NDArray[np.bool_]:
+        """Per triangle: whether its image is degenerate or has the wrong orientation.
+
+        A polygon oriented against Theta gives a mirror image, which is not
+        counted as flipped.
+        """
+        return flipped_triangles(self.mesh, self.values, self.theta.points)
+
+    def certify(self) -> Certificate:
+        """Exact for a piecewise-linear map: it is one-to-one iff no triangle flips."""
+        return Certificate(int(self.flipped().sum()), self.mesh.n_triangles, "triangles")
+
+    def describe(self) -> dict:
+        return {"mesh": {"vertices": self.mesh.n_vertices, "triangles": self.mesh.n_triangles}}
+
+    def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
+        tri, bary = self._domain_locator.locate(as_points(points))
+        out = barycentric_combine(self.values, self.mesh.triangles, tri, bary)
+        return Mapped(out, _gather(self._jacobians, tri) if jacobian else None)
+
+    def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
+        from . import _kernels
+
+        q = as_points(points)
+        finite = np.isfinite(q).all(axis=1)
+        out = np.full(q.shape, np.nan)
+        tri = np.full(len(q), -1, dtype=np.int64)
+        if coherent and finite.all():
+            # One compiled walk through the image mesh from each point's
+            # predecessor; the few walks that give up go to the bucket search.
+            where = np.empty(len(q), dtype=np.int32)
+            max_steps = len(self._triangles) + 64  # a safety net: the walk ends on its own
+            _kernels.walk(
+                np.ascontiguousarray(q), self._triangles, self._image_coefficients, self._neighbours,
+                self.mesh.vertices, max_steps, out, where,
+            )  # fmt: skip
+            tri[:] = where
+            lost = np.flatnonzero(where < 0)
+        else:
+            lost = np.flatnonzero(finite)
+        if lost.size:
+            out[lost], tri[lost] = self._inverse_located(q[lost])
+        return Mapped(out, _gather(self._inverse_jacobians, tri) if jacobian else None)
+
+    @cached_property
+    def _image_coefficients(self) -> NDArray[np.float64]:
+        return affine_coefficients(self.values, self._triangles)
+
+    @cached_property
+    def _neighbours(self) -> NDArray[np.int64]:
+        return triangle_neighbours(self._triangles)
+
+    def _inverse_located(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """phi^-1 by bucket search in the image mesh.
+
+        A point of Theta's boundary can miss every image triangle by a
+        rounding error; the boundary map is known exactly, so it is inverted
+        there instead (triangle -1: no Jacobian).
+        """
+        tri, bary = self._image_locator.locate(q)
+        out = barycentric_combine(self.mesh.vertices, self.mesh.triangles, tri, bary)
+        lost = np.flatnonzero((tri < 0) & np.isfinite(q).all(axis=1))
+        if lost.size:
+            edge, s, _ = nearest_edge(q[lost], self.theta.points)
+            out[lost] = self.boundary_from_theta(edge, s)
+        return out, tri
+
+    def evaluate_grid(
+        self, width: int, height: int, rows: tuple[int, int] | None = None, *, jacobian: bool = False
+    ) -> GridSample:
+        """phi at pixel centres by one compiled scan conversion of the mesh (see `_kernels.scan_grid`)."""
+        from . import _kernels
+
+        r0, r1 = rows if rows is not None else (0, height)
+        size = (r1 - r0) * width
+        pixels = np.empty(size, dtype=np.int64)
+        values = np.empty((size, 2))
+        where = np.empty(size, dtype=np.int32)
+        count = _kernels.scan_grid(
+            self.mesh.vertices, self._triangles, self._domain_coefficients, self.values, self._coherent_order,
+            width, height, r0, r1, np.zeros(size, dtype=np.uint8), pixels, values, where,
+        )  # fmt: skip
+        where = where[:count]
+        jac = self._jacobians[where] if jacobian else None
+        return GridSample(pixels[:count], values[:count], jac)
+
+    @cached_property
+    def _domain_coefficients(self) -> NDArray[np.float64]:
+        return affine_coefficients(self.mesh.vertices, self._triangles)
+
+    @cached_property
+    def _coherent_order(self) -> NDArray[np.int64]:
+        """Triangles in serpentine bands of 8 pixels: consecutive triangles are
+        neighbours, so each pixel's walk in Theta starts next to its goal."""
+        c = self.mesh.vertices[self._triangles].mean(axis=1)
+        row = np.floor(c[:, 1] / 8.0)
+        x = np.where(row % 2 == 0, c[:, 0], -c[:, 0])
+        return np.lexsort((x, row)).astype(np.int64)
+
+
+def _gather(table: NDArray[np.float64], tri: NDArray[np.integer]) -> NDArray[np.float64]:
+    """table[tri], NaN where tri is -1."""
+    out = table[np.maximum(tri, 0)]
+    out[tri < 0] = np.nan
+    return out
+
+
+def triangle_jacobians(
+    domain: NDArray[np.float64], image: NDArray[np.float64], triangles: NDArray[np.integer]
+) -> NDArray[np.float64]:
+    """(M, 2, 2): the constant Jacobian, per triangle, of the linear map taking
+    ``domain`` vertices to ``image`` vertices.
+
+    ``J = G @ inv(E)`` with ``E = [d_1 - d_0, d_2 - d_0]`` and
+    ``G = [i_1 - i_0, i_2 - i_0]`` as columns; NaN or inf for a degenerate
+    triangle. Swap the arguments for the inverse map's Jacobians.
+    """
+    t = triangles
+    e = np.stack([domain[t[:, 1]] - domain[t[:, 0]], domain[t[:, 2]] - domain[t[:, 0]]], axis=2)  # columns
+    g = np.stack([image[t[:, 1]] - image[t[:, 0]], image[t[:, 2]] - image[t[:, 0]]], axis=2)
+    return g @ _inv2(e)
+
+
+def _inv2(m: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Inverses of a stack of 2x2 matrices, in closed form."""
+    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.stack(
+            [np.stack([m[:, 1, 1], -m[:, 0, 1]], axis=1), np.stack([-m[:, 1, 0], m[:, 0, 0]], axis=1)], axis=1
+        ) / det[:, None, None]
+
+
+def build(polygon: Polygon, theta: Theta, options: MapOptions, role: str = "source") -> FEMMap:
+    """Mesh ``polygon`` and solve the discrete harmonic map onto ``theta``.
+
+    Parameters
+    ----------
+    polygon : Polygon
+    theta : Theta
+    options : MapOptions
+        ``max_area`` (for this ``role``), ``weights`` and ``check`` are used.
+    role : {"source", "target"}
+        Which of the pair ``polygon`` is (picks its ``max_area``).
+
+    Returns
+    -------
+    FEMMap
+        With ``options.check``: one that flips no triangle if a repair could
+        make it so. A cotangent map that flips (the constrained Delaunay
+        meshes should rule it out) is solved again with positive weights, with
+        a warning; the caller certifies the result.
+
+    Raises
+    ------
+    InputError
+        If the mesh would be too large.
+    MeshingError
+        If `triangle` fails.
+    """
+    area = options.areas()[0 if role == "source" else 1]
+    clock = time.perf_counter
+    t0 = clock()
+    mesh = mesh_polygon(polygon, auto_max_area(polygon) if area is None else area)
+    t1 = clock()
+    values = solve_dirichlet(mesh, theta.points, options.weights)
+    phi = FEMMap(polygon, theta, mesh, values, options.weights, timings={"mesh": t1 - t0, "solve": clock() - t1})
+    if options.check:
+        phi = repaired(phi)
+    return phi
+
+
+def repaired(phi: FEMMap) -> FEMMap:
+    """phi itself if it flips no triangle, else phi solved with positive weights."""
+    flips = int(phi.flipped().sum())
+    if flips == 0 or phi.weights == "positive":
+        return phi
+    log.warning(
+        "%s: the harmonic map flips %d triangle(s); solving with positive (mean-value) weights instead",
+        phi.polygon.name,
+        flips,
+    )
+    values = solve_dirichlet(phi.mesh, phi.theta.points, "positive")
+    return FEMMap(phi.polygon, phi.theta, phi.mesh, values, "positive", timings=phi.timings)
+
+
+def prepare() -> None:
+    """Load the compiled kernels (see `_kernels.warm_up`)."""
+    from . import _kernels
+
+    _kernels.warm_up()

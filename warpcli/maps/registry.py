@@ -1,0 +1,42 @@
+"""The registry of map methods and Theta strategies, by name.
+
+Light on purpose: the CLI builds its choices from it without importing numpy.
+Each entry names the module (and attribute) that implements it; the module is
+imported only when the method is used. To add a method, add an entry here and
+a module under ``warpcli/maps/`` with a ``build`` function (see
+`warpcli.maps.base.ThetaMap`).
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Entry:
+    """A registered implementation: ``module:attribute`` and one line of help."""
+
+    target: str
+    help: str
+
+    def load(self) -> Any:
+        module, _, attr = self.target.partition(":")
+        loaded = importlib.import_module(module)
+        return getattr(loaded, attr) if attr else loaded
+
+
+#: Methods that approximate a harmonic map onto Theta (the paper's §3.1).
+#: Each target is a module with ``build(polygon, theta, options, role)``,
+#: which returns a `warpcli.maps.base.ThetaMap`, and ``prepare()``, which
+#: loads what the method needs later (compiled kernels) while maps are solved.
+METHODS = {
+    "fem": Entry("warpcli.maps.fem", "finite elements on a graded Delaunay mesh (§3.1.1): fast, exact on the boundary"),
+}
+
+#: Strategies that choose the convex intermediate polygon Theta (§2, §5.1).
+#: Each target is a function ``(src, dst, options) -> Theta``.
+THETAS = {
+    "regular": Entry("warpcli.maps.theta:regular", "the regular n-gon"),
+}

@@ -1,0 +1,190 @@
+"""Options: the typed objects that carry a run's choices, and the one list of each choice.
+
+This module is imported by the CLI to build ``--help``, so it imports nothing heavy.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from .errors import InputError
+from .maps.registry import METHODS, THETAS
+
+#: Resampling filters (see `warpcli.raster.resample.resample`).
+INTERPOLATIONS = ("nearest", "linear", "cubic")
+#: Output pixel types, by name.
+DTYPES = ("uint8", "uint16", "half", "float")
+#: Edge weights of the FEM Laplacian.
+WEIGHTS = ("cotan", "positive")
+#: What a distortion heatmap shows.
+HEATMAP_MEASURES = ("conformal", "isometric", "det")
+#: Which way an STMap's t coordinate runs.
+STMAP_T = ("down", "up")
+
+
+def _choice(what: str, value: object, choices) -> None:
+    if value not in choices:
+        raise InputError(f"unknown {what} {value!r}; choose one of {', '.join(choices)}")
+
+
+def _positive(what: str, value: object) -> float:
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be a positive number, got {value!r}") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise InputError(f"{what} must be positive and finite, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class MapOptions:
+    """How the bijective map between two polygons is built.
+
+    Parameters
+    ----------
+    method : str
+        Name of the method that approximates the harmonic maps onto Theta, a key
+        of `warpcli.maps.registry.METHODS` (``"fem"``).
+    theta : str
+        Name of the strategy that chooses the convex intermediate polygon Theta,
+        a key of `warpcli.maps.registry.THETAS` (``"regular"``).
+    max_area : float, (float, float) or None
+        FEM: largest triangle area in square pixels, for both meshes or
+        (source, target); None: automatic (`warpcli.maps.fem.mesh.auto_max_area`).
+    weights : {"cotan", "positive"}
+        FEM: ``cotan`` solves the harmonic maps (the paper's §3.1.1);
+        ``positive`` uses mean-value weights, one-to-one on any mesh but no
+        longer harmonic (§3.1.4).
+    check : bool
+        Certify that neither map folds (and let a method repair what it can);
+        never hand back a folding map.
+
+    Raises
+    ------
+    InputError
+        If a name is unknown or a number is out of range.
+    """
+
+    method: str = "fem"
+    theta: str = "regular"
+    max_area: float | tuple[float, float] | None = None
+    weights: str = "cotan"
+    check: bool = True
+
+    def __post_init__(self) -> None:
+        _choice("method", self.method, METHODS)
+        _choice("Theta", self.theta, THETAS)
+        _choice("weights", self.weights, WEIGHTS)
+        if self.max_area is not None:
+            if isinstance(self.max_area, (tuple, list)):
+                if len(self.max_area) != 2:
+                    raise InputError(f"max_area must be one number or a (source, target) pair, got {self.max_area!r}")
+                areas = tuple(_positive("max_area", a) for a in self.max_area)
+                object.__setattr__(self, "max_area", areas)
+            else:
+                object.__setattr__(self, "max_area", _positive("max_area", self.max_area))
+
+    def areas(self) -> tuple[float | None, float | None]:
+        """``max_area`` as a (source, target) pair."""
+        a = self.max_area
+        return a if isinstance(a, tuple) else (a, a)  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class WarpOptions:
+    """How an image is warped: the map, the resampling, and the output.
+
+    Parameters
+    ----------
+    map : MapOptions
+    interp : {"nearest", "linear", "cubic"}
+        ``linear`` is bilinear (reproduces linear data exactly), ``cubic`` the
+        interpolating cubic B-spline, ``nearest`` the pixel the point falls in.
+    background : float or tuple of float
+        Value of output pixels outside the target, or whose pre-image lies
+        outside the input: one for every channel or one per channel; 0..1 spans
+        an integer type's range, floats are taken as they are.
+    antialias : bool
+        Antialias the target polygon's edge and, with ``linear``, average each
+        output pixel over its footprint where the map shrinks.
+    size : (width, height) or None
+        Output size in pixels (width first); the input's by default.
+    dtype : {"uint8", "uint16", "half", "float"} or None
+        Output pixel type; the input's by default.
+
+    Raises
+    ------
+    InputError
+        If a value is out of range.
+
+    Examples
+    --------
+    >>> WarpOptions().changed(interp="cubic", max_area=4).map.max_area
+    4.0
+    """
+
+    map: MapOptions = field(default_factory=MapOptions)
+    interp: str = "linear"
+    background: float | tuple[float, ...] = 0.0
+    antialias: bool = True
+    size: tuple[int, int] | None = None
+    dtype: str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.map, MapOptions):
+            raise InputError(f"map must be MapOptions, got {type(self.map).__name__}")
+        _choice("interpolation", self.interp, INTERPOLATIONS)
+        if self.dtype is not None:
+            _choice("dtype", self.dtype, DTYPES)
+        bg = self.background
+        values = tuple(bg) if isinstance(bg, (tuple, list)) else (bg,)
+        try:
+            values = tuple(float(v) for v in values)
+        except (TypeError, ValueError):
+            raise InputError(f"background must be numbers, got {bg!r}") from None
+        if not values or not all(math.isfinite(v) for v in values):
+            raise InputError(f"background values must be finite numbers, got {bg!r}")
+        object.__setattr__(self, "background", values[0] if len(values) == 1 else values)
+        if self.size is not None:
+            object.__setattr__(self, "size", check_size(self.size))
+
+    def changed(self, **changes: Any) -> WarpOptions:
+        """A copy with some fields changed; names of `MapOptions` fields change ``map``.
+
+        Raises
+        ------
+        InputError
+            If a name is not an option.
+        """
+        own = {f.name for f in dataclasses.fields(self)}
+        mine = {k: v for k, v in changes.items() if k in own}
+        theirs = {k: v for k, v in changes.items() if k not in own}
+        map_fields = {f.name for f in dataclasses.fields(MapOptions)}
+        unknown = sorted(set(theirs) - map_fields)
+        if unknown:
+            raise InputError(f"unknown option(s): {', '.join(unknown)}")
+        if theirs:
+            mine["map"] = dataclasses.replace(mine.get("map", self.map), **theirs)
+        return dataclasses.replace(self, **mine)
+
+
+def check_size(size: object) -> tuple[int, int]:
+    """An image size ``(width, height)`` of positive integers, or `InputError`.
+
+    >>> check_size((640, 480))
+    (640, 480)
+    """
+    try:
+        w, h = size  # type: ignore[misc]
+        if int(w) != w or int(h) != h:
+            raise ValueError
+        w, h = int(w), int(h)
+    except (TypeError, ValueError):
+        raise InputError(f"size must be (width, height), two whole numbers, got {size!r}") from None
+    if w <= 0 or h <= 0:
+        raise InputError(f"size must be positive, got width {w} and height {h}")
+    return w, h

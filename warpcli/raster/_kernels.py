@@ -1,0 +1,154 @@
+"""Compiled (numba) inner loops of the resample stage: samplers and the final rounding.
+
+Each kernel is the per-pixel loop that numpy could only express as many
+full-image passes. The kernels are cached on disk (``cache=True``: beside this
+file, or in numba's user-wide cache directory when that is not writable;
+``NUMBA_CACHE_DIR`` overrides both), so only the first run compiles.
+
+Results never depend on the number of threads: every output pixel is
+computed independently.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, nogil=True)
+def _background_if_outside(x, y, w, h, background, out, n):
+    """Write the background into out[n] if (x, y) is outside [0, w] x [0, h] (or NaN)."""
+    if x >= 0.0 and x <= w and y >= 0.0 and y <= h:
+        return False
+    for ch in range(out.shape[1]):
+        out[n, ch] = background[ch]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def sample_linear(img, xy, background, out):
+    """Bilinear samples of ``img`` (H, W, C) at continuous points ``xy`` (N, 2).
+
+    Pixel i has its centre at i + 0.5; beyond the outermost centres the edge
+    pixels extend (like scipy.ndimage.map_coordinates with mode='nearest').
+    Points outside [0, W] x [0, H], or NaN, get ``background``.
+    """
+    h, w, nc = img.shape
+    for n in range(xy.shape[0]):
+        x = xy[n, 0]
+        y = xy[n, 1]
+        if _background_if_outside(x, y, w, h, background, out, n):
+            continue
+        for ch in range(nc):
+            out[n, ch] = _bilinear(img, x, y, ch)
+
+
+@njit(cache=True, nogil=True)
+def _bilinear(img, x, y, ch):
+    """Bilinear sample of channel ch at continuous (x, y); the edge pixels extend."""
+    h, w, _ = img.shape
+    u = min(max(x - 0.5, 0.0), w - 1.0)
+    v = min(max(y - 0.5, 0.0), h - 1.0)
+    i0 = int(u)
+    j0 = int(v)
+    i1 = min(i0 + 1, w - 1)
+    j1 = min(j0 + 1, h - 1)
+    tu = u - i0
+    tv = v - j0
+    top = img[j0, i0, ch] * (1.0 - tu) + img[j0, i1, ch] * tu
+    bottom = img[j1, i0, ch] * (1.0 - tu) + img[j1, i1, ch] * tu
+    return top * (1.0 - tv) + bottom * tv
+
+
+@njit(cache=True, nogil=True)
+def sample_linear_aa(img, xy, jac, kmax, background, out):  # noqa: C901
+    """Bilinear samples averaged over each output pixel's footprint in the source.
+
+    The footprint of output pixel n is the parallelogram ``J [-1/2, 1/2]^2``
+    around its source point, J = ``jac[n]`` the Jacobian of the inverse map
+    there (NaN: unknown, one sample). It is covered by a k_u x k_v grid of
+    samples, k_u = ceil(|J e_u| - 0.3) (so samples are at most ~1.15 px
+    apart, and a map that barely shrinks keeps one sharp sample), capped at
+    ``kmax``; where the map magnifies, k = 1: plain bilinear. Points, and
+    samples, outside the input's area take ``background``. A symmetric
+    average of a linear function is its value at the centre: linear data is
+    still reproduced exactly.
+    """
+    h, w, nc = img.shape
+    acc = np.zeros(nc)
+    for n in range(xy.shape[0]):
+        x = xy[n, 0]
+        y = xy[n, 1]
+        if _background_if_outside(x, y, w, h, background, out, n):
+            continue
+        a = jac[n, 0, 0]
+        b = jac[n, 0, 1]
+        c = jac[n, 1, 0]
+        d = jac[n, 1, 1]
+        ku = 1
+        kv = 1
+        # |column| <= 1.3 (most pixels): one sample, no square root needed.
+        # An unknown (NaN) Jacobian compares false: one sample.
+        nu = a * a + c * c
+        nv = b * b + d * d
+        if nu > 1.69:
+            ku = min(kmax, int(math.ceil(math.sqrt(nu) - 0.3)))
+        if nv > 1.69:
+            kv = min(kmax, int(math.ceil(math.sqrt(nv) - 0.3)))
+        if ku == 1 and kv == 1:
+            # One sample (most pixels): bilinear at the centre, straight into out.
+            for ch in range(nc):
+                out[n, ch] = _bilinear(img, x, y, ch)
+            continue
+        for ch in range(nc):
+            acc[ch] = 0.0
+        weight = 1.0 / (ku * kv)
+        for i in range(ku):
+            su = (i + 0.5) / ku - 0.5
+            for j in range(kv):
+                sv = (j + 0.5) / kv - 0.5
+                sx = x + a * su + b * sv
+                sy = y + c * su + d * sv
+                if sx >= 0.0 and sx <= w and sy >= 0.0 and sy <= h:
+                    for ch in range(nc):
+                        acc[ch] += weight * _bilinear(img, sx, sy, ch)
+                else:
+                    for ch in range(nc):
+                        acc[ch] += weight * background[ch]
+        for ch in range(nc):
+            out[n, ch] = acc[ch]
+
+
+@njit(cache=True, nogil=True)
+def sample_nearest(img, xy, background, out):
+    """The pixel each point ``xy`` (N, 2) falls in (the border belongs to the edge
+    pixels); ``background`` outside [0, W] x [0, H]."""
+    h, w, nc = img.shape
+    for n in range(xy.shape[0]):
+        x = xy[n, 0]
+        y = xy[n, 1]
+        if _background_if_outside(x, y, w, h, background, out, n):
+            continue
+        i = min(int(x), w - 1)
+        j = min(int(y), h - 1)
+        for ch in range(nc):
+            out[n, ch] = img[j, i, ch]
+
+
+
+@njit(cache=True, nogil=True)
+def store(values, out, lo, hi, integer):
+    """out = values, rounded half to even and clipped to [lo, hi] when ``integer``."""
+    flat_in = values.reshape(-1)
+    flat_out = out.reshape(-1)
+    for i in range(flat_in.shape[0]):
+        v = flat_in[i]
+        if integer:
+            v = np.rint(v)
+            if v < lo:
+                v = lo
+            elif v > hi:
+                v = hi
+        flat_out[i] = v
