@@ -1,6 +1,26 @@
-"""Test configuration: hypothesis runs a fixed, derandomized set of examples."""
+"""Test configuration: one copy of warpcli under test, and derandomized hypothesis."""
 
+from __future__ import annotations
+
+import os
+
+import pytest
 from hypothesis import settings
+
+import warpcli
+
+#: The checkout these tests belong to.
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# Exactly one copy of the code is tested: the one in this checkout. A copy
+# installed elsewhere (pip install . without -e) would be tested by the CLI
+# subprocesses while the working tree was tested in-process; refuse to run.
+_here = os.path.dirname(os.path.abspath(warpcli.__file__))
+if _here != os.path.join(REPO, "warpcli"):
+    raise pytest.UsageError(
+        f"the tests import warpcli from {_here}, not from this checkout ({REPO}); "
+        "install it in editable mode: pip install -e '.[test]'"
+    )
 
 # No unseeded randomness anywhere, tests included: the same examples every run.
 settings.register_profile("warpcli", derandomize=True, deadline=None, max_examples=40)

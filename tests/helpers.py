@@ -92,3 +92,67 @@ def read_pixels(path):
     px = inp.read_image(oiio.UNKNOWN)
     inp.close()
     return px if px.ndim == 3 else px[:, :, None]
+
+
+def star_shaped(angles_gaps, radii, cx: float = 64.0, cy: float = 64.0, scale: float = 56.0):
+    """A star-shaped polygon: vertex k at angle (cumulative gaps) and radius radii[k].
+
+    Simple by construction: the angles increase strictly around the centre.
+    """
+    gaps = np.asarray(angles_gaps, dtype=float)
+    a = np.cumsum(gaps) / gaps.sum() * 2 * math.pi
+    r = np.asarray(radii, dtype=float)
+    return np.stack([cx + scale * r * np.cos(a), cy + scale * r * np.sin(a)], axis=1)
+
+
+def monotone_band(xs_top, ys_top, xs_bottom, ys_bottom, x0: float = 8.0, y0: float = 8.0, size: float = 112.0):
+    """An x-monotone polygon: a top chain left to right over a bottom chain right to left.
+
+    Simple by construction: both chains are x-monotone, share their end
+    points' x, and the top chain's y (screen: smaller) stays above a line the
+    bottom chain stays below. With deep notches from both sides it is not
+    star-shaped. Arguments are in [0, 1]: x positions of the inner vertices
+    of each chain (sorted here) and their heights (top in [0, 0.45], bottom in
+    [0.55, 1] of ``size``).
+    """
+    xt = np.sort(np.asarray(xs_top, dtype=float))
+    xb = np.sort(np.asarray(xs_bottom, dtype=float))[::-1]
+    top = np.stack([xt, 0.45 * np.asarray(ys_top, dtype=float)], axis=1)
+    bottom = np.stack([xb, 0.55 + 0.45 * np.asarray(ys_bottom, dtype=float)], axis=1)
+    ends_top = np.array([[0.0, 0.45 * 0.5], [1.0, 0.45 * 0.5]])
+    ends_bottom = np.array([[1.0, 0.55 + 0.45 * 0.5], [0.0, 0.55 + 0.45 * 0.5]])
+    pts = np.concatenate([ends_top[:1], top, ends_top[1:], ends_bottom[:1], bottom, ends_bottom[1:]])
+    return np.array([x0, y0]) + size * pts
+
+
+def simple_polygons(n: int):
+    """A hypothesis strategy of valid simple polygons with n >= 4 (or 3) vertices, built valid.
+
+    Star-shaped ones (random angles and radii) and x-monotone bands with
+    notches from both sides (generally not star-shaped), either orientation;
+    no draw is rejected.
+    """
+    from hypothesis import strategies as st
+
+    unit = st.floats(0.0, 1.0)
+
+    def build(kind, gaps, radii, xs, ys, reverse):
+        if kind == "star" or n < 4:
+            pts = star_shaped(gaps, radii)
+        else:
+            k_top = (n - 4) // 2
+            k_bot = n - 4 - k_top
+            # Distinct x positions: a strictly increasing sequence from the draws.
+            x = 0.02 + 0.96 * np.cumsum(np.asarray(xs) + 0.05)[: n - 4] / np.sum(np.asarray(xs) + 0.05)
+            pts = monotone_band(x[:k_top], ys[:k_top], x[k_top:], ys[k_top : k_top + k_bot])
+        return pts[::-1].copy() if reverse else pts
+
+    return st.builds(
+        build,
+        st.sampled_from(["star", "band"]),
+        st.lists(st.floats(0.2, 1.0), min_size=n, max_size=n),
+        st.lists(st.floats(0.3, 1.0), min_size=n, max_size=n),
+        st.lists(unit, min_size=n, max_size=n),
+        st.lists(unit, min_size=n, max_size=n),
+        st.booleans(),
+    )

@@ -31,3 +31,13 @@ def test_readme_commands_run_in_order(tmp_path):
     for command in COMMANDS:  # later ones may use earlier outputs (apply-map on a saved map)
         done = subprocess.run(command, shell=True, cwd=tmp_path, env=env, capture_output=True, text=True)
         assert done.returncode == 0, f"{command}\n{done.stderr}"
+
+
+def test_readme_python_examples_run(tmp_path, monkeypatch):
+    text = open(os.path.join(ROOT, "README.md")).read()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    assert blocks
+    os.symlink(os.path.join(ROOT, "sample_images"), tmp_path / "sample_images")
+    monkeypatch.chdir(tmp_path)
+    for block in blocks:
+        exec(compile(block, "README.md", "exec"), {})

@@ -84,6 +84,17 @@ class RasterImage:
 def read_image(path: str | os.PathLike[str]) -> RasterImage:
     """Read an image file in its own pixel type.
 
+    Parameters
+    ----------
+    path : path-like
+        Any format OpenImageIO reads. The EXIF orientation is applied, so the
+        pixels are the image as displayed.
+
+    Returns
+    -------
+    RasterImage
+        Pixels (H, W, C) in the file's type, channel names, alpha, metadata.
+
     Raises
     ------
     ImageInputError
@@ -184,6 +195,14 @@ def write_image(path: str | os.PathLike[str], image: RasterImage) -> None:
     """Write an image atomically: to a temporary file beside ``path``, then rename.
 
     An interrupted or failed write leaves no partial file at ``path``.
+
+    Parameters
+    ----------
+    path : path-like
+        The output; its extension picks the format.
+    image : RasterImage
+        Pixels (H, W, C) and what to carry over (channel names, alpha, its
+        convention, metadata).
 
     Raises
     ------

@@ -1,0 +1,252 @@
+"""The contract of a map method: every implementation of warpcli.maps.base.ThetaMap passes these.
+
+A new method (BEM, MFS, ...) adds one entry to IMPLEMENTATIONS, with the
+tolerances its boundary behaviour needs, and inherits the whole battery of
+exact mathematics: affine images of Theta, symmetry, relabelling, translation
+at 1e6, the area identity, edges onto edges, identity, triangles, no flips,
+and agreement of the grid fast path with the pointwise maps.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from helpers import comb, l_shape, regular, similarity, spiral, star
+from warpcli import BijectiveMap, MapOptions, Polygon
+from warpcli.grid import inside_polygon, pixel_centres
+from warpcli.maps.base import ThetaMap
+from warpcli.maps.theta import regular_polygon
+
+
+@dataclass(frozen=True)
+class Implementation:
+    """A method with its options and the tolerances (in pixels) its contract holds to.
+
+    exact: where the method reproduces the map exactly (affine images of
+    Theta, triangles): the error bound. boundary: the largest deviation of an
+    edge point from its image edge. accuracy: (mean, max) error against the
+    exact map where that is known (a similarity), which also bounds how far
+    two discretizations of one map may differ.
+    """
+
+    options: MapOptions
+    exact: float
+    boundary: float
+    accuracy: tuple[float, float]
+
+
+IMPLEMENTATIONS = {
+    "fem-cotan": Implementation(MapOptions(method="fem", weights="cotan"), 1e-9, 1e-7, (0.05, 0.5)),
+    "fem-positive": Implementation(MapOptions(method="fem", weights="positive"), 1e-9, 1e-7, (0.5, 3.0)),
+}
+
+CONCAVE = {"star": star(), "L": l_shape(), "comb": comb(), "spiral": spiral()}
+
+
+@pytest.fixture(params=sorted(IMPLEMENTATIONS))
+def impl(request) -> Implementation:
+    return IMPLEMENTATIONS[request.param]
+
+
+def between(src, dst, impl: Implementation) -> BijectiveMap:
+    return BijectiveMap.between(Polygon(src), Polygon(dst), impl.options)
+
+
+def inside(poly, count: int = 800, seed: int = 7) -> np.ndarray:
+    """Points strictly inside a polygon, at least 1 px from its boundary (seeded)."""
+    from warpcli.boundary import nearest_edge
+
+    p = np.asarray(poly, dtype=float)
+    rng = np.random.default_rng(seed)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    q = rng.uniform(lo, hi, size=(20 * count, 2))
+    q = q[inside_polygon(q, p)]
+    q = q[nearest_edge(q, p)[2] > 1.0]
+    return q[:count]
+
+
+def affine(points, a, b):
+    return np.asarray(points) @ np.asarray(a).T + b
+
+
+@pytest.mark.parametrize("n", [3, 4, 5, 8, 13])
+def test_affine_images_of_theta_give_that_affine_map(impl, n):
+    """Both polygons affine images of Theta: the harmonic maps are affine, and so is f."""
+    w = regular_polygon(n)
+    a0, b0 = np.array([[50.0, 12.0], [-8.0, 41.0]]), np.array([64.0, 60.0])
+    a1, b1 = np.array([[35.0, -20.0], [15.0, 55.0]]), np.array([70.0, 66.0])
+    src, dst = affine(w, a0, b0), affine(w, a1, b1)
+    f = between(src, dst, impl)
+    m = a1 @ np.linalg.inv(a0)
+    p = inside(src)
+    np.testing.assert_allclose(f.forward(p), affine(p - b0, m, b1), atol=impl.exact)
+    q = inside(dst)
+    np.testing.assert_allclose(f.inverse(q), affine(q - b1, np.linalg.inv(m), b0), atol=impl.exact)
+    np.testing.assert_allclose(f.forward_jacobian(p), np.broadcast_to(m, (len(p), 2, 2)), atol=1e3 * impl.exact)
+
+
+def test_triangle_to_triangle_is_affine(impl):
+    src = np.array([[5.0, 7.0], [120.0, 20.0], [30.0, 110.0]])
+    dst = np.array([[60.0, 2.0], [118.0, 90.0], [4.0, 60.0]])
+    f = between(src, dst, impl)
+    m = np.linalg.solve(np.hstack([src, np.ones((3, 1))]), dst)
+    p = inside(src)
+    np.testing.assert_allclose(f.forward(p), np.hstack([p, np.ones((len(p), 1))]) @ m, atol=100 * impl.exact)
+
+
+@pytest.mark.parametrize("name", sorted(CONCAVE))
+def test_identical_polygons_give_the_identity(impl, name):
+    poly = CONCAVE[name]
+    f = between(poly, poly, impl)
+    p = inside(poly)
+    np.testing.assert_allclose(f.forward(p), p, atol=100 * impl.exact)
+    np.testing.assert_allclose(f.inverse(p), p, atol=100 * impl.exact)
+
+
+@pytest.mark.parametrize("name", ["star", "L"])
+def test_similar_polygons_give_the_similarity(impl, name):
+    src = CONCAVE[name]
+    dst = similarity(src, 0.7, 0.5, (4.0, -3.0))
+    f = between(src, dst, impl)
+    p = inside(src)
+    err = np.hypot(*(f.forward(p) - similarity(p, 0.7, 0.5, (4.0, -3.0))).T)
+    assert err.mean() < impl.accuracy[0] and err.max() < impl.accuracy[1]
+
+
+@pytest.mark.parametrize("name", sorted(CONCAVE))
+def test_symmetry_between_dst_src_is_the_inverse(impl, name):
+    src = CONCAVE[name]
+    dst = regular(len(src), r=50.0, phase=0.3)
+    f = between(src, dst, impl)
+    g = between(dst, src, impl)
+    q = inside(dst)
+    np.testing.assert_allclose(g.forward(q), f.inverse(q), atol=100 * impl.exact)
+    p = inside(src)
+    np.testing.assert_allclose(g.inverse(p), f.forward(p), atol=100 * impl.exact)
+
+
+@pytest.mark.parametrize("shift", [1, 3])
+def test_cyclic_relabelling_of_both_polygons_changes_nothing(impl, shift):
+    src = CONCAVE["star"]
+    dst = star(phase=0.4, r_in=20)
+    f = between(src, dst, impl)
+    g = between(np.roll(src, shift, axis=0), np.roll(dst, shift, axis=0), impl)
+    p = inside(src)
+    # The exact map is the same (a relabelling rotates the regular Theta onto
+    # itself); the discretizations may differ (FEM: the mesher starts at
+    # another vertex), within the method's accuracy.
+    err = np.hypot(*(g.forward(p) - f.forward(p)).T)
+    assert err.mean() < impl.accuracy[0] / 5 and err.max() < impl.accuracy[1] / 5
+
+
+def test_translation_by_a_million_pixels_moves_the_map_along(impl):
+    src = CONCAVE["L"]
+    dst = star(3, r_in=30, r_out=56, phase=0.2)
+    offset = np.array([1.0e6, -2.0e6])
+    f = between(src, dst, impl)
+    g = between(src + offset, dst - offset, impl)
+    p = inside(src)
+    err = np.hypot(*(g.forward(p + offset) + offset - f.forward(p)).T)
+    # The same exact map; the discretizations may differ (rounding the
+    # coordinates at 1e6, 2e-10 px, changes triangle's refinement choices
+    # where points are cocircular), within the method's accuracy.
+    assert err.mean() < impl.accuracy[0] and err.max() < impl.accuracy[1], (err.mean(), err.max())
+
+
+@pytest.mark.parametrize("name", ["star", "comb"])
+def test_area_identity(impl, name):
+    """The integral of |det J_f^-1| over the target equals the source's area."""
+    src = Polygon(CONCAVE[name])
+    dst = Polygon(regular(src.n, r=55.0, phase=0.1))
+    f = BijectiveMap.between(src, dst, impl.options)
+    h = 0.25  # quadrature on a fine grid of the target's bounding box
+    q = pixel_centres(4 * 128, 4 * 128) * h
+    q = q[inside_polygon(q, dst.points)]
+    j = f.inverse_jacobian(q)
+    det = np.abs(j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0])
+    ok = np.isfinite(det)
+    assert ok.mean() > 0.999
+    integral = det[ok].sum() * h * h
+    assert integral == pytest.approx(abs(src.signed_area), rel=0.01)
+
+
+@pytest.mark.parametrize("name", sorted(CONCAVE))
+def test_edges_go_onto_edges_at_the_same_parameter(impl, name):
+    src = CONCAVE[name]
+    dst = regular(len(src), r=55.0, phase=0.2)
+    f = between(src, dst, impl)
+    n = len(src)
+    t = np.linspace(0.0, 1.0, 17)[:-1]
+    for i in range(n):
+        on_src = src[i] + t[:, None] * (src[(i + 1) % n] - src[i])
+        on_dst = dst[i] + t[:, None] * (dst[(i + 1) % n] - dst[i])
+        np.testing.assert_allclose(f.forward(on_src), on_dst, atol=impl.boundary)
+        np.testing.assert_allclose(f.inverse(on_dst), on_src, atol=impl.boundary)
+    np.testing.assert_allclose(f.inverse_boundary(np.arange(n), np.full(n, 0.5)), 0.5 * (src + np.roll(src, -1, axis=0)))
+
+
+@pytest.mark.parametrize("name", sorted(CONCAVE))
+@pytest.mark.parametrize("mirror", [False, True])
+def test_no_fold_over_and_round_trips(impl, name, mirror):
+    src = CONCAVE[name]
+    dst = regular(len(src), r=50.0, phase=0.3)
+    if mirror:
+        dst = dst * [-1.0, 1.0] + [128.0, 0.0]
+    f = between(src, dst, impl)
+    assert all(c.ok for c in f.certificates())
+    q = inside(dst)
+    j = f.inverse_jacobian(q)
+    det = j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0]
+    expected = math.copysign(1.0, Polygon(src).signed_area * Polygon(dst).signed_area)
+    assert np.all(det * expected > 0)
+    np.testing.assert_allclose(f.forward(f.inverse(q)), q, atol=1e-7)
+    p = inside(src)
+    np.testing.assert_allclose(f.inverse(f.forward(p)), p, atol=1e-7)
+
+
+@pytest.mark.parametrize("name", ["star", "comb"])
+def test_grid_fast_path_equals_the_pointwise_maps(impl, name):
+    src = CONCAVE[name]
+    dst = regular(len(src), r=60.0, phase=0.1)
+    f = between(src, dst, impl)
+    pull = f.pull_back(130, 120)
+    centres = pixel_centres(130, 120)
+    pts = f.inverse(centres).reshape(120, 130, 2)
+    assert np.array_equal(np.isnan(pull.points), np.isnan(pts))
+    np.testing.assert_allclose(pull.points, pts, atol=1e-9)
+    jac = f.inverse_jacobian(centres).reshape(120, 130, 2, 2)
+    ok = np.isfinite(jac).all(axis=(2, 3)) & np.isfinite(pull.jacobian).all(axis=(2, 3))
+    assert ok.sum() > 0.98 * np.isfinite(pts[..., 0]).sum()
+    # Pixels on an element boundary may take either side's Jacobian (FEM).
+    same = np.isclose(pull.jacobian[ok], jac[ok], atol=1e-9).all(axis=(1, 2))
+    assert same.mean() > 0.99
+
+
+def test_method_grid_path_agrees_with_the_generic_one(impl):
+    """A method's evaluate_grid against the interface's default (pointwise) implementation."""
+    src = Polygon(CONCAVE["spiral"])
+    f = BijectiveMap.between(src, Polygon(regular(src.n, r=55.0)), impl.options)
+    fast = f.phi0.evaluate_grid(128, 128, (10, 100), jacobian=True)
+    slow = ThetaMap.evaluate_grid(f.phi0, 128, 128, (10, 100), jacobian=True)
+    common, i, k = np.intersect1d(fast.pixels, slow.pixels, return_indices=True)
+    assert len(common) > 0.99 * max(len(fast.pixels), len(slow.pixels))
+    np.testing.assert_allclose(fast.values[i], slow.values[k], atol=1e-9)
+    assert (fast.pixels // 128 >= 10).all() and (fast.pixels // 128 < 100).all()
+
+
+def test_two_maps_onto_different_thetas_are_refused(impl):
+    from warpcli.errors import InputError
+    from warpcli.maps.theta import Theta
+
+    src = Polygon(CONCAVE["star"])
+    f = BijectiveMap.between(src, src, impl.options)
+    other = Theta(regular_polygon(src.n) * 2.0, name="bigger")
+    import dataclasses
+
+    g1 = dataclasses.replace(f.phi1, theta=other)
+    with pytest.raises(InputError, match="different Thetas"):
+        BijectiveMap(f.phi0, g1)
