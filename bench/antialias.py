@@ -42,7 +42,7 @@ def measure(size: int = 300, square: int = 3, shrink: float = 3.0) -> dict:
     reference = big.astype(np.float64).reshape(size, 4, size, 4).mean(axis=(1, 3))
     centre_in = np.isfinite(warp_image(img, src, dst, antialias=False).inverse_map[..., 0])
     inside = centre_in.ravel()
-    inside[edge_coverage(dst, size, size, centre_in).pixels] = False
+    inside[edge_coverage(dst, centre_in).pixels] = False
     inside = inside.reshape(size, size)
 
     def errors(x):

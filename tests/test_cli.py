@@ -133,7 +133,7 @@ def assert_full_help(text):
     assert "Examples:" in text
     assert "warp face.png --src face.json --dst smile.json warped.png" in text
     assert "Exit status:" in text
-    for code in ("0  success", "1  failure", "2  bad input"):
+    for code in ("0    success", "1    failure", "2    bad input", "143: terminated"):
         assert code in text
     assert "[nearest|linear|cubic]" in text
 
@@ -676,3 +676,38 @@ def test_labels_choose_polygons_from_labelme_files(files):
     assert main([files.image, str(labelled), "--src", both, "--src-label", "from", "--dst", both, "--dst-label", "to"]) == 0
     assert main(argv(files)) == 0
     assert labelled.read_bytes() == open(files.out, "rb").read()
+
+
+# --- everyday use ---------------------------------------------------------------
+
+
+def test_a_mirroring_pair_is_warned_about_by_default_and_not_with_q(files, capsys):
+    mirrored = write_polygon(files.dir / "mirror.json", [[64 - x, y] for x, y in DST])
+    assert main(argv(files, dst=mirrored)) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "mirrors the image" in err
+    assert main(argv(files, "-q", dst=mirrored)) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_a_target_outside_the_output_is_warned_about(files, capsys):
+    far = write_polygon(files.dir / "far.json", [[x + 1000, y] for x, y in DST])
+    assert main(argv(files, dst=far)) == 0
+    err = capsys.readouterr().err
+    assert "lies entirely outside" in err and "all background" in err
+    assert (read_pixels(files.out) == 0).all()
+
+
+def test_no_arguments_prints_the_usage(capsys):
+    assert main([]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("Usage: warp [OPTIONS] INPUT OUTPUT") and "warp --help" in err
+
+
+def test_apply_map_is_a_subcommand(files, capsys):
+    assert main(argv(files, "--save-map", str(files.dir / "m.exr"))) == 0
+    out = str(files.dir / "again.png")
+    assert main(["apply-map", str(files.dir / "m.exr"), files.image, out, "-q"]) == 0
+    assert os.path.exists(out)
+    assert main(["apply-map", "--help"]) == 0
+    assert capsys.readouterr().out.startswith("Usage: warp apply-map [OPTIONS] MAP INPUT OUTPUT")

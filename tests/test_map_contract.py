@@ -216,14 +216,20 @@ def test_grid_fast_path_equals_the_pointwise_maps(impl, name):
     pull = f.pull_back(130, 120)
     centres = pixel_centres(130, 120)
     pts = f.inverse(centres).reshape(120, 130, 2)
-    assert np.array_equal(np.isnan(pull.points), np.isnan(pts))
-    np.testing.assert_allclose(pull.points, pts, atol=1e-9)
+    grid = pull.full_points()
+    assert np.array_equal(np.isnan(grid), np.isnan(pts))
+    np.testing.assert_allclose(grid, pts, atol=1e-9)
     jac = f.inverse_jacobian(centres).reshape(120, 130, 2, 2)
-    ok = np.isfinite(jac).all(axis=(2, 3)) & np.isfinite(pull.jacobian).all(axis=(2, 3))
+    grid_jac = pull.spread(pull.jacobian)
+    ok = np.isfinite(jac).all(axis=(2, 3)) & np.isfinite(grid_jac).all(axis=(2, 3))
     assert ok.sum() > 0.98 * np.isfinite(pts[..., 0]).sum()
     # Pixels on an element boundary may take either side's Jacobian (FEM).
-    same = np.isclose(pull.jacobian[ok], jac[ok], atol=1e-9).all(axis=(1, 2))
+    same = np.isclose(grid_jac[ok], jac[ok], atol=1e-9).all(axis=(1, 2))
     assert same.mean() > 0.99
+    # The window is the target's bounding box and a margin, nothing more.
+    r0, c0 = pull.origin
+    rows = np.flatnonzero(np.isfinite(grid[..., 0]).any(axis=1))
+    assert r0 <= rows.min() and rows.max() < r0 + pull.points.shape[0]
 
 
 def test_method_grid_path_agrees_with_the_generic_one(impl):

@@ -25,7 +25,7 @@ def test_identical_polygons_leave_the_image_unchanged_inside():
     poly = star(cx=32, cy=32, r_in=12, r_out=30)
     res = warp_image(img, poly, poly, background=0)
     inside = np.isfinite(res.inverse_map[..., 0])
-    edge = edge_coverage(poly, 64, 64, inside)
+    edge = edge_coverage(poly, inside)
     on_edge = np.zeros(64 * 64, bool)
     on_edge[edge.pixels] = True
     on_edge = on_edge.reshape(64, 64)
@@ -80,7 +80,7 @@ def test_linear_image_data_is_reproduced_through_the_whole_warp():
             from warpcli.raster.resample import edge_coverage
 
             edge = np.zeros(h * w, bool)
-            edge[edge_coverage(star(cx=48, cy=48, r_in=20, r_out=44)[::2], w, h, np.isfinite(x)).pixels] = True
+            edge[edge_coverage(star(cx=48, cy=48, r_in=20, r_out=44)[::2], np.isfinite(x)).pixels] = True
             ok &= ~edge.reshape(h, w)
         expected0 = 0.25 * (x - 0.5) + 0.5 * (y - 0.5)
         expected1 = -0.75 * (x - 0.5) + 3.0
@@ -156,7 +156,7 @@ def test_antialiased_affine_warp_averages_the_footprint():
     from warpcli.raster.resample import edge_coverage
 
     edge = np.zeros(90 * 90, bool)
-    edge[edge_coverage(dst, 90, 90, np.isfinite(res.inverse_map[..., 0])).pixels] = True
+    edge[edge_coverage(dst, np.isfinite(res.inverse_map[..., 0])).pixels] = True
     ok = np.isfinite(res.inverse_map[..., 0]) & ~edge.reshape(90, 90)
     np.testing.assert_allclose(res.pixels[ok, 0], expected[ok], atol=1e-9)
 
@@ -166,7 +166,7 @@ def test_edge_coverage_sums_to_the_polygon_area():
 
     poly = star(cx=64, cy=64, r_in=25, r_out=58, phase=0.37)
     res = warp_image(np.zeros((128, 128, 1), np.float32), poly, poly, antialias=False)
-    edge = edge_coverage(poly, 128, 128, np.isfinite(res.inverse_map[..., 0]))
+    edge = edge_coverage(poly, np.isfinite(res.inverse_map[..., 0]))
     full = np.isfinite(res.inverse_map[..., 0]).ravel()
     full[edge.pixels] = False  # interior pixels count 1, edge pixels their share
     area = full.sum() + edge.fraction.sum()
@@ -191,7 +191,7 @@ def test_antialiasing_follows_the_map_where_it_shrinks():
     smooth = warp_image(img, src, dst, antialias=True)
     centre_in = np.isfinite(plain.inverse_map[..., 0])
     inside = centre_in.ravel()
-    inside[edge_coverage(dst, size, size, centre_in).pixels] = False
+    inside[edge_coverage(dst, centre_in).pixels] = False
     inside = inside.reshape(size, size)
 
     def rmse(x):
@@ -201,3 +201,81 @@ def test_antialiasing_follows_the_map_where_it_shrinks():
     assert rmse(plain.pixels) > 40  # aliasing: the unfiltered warp is far off
     assert rmse(smooth.pixels) < 0.15 * rmse(plain.pixels)
     assert rmse(smooth.pixels) < 8
+
+
+@pytest.mark.parametrize(
+    "dst, size",
+    [
+        ([[-100.0, -100.0], [500.0, -100.0], [500.0, 500.0], [-100.0, 500.0]], (64, 48)),  # covers the image
+        ([[1000.0, 1000.0], [1100.0, 1000.0], [1100.0, 1100.0], [1000.0, 1100.0]], (64, 48)),  # misses it
+        ([[0.0, 0.0], [1.0e7, 0.0], [1.0e7, 1.0e7], [0.0, 1.0e7]], (64, 48)),  # far larger than the image
+        ([[0.2, 0.2], [0.9, 0.3], [0.5, 0.9]], (1, 1)),  # a 1 x 1 output
+        ([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], (1, 1)),
+    ],
+)
+def test_targets_covering_missing_or_dwarfing_the_output(dst, size):
+    img = np.full((40, 50, 3), 200, dtype=np.uint8)
+    src = [[5.0, 5.0], [45.0, 5.0], [45.0, 35.0], [5.0, 35.0]][: len(dst)] if len(dst) == 4 else [[5, 5], [45, 5], [20, 35]]
+    res = warp_image(img, src, dst, size=size, max_area=1e12 if max(np.ravel(dst)) > 1e6 else None)
+    assert res.pixels.shape == (size[1], size[0], 3)
+    r, c = res.pull.origin
+    h, w = res.pull.points.shape[:2]
+    assert 0 <= r <= r + h <= size[1] and 0 <= c <= c + w <= size[0]
+
+
+def test_only_the_target_window_costs_map_work():
+    """A 10 x 10 target on a large output: the pull-back covers its bounding box and a margin."""
+    img = np.zeros((3000, 4000, 1), dtype=np.uint8)
+    dst = [[2000.0, 1500.0], [2010.0, 1500.0], [2010.0, 1510.0], [2000.0, 1510.0]]
+    res = warp_image(img, [[0, 0], [4000, 0], [4000, 3000], [0, 3000]], dst)
+    assert res.pull.points.shape[:2] == (14, 14)
+    assert res.pull.origin == (1498, 1998)
+    assert res.inverse_map.shape == (3000, 4000, 2)
+    assert np.isfinite(res.inverse_map[..., 0]).sum() == 100
+
+
+def test_edge_coverage_of_a_huge_polygon_costs_only_its_visible_boundary():
+    from warpcli.raster.resample import edge_coverage
+
+    big = np.array([[-5.0e8, -5.0e8], [5.0e8, -5.0e8], [5.0e8, 20.5], [-5.0e8, 20.5]])
+    inside = np.zeros((30, 40), dtype=bool)
+    inside[:20] = True
+    cov = edge_coverage(big, inside)
+    # The one visible edge (y = 20.5) crosses row 20: half of each pixel there is inside.
+    assert set(cov.pixels // 40) == {20}
+    np.testing.assert_allclose(cov.fraction, 0.5)
+
+
+@pytest.mark.parametrize("pattern", ["../x.png", "{name.__class__}", "{name!r}", "{name:>20}", "{0}", "", "sub/{name}", ".."])
+def test_output_names_stay_inside_the_output_directory(pattern):
+    from warpcli.errors import InputError
+    from warpcli.pipeline import output_name
+
+    with pytest.raises(InputError):
+        output_name("shots/a.png", pattern)
+
+
+def test_out_of_range_backgrounds_are_clipped_without_warnings():
+    import warnings
+
+    img = np.full((20, 20, 3), 50, dtype=np.uint8)
+    tri = [[2.0, 2.0], [18.0, 2.0], [2.0, 18.0]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = warp_image(img, tri, tri, background=1e308).pixels
+        assert out[19, 19].tolist() == [255, 255, 255]
+        out = warp_image(img.astype(np.float32), tri, tri, background=-1e308).pixels
+        assert np.isfinite(out).all()
+
+
+def test_cubic_with_alpha_prints_no_warnings():
+    import warnings
+
+    rng = np.random.default_rng(5)
+    img = rng.integers(0, 256, (40, 40, 4), dtype=np.uint8)
+    img[::3, :, 3] = 0  # transparent stripes: the spline rings around alpha 0
+    src = star(cx=20, cy=20, r_in=8, r_out=18)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = warp_image(img, src, star(cx=20, cy=20, r_in=6, r_out=19, phase=0.3), interp="cubic", alpha_channel=3)
+    assert res.pixels.dtype == np.uint8

@@ -43,7 +43,7 @@ def test_sample_warp_end_to_end(image, src, dst, tmp_path):
     h, w = before.shape[:2]
     centre_in = np.isfinite(f.inverse_grid(w, h)[..., 0])
     inside = centre_in.ravel()
-    inside[edge_coverage(f.dst.points, w, h, centre_in).pixels] = True
+    inside[edge_coverage(f.dst.points, centre_in).pixels] = True
     assert (after.reshape(h * w, -1)[~inside] == 0).all()
     # Just inside each target vertex, the output shows what the input has just
     # inside the corresponding source vertex (the vertices correspond).

@@ -16,13 +16,14 @@ from .maps.registry import METHODS, THETAS
 from .options import DTYPES, HEATMAP_MEASURES, INTERPOLATIONS, STMAP_T, WEIGHTS
 
 #: Exit statuses; decided here and nowhere else.
-EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
 
 EXIT_CODES = """\b
 Exit status:
-  0  success (in a batch: every input)
-  1  failure while processing (for example a write error)
-  2  bad input or usage (unreadable or invalid polygon, image or option)
+  0    success (in a batch: every input)
+  1    failure while processing (for example a write error)
+  2    bad input or usage (unreadable or invalid polygon, image or option)
+  130  interrupted (Ctrl-C); 143: terminated (SIGTERM); nothing is left behind
 """
 
 WARP_EPILOG = EXIT_CODES + """
@@ -385,8 +386,26 @@ def _configure_logging(verbose: int, quiet: bool) -> None:
 cli = DefaultGroup("warp", commands={"warp": warp, "apply-map": apply_map}, default="warp", context_settings=CONTEXT)
 
 
+class Terminated(BaseException):
+    """SIGTERM arrived: unwind like Ctrl-C, so that no temporary file stays behind."""
+
+
+def _terminate(signum, frame):
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the ``warp`` command; return its exit status instead of raising."""
+    import signal
+    import warnings
+
+    # SIGTERM (a job scheduler, `kill`) is handled like Ctrl-C: outputs are
+    # written to temporary files and renamed at the end, and unwinding removes them.
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _terminate)
+    # Nothing but warpcli's own lines on stderr: numpy's and other libraries'
+    # warnings are not for the user of a command-line tool.
+    warnings.simplefilter("ignore")
     args = list(sys.argv[1:] if argv is None else argv)
     prog = "warp apply-map" if args[:1] == ["apply-map"] else "warp"
     if not args:
@@ -405,6 +424,9 @@ def main(argv: list[str] | None = None) -> int:
     except (click.exceptions.Abort, KeyboardInterrupt):
         click.echo("warp: interrupted", err=True)
         return EXIT_INTERRUPTED
+    except Terminated:
+        click.echo("warp: terminated", err=True)
+        return EXIT_TERMINATED
     except WarpError as err:
         click.echo(f"warp: error: {err}", err=True)
         return exit_code(err)

@@ -41,16 +41,26 @@ def pixel_centres(width: int, height: int, rows: tuple[int, int] | None = None) 
     return np.stack([xx.ravel(), yy.ravel()], axis=1)
 
 
-def covered_rows(bounds: tuple[float, float, float, float], height: int) -> tuple[int, int]:
-    """Rows ``(r0, r1)`` whose pixel centres can lie in a box ``(xmin, ymin, xmax, ymax)``.
+def window(bounds: tuple[float, float, float, float], width: int, height: int, margin: int = 2) -> tuple[int, int, int, int]:
+    """The pixels ``(r0, r1, c0, c1)`` of a grid whose centres can lie in a box, plus a margin.
 
-    >>> covered_rows((0.0, 2.0, 5.0, 4.5), 10)
-    (2, 5)
+    Rows ``r0 <= r < r1`` and columns ``c0 <= c < c1`` of a ``width`` x
+    ``height`` grid around the box ``(xmin, ymin, xmax, ymax)``, ``margin``
+    pixels wider each side (a polygon's antialiased edge reaches a pixel
+    beyond its bounding box), clipped to the grid; empty (r0 == r1 or
+    c0 == c1) when the box misses the grid.
+
+    >>> window((10.2, 3.0, 20.0, 4.5), 100, 50)
+    (1, 7, 8, 22)
+    >>> window((200.0, 3.0, 300.0, 4.5), 100, 50)[2:]
+    (100, 100)
     """
-    _, ymin, _, ymax = bounds
-    r0 = max(0, math.ceil(ymin - 0.5))
-    r1 = min(height, math.floor(ymax - 0.5) + 1)
-    return (r0, max(r0, r1))
+    xmin, ymin, xmax, ymax = bounds
+    r0 = min(max(0, math.ceil(ymin - 0.5) - margin), height)
+    r1 = max(r0, min(height, math.floor(ymax - 0.5) + 1 + margin))
+    c0 = min(max(0, math.ceil(xmin - 0.5) - margin), width)
+    c1 = max(c0, min(width, math.floor(xmax - 0.5) + 1 + margin))
+    return r0, r1, c0, c1
 
 
 def inside_polygon(points: ArrayLike, vertices: ArrayLike) -> NDArray[np.bool_]:

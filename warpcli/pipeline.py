@@ -9,16 +9,18 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import InputError, WarpError
-from .maps.compose import BijectiveMap
+from .maps.compose import BijectiveMap, PullBack
 from .options import WarpOptions
 from .polygon import Polygon, check_pair, read_polygon
-from .raster.imageio import RasterImage, atomic_path, check_output_path, convert_pixels, read_image, write_image
+from .outputs import PendingOutputs
+from .raster.imageio import RasterImage, check_output_path, convert_pixels, read_image, write_image
 from .raster.pixels import unit
 from .raster.resample import EdgeCoverage, edge_coverage, resample
 from .report import build_report
@@ -41,11 +43,9 @@ class WarpResult:
         The warped image, in the input's pixel type (H, W: the output's
         height and width).
     map : BijectiveMap
-    inverse_map : (H, W, 2) ndarray of float
-        Source position of every output pixel centre; NaN outside the target.
-    jacobian : (H, W, 2, 2) ndarray of float or None
-        Jacobian of the inverse map at every output pixel (d source / d
-        output); NaN outside the target.
+    pull : PullBack
+        The inverse map and its Jacobians in the window of output pixels
+        around the target polygon (see `warpcli.maps.compose.PullBack`).
     timings : dict of str to float
         Seconds per stage.
     report : dict or None
@@ -54,10 +54,20 @@ class WarpResult:
 
     pixels: NDArray
     map: BijectiveMap
-    inverse_map: NDArray[np.float64]
-    jacobian: NDArray[np.float64] | None = field(default=None, repr=False)
+    pull: PullBack = field(repr=False)
     timings: dict[str, float] = field(default_factory=dict)
     report: dict | None = None
+
+    @cached_property
+    def inverse_map(self) -> NDArray[np.float64]:
+        """(H, W, 2): the source point of every output pixel centre; NaN outside the target."""
+        return self.pull.full_points()
+
+    @cached_property
+    def jacobian(self) -> NDArray[np.float64] | None:
+        """(H, W, 2, 2): the Jacobian of the inverse map at every output pixel (d source / d
+        output); NaN outside the target; None if the warp kept none."""
+        return None if self.pull.jacobian is None else self.pull.spread(self.pull.jacobian)
 
     def distortion(self) -> Distortion:
         """Distortion of the map at every output pixel (flattened, row-major; NaN outside the target).
@@ -67,9 +77,11 @@ class WarpResult:
         ValueError
             If the result kept no Jacobians.
         """
-        if self.jacobian is None:
+        if self.pull.jacobian is None:
             raise ValueError("this result kept no Jacobians")
-        return distortion(self.jacobian)
+        d = distortion(self.pull.jacobian)
+        shape = self.pull.points.shape[:2]
+        return Distortion(*(self.pull.spread(v.reshape(shape)).ravel() for v in dataclasses.astuple(d)))
 
 
 def _options(options: WarpOptions | None, changes: dict[str, Any]) -> WarpOptions:
@@ -168,7 +180,7 @@ def warp_image(
     out = _resample_with(plan, img, opts, bg, alpha_channel, associated_alpha)
     timings["compose"] = t1 - t0
     timings["resample"] = clock() - t1
-    return WarpResult(out, fmap, plan.pull.points, plan.pull.jacobian, timings)
+    return WarpResult(out, fmap, plan.pull, timings)
 
 
 def _same_polygon(a: Polygon, b: Polygon) -> bool:
@@ -178,9 +190,10 @@ def _same_polygon(a: Polygon, b: Polygon) -> bool:
 @dataclass(frozen=True)
 class _Sampling:
     """What a warp needs of the map on an output grid, whatever the image: where each
-    pixel comes from, the Jacobians there, and the edge coverage."""
+    pixel of the window around the target comes from, the Jacobians there, and the
+    edge coverage."""
 
-    pull: Any  # warpcli.maps.compose.PullBack
+    pull: PullBack
     coverage: EdgeCoverage | None
     footprints: bool  # resample with the Jacobians (antialiasing where the map shrinks)
 
@@ -190,8 +203,7 @@ def _sampling(fmap: BijectiveMap, width: int, height: int, opts: WarpOptions, *,
     pull = fmap.pull_back(width, height, jacobian=keep_jacobian or footprints)
     coverage = None
     if opts.antialias and opts.interp != "nearest":
-        inside = np.isfinite(pull.points[..., 0])
-        cov = edge_coverage(fmap.dst.points, width, height, inside)
+        cov = edge_coverage(fmap.dst.points, np.isfinite(pull.points[..., 0]), pull.origin)
         coverage = dataclasses.replace(cov, source_points=fmap.inverse_boundary(cov.edge, cov.t))
     return _Sampling(pull, coverage, footprints)
 
@@ -199,11 +211,26 @@ def _sampling(fmap: BijectiveMap, width: int, height: int, opts: WarpOptions, *,
 def _resample_with(
     plan: _Sampling, img: NDArray, opts: WarpOptions, bg: NDArray, alpha_channel: int | None, associated_alpha: bool
 ) -> NDArray:
-    return resample(
-        img, plan.pull.points, interp=opts.interp, background=bg, alpha_channel=alpha_channel,
-        associated_alpha=associated_alpha, jacobian=plan.pull.jacobian if plan.footprints else None,
-        coverage=plan.coverage,
-    )  # fmt: skip
+    """The whole output: the window around the target resampled, background elsewhere."""
+
+    def sample(points, jacobian=None, coverage=None):
+        return resample(
+            img, points, interp=opts.interp, background=bg, alpha_channel=alpha_channel,
+            associated_alpha=associated_alpha, jacobian=jacobian, coverage=coverage,
+        )  # fmt: skip
+
+    pull = plan.pull
+    width, height = pull.size
+    window = sample(pull.points, pull.jacobian if plan.footprints else None, plan.coverage)
+    if window.shape[:2] == (height, width):
+        return window
+    # Pixels outside the window have no pre-image: the background, exactly as
+    # the resampler writes it for such a pixel (rounded, alpha convention).
+    out = np.empty((height, width, window.shape[2]), dtype=window.dtype)
+    out[:] = sample(np.full((1, 1, 2), np.nan))[0, 0]
+    r, c = pull.origin
+    out[r : r + window.shape[0], c : c + window.shape[1]] = window
+    return out
 
 
 def _write_like(path: str | os.PathLike[str], image: RasterImage, pixels: NDArray, dtype: str | None = None) -> None:
@@ -297,52 +324,76 @@ def warp_file(
     stage("reading")
     image = read_image(input_path)
     t_read = clock() - t0
-    _warn_if_outside(src, image.width, image.height, os.fspath(input_path))
+    _warn_if_outside(src, (image.width, image.height), os.fspath(input_path), "all background")
+    out_size = opts.size if opts.size is not None else (image.width, image.height)
+    _warn_if_outside(dst, out_size, os.fspath(output_path), "all background")
     if not ((src.signed_area > 0) == (dst.signed_area > 0)):
-        log.info("%s and %s run in opposite directions: the warp mirrors the image", src.name, dst.name)
+        log.warning(
+            "%s and %s run in opposite directions: the warp mirrors the image (reverse one file's vertex order "
+            "if that is not what you want)",
+            src.name,
+            dst.name,
+        )
     result = warp_image(
         image.pixels, src, dst, opts, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha,
         progress=progress,
     )  # fmt: skip
-    t0 = clock()
-    stage("writing")
-    _write_like(output_path, image, result.pixels, opts.dtype)
-    result.timings["read"] = t_read
-    result.timings["write"] = clock() - t0
-    if grid_path is not None or heatmap_path is not None:
-        from .report import figures
-
+    # Every output is written under a pending name and renamed into place
+    # only when all are written: a run's outputs succeed or fail together.
+    with PendingOutputs() as pending:
         t0 = clock()
-        stage("drawing figures")
-        if grid_path is not None:
-            fig = figures.grid_figure(image.pixels, result.inverse_map, src, dst, alpha_channel=image.alpha_channel)
-            write_image(grid_path, RasterImage(fig))
-        if heatmap_path is not None:
-            values = getattr(result.distortion(), heatmap_measure).reshape(result.inverse_map.shape[:2])
-            write_image(heatmap_path, RasterImage(figures.heatmap_figure(values, heatmap_measure)))
-        result.timings["figures"] = clock() - t0
-    if save_map is not None or save_forward_map is not None:
-        from .raster.stmap import save_stmap
+        stage("writing")
+        _write_like(pending.path(output_path), image, result.pixels, opts.dtype)
+        result.timings["read"] = t_read
+        result.timings["write"] = clock() - t0
+        if grid_path is not None or heatmap_path is not None:
+            from .report import figures
 
-        t0 = clock()
-        stage("saving maps")
-        out_h, out_w = result.inverse_map.shape[:2]
-        if save_map is not None:
-            save_stmap(save_map, result.inverse_map, (image.width, image.height), kind="inverse", t_up=stmap_t_up)
-        if save_forward_map is not None:
-            fwd = result.map.forward_grid(image.width, image.height)
-            save_stmap(save_forward_map, fwd, (out_w, out_h), kind="forward", t_up=stmap_t_up)
-        result.timings["maps"] = clock() - t0
-    if report_path is not None:
-        stage("measuring distortion")
-        doc = build_report(result)
-        if os.fspath(report_path) != "-":
-            with atomic_path(os.fspath(report_path)) as tmp:
-                with open(tmp, "w") as fh:
-                    json.dump(doc, fh, indent=2)
-                    fh.write("\n")
-        result = dataclasses.replace(result, report=doc)
+            t0 = clock()
+            stage("drawing figures")
+            if grid_path is not None:
+                fig = figures.grid_figure(image.pixels, result.inverse_map, src, dst, alpha_channel=image.alpha_channel)
+                write_image(pending.path(grid_path), RasterImage(fig))
+            if heatmap_path is not None:
+                values = getattr(result.distortion(), heatmap_measure).reshape(result.inverse_map.shape[:2])
+                write_image(pending.path(heatmap_path), RasterImage(figures.heatmap_figure(values, heatmap_measure)))
+            result.timings["figures"] = clock() - t0
+        if save_map is not None or save_forward_map is not None:
+            from .raster.stmap import save_stmap
+
+            t0 = clock()
+            stage("saving maps")
+            out_h, out_w = result.pull.size[1], result.pull.size[0]
+            if save_map is not None:
+                save_stmap(
+                    pending.path(save_map), result.inverse_map, (image.width, image.height), kind="inverse",
+                    t_up=stmap_t_up,
+                )  # fmt: skip
+            if save_forward_map is not None:
+                fwd = result.map.forward_grid(image.width, image.height)
+                save_stmap(pending.path(save_forward_map), fwd, (out_w, out_h), kind="forward", t_up=stmap_t_up)
+            result.timings["maps"] = clock() - t0
+        if report_path is not None:
+            stage("measuring distortion")
+            doc = build_report(result)
+            if os.fspath(report_path) != "-":
+                _write_json(pending.path(report_path), doc)
+            result = dataclasses.replace(result, report=doc)
     return result
+
+
+def _write_json(path: str, doc: dict) -> None:
+    """Write a JSON document, checking the write (a full disk is an error, not a success)."""
+    from .errors import ImageIOError
+
+    try:
+        with open(path, "w") as fh:
+            json.dump(doc, fh, indent=2)
+            fh.write("\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+    except OSError as err:
+        raise ImageIOError(f"{path}: cannot write the report: {err.strerror or err}") from err
 
 
 @dataclass(frozen=True)
@@ -358,22 +409,42 @@ def output_name(input_path: str | os.PathLike[str], pattern: str = "{name}") -> 
     """The output file name for an input: ``pattern`` with ``{name}`` (the input's
     file name), ``{stem}`` (without extension) and ``{ext}`` (with its dot).
 
+    Only those three fields, without attributes, indices or conversions, and
+    the result must be a plain file name (no directory part, not ``.`` or
+    ``..``), so that outputs stay inside the output directory.
+
     Raises
     ------
     InputError
-        If the pattern uses anything else.
+        If the pattern uses anything else or names another directory.
 
     Examples
     --------
     >>> output_name("shots/frame_0001.png", "{stem}_warped.exr")
     'frame_0001_warped.exr'
     """
+    import string
+
     name = os.path.basename(os.fspath(input_path))
     stem, ext = os.path.splitext(name)
+    fields = {"name": name, "stem": stem, "ext": ext}
+    bad = InputError(f"output name pattern {pattern!r} is invalid: use {{name}}, {{stem}} and {{ext}} and plain text")
     try:
-        return pattern.format(name=name, stem=stem, ext=ext)
-    except (KeyError, IndexError, ValueError) as err:
-        raise InputError(f"output name pattern {pattern!r} is invalid: use {{name}}, {{stem}} and {{ext}}") from err
+        pieces = list(string.Formatter().parse(pattern))
+    except ValueError as err:
+        raise bad from err
+    out = []
+    for text, field_name, spec, conversion in pieces:
+        out.append(text)
+        if field_name is None:
+            continue
+        if field_name not in fields or spec or conversion:
+            raise bad
+        out.append(fields[field_name])
+    result = "".join(out)
+    if not result or result in (".", "..") or "/" in result or os.sep in result or "\0" in result:
+        raise InputError(f"output name pattern {pattern!r} gives {result!r}, which is not a file name in the output directory")
+    return result
 
 
 def warp_batch(
@@ -512,16 +583,22 @@ def _background(background: float | ArrayLike, img: NDArray) -> NDArray[np.float
     bg = np.asarray(background, dtype=np.float64).ravel()
     if bg.size not in (1, nc):
         raise InputError(f"background has {bg.size} values but the image has {nc} channels")
+    # Values beyond what the output type holds are clipped there anyway; clip
+    # them first, so that they blend as the value written and cannot overflow.
+    if np.issubdtype(img.dtype, np.integer):
+        bg = np.clip(bg, 0.0, 1.0)
+    else:
+        top = float(np.finfo(np.float32 if img.dtype != np.float64 else np.float64).max)
+        bg = np.clip(bg, -top, top)
     return bg * unit(img.dtype)
 
 
-def _warn_if_outside(src: Polygon, width: int, height: int, image_name: str) -> None:
-    xmin, ymin, xmax, ymax = src.bounds
+def _warn_if_outside(poly: Polygon, size: tuple[int, int], image_name: str, consequence: str) -> None:
+    """Warn when a polygon misses an image of ``size`` (width, height) entirely."""
+    xmin, ymin, xmax, ymax = poly.bounds
+    width, height = size
     if xmax <= 0 or ymax <= 0 or xmin >= width or ymin >= height:
         log.warning(
-            "%s lies entirely outside %s (%dx%d): the output will be all background",
-            src.name,
-            image_name,
-            width,
-            height,
-        )
+            "%s lies entirely outside %s (%dx%d): the output will be %s", poly.name, image_name, width, height,
+            consequence,
+        )  # fmt: skip

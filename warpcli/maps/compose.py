@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import FoldOverError, InputError
-from ..grid import covered_rows
+from ..grid import window
 from ..options import MapOptions
 from ..polygon import Polygon, check_pair
 from .base import ThetaMap, as_points
@@ -23,19 +23,41 @@ BAND_PIXELS = 1 << 18
 
 @dataclass(frozen=True)
 class PullBack:
-    """The inverse map f^-1 at every pixel centre of an output grid.
+    """The inverse map f^-1 at the pixel centres of an output grid, in a window.
+
+    Only the window around the target polygon's bounding box (see
+    `warpcli.grid.window`) is computed and stored: outside it no pixel
+    centre has a pre-image, so a small target on a huge image costs little.
 
     Attributes
     ----------
-    points : (H, W, 2) ndarray of float
-        Source point of each output pixel centre; NaN outside the target.
-    jacobian : (H, W, 2, 2) ndarray of float or None
+    points : (h, w, 2) ndarray of float
+        Source point of each pixel centre of the window; NaN outside the target.
+    jacobian : (h, w, 2, 2) ndarray of float or None
         Jacobian of f^-1 there (d source / d target), if asked for; NaN where
         unknown.
+    origin : (int, int)
+        ``(row, column)`` of the window's top-left pixel in the grid.
+    size : (int, int)
+        The whole grid's ``(width, height)``.
     """
 
     points: NDArray[np.float64]
-    jacobian: NDArray[np.float64] | None = None
+    jacobian: NDArray[np.float64] | None
+    origin: tuple[int, int]
+    size: tuple[int, int]
+
+    def full_points(self) -> NDArray[np.float64]:
+        """`points` spread over the whole grid: (height, width, 2), NaN outside the window."""
+        return self.spread(self.points)
+
+    def spread(self, values: NDArray) -> NDArray:
+        """Window-shaped float ``values`` (h, w, ...) spread over the whole grid, NaN outside."""
+        width, height = self.size
+        out = np.full((height, width) + values.shape[2:], np.nan, dtype=values.dtype)
+        r, c = self.origin
+        out[r : r + values.shape[0], c : c + values.shape[1]] = values
+        return out
 
 
 class BijectiveMap:
@@ -207,11 +229,12 @@ class BijectiveMap:
         return self.phi0.boundary_from_theta(edge, self.phi1.to_theta_parameter(t))
 
     def pull_back(self, width: int, height: int, *, jacobian: bool = True) -> PullBack:
-        """f^-1 (and its Jacobian) at every pixel centre of a ``width`` x ``height`` output grid.
+        """f^-1 (and its Jacobian) at the pixel centres of a ``width`` x ``height`` output grid.
 
-        Works through the rows the target polygon covers in bands: phi1 on
-        the band's pixel grid (`ThetaMap.evaluate_grid`), then phi0^-1 of
-        those points of Theta in the order they were found (coherent).
+        Only the window around the target's bounding box is computed, in
+        bands of rows: phi1 on the band's pixel grid
+        (`ThetaMap.evaluate_grid`), then phi0^-1 of those points of Theta in
+        the order they were found (coherent).
 
         Parameters
         ----------
@@ -234,7 +257,7 @@ class BijectiveMap:
         (height, width, 2) ndarray of float
             Source point of each output pixel centre; NaN outside the target.
         """
-        return self.pull_back(width, height, jacobian=False).points
+        return self.pull_back(width, height, jacobian=False).full_points()
 
     def forward_grid(self, width: int, height: int) -> NDArray[np.float64]:
         """`forward` at every pixel centre of a ``width`` x ``height`` source image.
@@ -244,7 +267,7 @@ class BijectiveMap:
         (height, width, 2) ndarray of float
             Target point of each source pixel centre; NaN outside the source.
         """
-        return _through_theta(self.phi0, self.phi1, width, height, False).points
+        return _through_theta(self.phi0, self.phi1, width, height, False).full_points()
 
     def describe(self) -> dict:
         """What the methods add to a report, prefixed by ``source_`` and ``target_``."""
@@ -254,20 +277,34 @@ class BijectiveMap:
 
 
 def _through_theta(phi_grid: ThetaMap, phi_other: ThetaMap, width: int, height: int, jacobian: bool) -> PullBack:
-    """phi_other^-1 o phi_grid at every pixel centre of the grid phi_grid's polygon lives on."""
-    points = np.full((height * width, 2), np.nan)
-    jac = np.full((height * width, 2, 2), np.nan) if jacobian else None
-    r0, r1 = covered_rows(phi_grid.polygon.bounds, height)
+    """phi_other^-1 o phi_grid at the pixel centres of the grid phi_grid's polygon lives on."""
+    r0, r1, c0, c1 = window(phi_grid.polygon.bounds, width, height)
+    ww = c1 - c0
+    points = np.full(((r1 - r0) * ww, 2), np.nan)
+    jac = np.full(((r1 - r0) * ww, 2, 2), np.nan) if jacobian else None
     band = max(1, BAND_PIXELS // width)
     for start in range(r0, r1, band):
         rows = (start, min(start + band, r1))
         g = phi_grid.evaluate_grid(width, height, rows, jacobian=jacobian)
-        m = phi_other.inverse(g.values, jacobian=jacobian, coherent=True)
-        points[g.pixels] = m.points
+        row, col = np.divmod(g.pixels, width)
+        idx = (row - r0) * ww + (col - c0)
+        # The window holds every centre in the polygon (its bounding box and
+        # a margin); a method that reported one beyond it would be dropped.
+        keep = (col >= c0) & (col < c1)
+        values, jac_grid = g.values, g.jacobian
+        if not keep.all():
+            idx, values = idx[keep], values[keep]
+            jac_grid = None if jac_grid is None else jac_grid[keep]
+        m = phi_other.inverse(values, jacobian=jacobian, coherent=True)
+        points[idx] = m.points
         if jac is not None:
-            jac[g.pixels] = matmul2(m.jacobian, g.jacobian)
-    shape = (height, width)
-    return PullBack(points.reshape(*shape, 2), None if jac is None else jac.reshape(*shape, 2, 2))
+            from . import _kernels
+
+            _kernels.scatter_products(m.jacobian, jac_grid, idx, jac)
+    shape = (r1 - r0, ww)
+    return PullBack(
+        points.reshape(*shape, 2), None if jac is None else jac.reshape(*shape, 2, 2), (r0, c0), (width, height)
+    )
 
 
 def matmul2(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:

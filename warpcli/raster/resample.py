@@ -14,6 +14,9 @@ from .pixels import unit
 #: With antialiasing, a footprint is covered by at most this many samples per side.
 MAX_FOOTPRINT_SAMPLES = 16
 
+#: Alpha (0..1) at or below which a resampled pixel counts as fully transparent.
+ALPHA_EPSILON = 1e-12
+
 
 def resample(
     image: ArrayLike,
@@ -136,8 +139,10 @@ def resample(
         _kernels.sample_linear_aa(src, points, jac, MAX_FOOTPRINT_SAMPLES, bg, out)
     if alpha_channel_blend is not None:
         a = out[:, alpha_channel_blend] / alpha_scale
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = np.where(a > 0, 1.0 / a, 0.0).astype(work_dtype)
+        # Alpha below ALPHA_EPSILON (a cubic spline's ringing around 0, say)
+        # is transparent: its colour would be divided by nearly nothing.
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            inv = np.where(a > ALPHA_EPSILON, 1.0 / a, 0.0).astype(work_dtype)
         for c in range(nc):
             if c != alpha_channel_blend:
                 out[:, c] *= inv
@@ -184,7 +189,9 @@ class EdgeCoverage:
     source_points: NDArray[np.float64] | None = None
 
 
-def edge_coverage(dst: NDArray[np.float64], width: int, height: int, inside: NDArray[np.bool_]) -> EdgeCoverage:
+def edge_coverage(
+    dst: NDArray[np.float64], inside: NDArray[np.bool_], origin: tuple[int, int] = (0, 0)
+) -> EdgeCoverage:
     """Coverage of the pixels along polygon ``dst``'s boundary, and their nearest boundary points.
 
     A pixel's share inside the polygon is taken as ``clip(1/2 + s, 0, 1)``,
@@ -192,40 +199,56 @@ def edge_coverage(dst: NDArray[np.float64], width: int, height: int, inside: NDA
     boundary: exact for an edge parallel to an axis, and exact on average along
     any straight edge, so the coverages sum to the polygon's area up to
     corner effects (the usual distance-field antialiasing). Only edges near a
-    pixel are measured: each edge is sampled every half pixel and offers
-    itself to the 3 x 3 pixels around each sample, so the cost is linear in
-    the perimeter.
+    pixel are measured: the part of each edge that crosses the window is
+    sampled every half pixel and offers itself to the 3 x 3 pixels around each
+    sample, so the cost is linear in the length of boundary inside the window,
+    whatever the polygon's size.
 
     Parameters
     ----------
     dst : (n, 2) array of float
-        The target polygon.
-    width, height : int
-        Output size in pixels.
-    inside : (height, width) bool array
-        Whether each pixel centre lies inside ``dst``.
+        The target polygon, in the grid's coordinates.
+    inside : (h, w) array of bool
+        Whether each pixel centre of the window lies inside ``dst``.
+    origin : (int, int)
+        ``(row, column)`` of the window's top-left pixel in the grid.
+
+    Returns
+    -------
+    EdgeCoverage
+        ``pixels`` are flat indices into the window.
     """
+    height, width = inside.shape
+    r0, c0 = origin
     n = len(dst)
     a = dst
     d = np.roll(dst, -1, axis=0) - dst
     length = np.hypot(d[:, 0], d[:, 1])
-    count = np.ceil(length / 0.5).astype(np.int64) + 1
-    edge = np.repeat(np.arange(n), count)
+    # The part of each edge within one pixel of the window (Liang-Barsky).
+    t_lo, t_hi = _clip_segments(a, d, (c0 - 1.0, r0 - 1.0, c0 + width + 1.0, r0 + height + 1.0))
+    crosses = np.flatnonzero(t_lo <= t_hi)
+    span = (t_hi - t_lo)[crosses]
+    count = np.ceil(length[crosses] * span / 0.5).astype(np.int64) + 1
+    edge = np.repeat(crosses, count)
     first = np.cumsum(count) - count
-    t = (np.arange(edge.size) - np.repeat(first, count)) / np.repeat(count - 1, count)
+    step = (np.arange(edge.size) - np.repeat(first, count)) / np.repeat(np.maximum(count - 1, 1), count)
+    t = np.repeat(t_lo[crosses], count) + np.repeat(span, count) * step
     samples = a[edge] + t[:, None] * d[edge]
     base = np.floor(samples).astype(np.int64)
     offs = np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
-    col = (base[:, None, 0] + offs[None, :, 0]).ravel()
-    row = (base[:, None, 1] + offs[None, :, 1]).ravel()
+    col = (base[:, None, 0] + offs[None, :, 0]).ravel() - c0
+    row = (base[:, None, 1] + offs[None, :, 1]).ravel() - r0
     edge = np.repeat(edge, len(offs))
     ok = (col >= 0) & (col < width) & (row >= 0) & (row < height)
     pix = row[ok] * width + col[ok]
     key = np.unique(pix * n + edge[ok])
+    if key.size == 0:
+        empty = np.zeros(0)
+        return EdgeCoverage(np.zeros(0, dtype=np.int64), empty, np.zeros(0, dtype=np.intp), empty)
     pix = key // n
     edge = key % n
-    cx = (pix % width) + 0.5
-    cy = (pix // width) + 0.5
+    cx = (pix % width + c0) + 0.5
+    cy = (pix // width + r0) + 0.5
     dd = np.einsum("ij,ij->i", d, d)
     t = np.clip(((cx - a[edge, 0]) * d[edge, 0] + (cy - a[edge, 1]) * d[edge, 1]) / dd[edge], 0.0, 1.0)
     dist = np.hypot(a[edge, 0] + t * d[edge, 0] - cx, a[edge, 1] + t * d[edge, 1] - cy)
@@ -238,6 +261,25 @@ def edge_coverage(dst: NDArray[np.float64], width: int, height: int, inside: NDA
     frac = np.clip(0.5 + sign * dist, 0.0, 1.0)
     keep = (frac > 0) & (frac < 1)
     return EdgeCoverage(pix[keep], frac[keep], edge[keep], t[keep])
+
+
+def _clip_segments(a: NDArray[np.float64], d: NDArray[np.float64], box: tuple[float, float, float, float]):
+    """Parameter range ``[t_lo, t_hi]`` of the segments ``a + t d``, t in [0, 1], inside a box
+    ``(xmin, ymin, xmax, ymax)``; ``t_lo > t_hi`` where a segment misses it."""
+    t_lo = np.zeros(len(a))
+    t_hi = np.ones(len(a))
+    lo = np.array(box[:2])
+    hi = np.array(box[2:])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(2):
+            p, q = d[:, k], a[:, k]
+            t1 = (lo[k] - q) / p
+            t2 = (hi[k] - q) / p
+            enter = np.where(p != 0, np.minimum(t1, t2), np.where((q >= lo[k]) & (q <= hi[k]), -np.inf, np.inf))
+            leave = np.where(p != 0, np.maximum(t1, t2), np.where((q >= lo[k]) & (q <= hi[k]), np.inf, -np.inf))
+            t_lo = np.maximum(t_lo, enter)
+            t_hi = np.minimum(t_hi, leave)
+    return t_lo, t_hi
 
 
 def _to_dtype(values: NDArray, dtype: np.dtype) -> NDArray:

@@ -9,15 +9,13 @@ from __future__ import annotations
 import time
 from typing import Any, Protocol
 
-import numpy as np
-from numpy.typing import NDArray
 
 
 class Measurable(Protocol):
     """What a report needs of a warp (`warpcli.pipeline.WarpResult` is one)."""
 
     map: Any  #: the `warpcli.maps.compose.BijectiveMap`
-    jacobian: NDArray[np.float64] | None  #: (H, W, 2, 2) Jacobians of f^-1 at output pixels
+    pull: Any  #: the `warpcli.maps.compose.PullBack`, with Jacobians of f^-1 at output pixels
     timings: dict[str, float]
 
 
@@ -32,8 +30,8 @@ def build_report(result: Measurable) -> dict:
     Parameters
     ----------
     result : WarpResult
-        A warp that kept its Jacobians (any object with ``map``, ``jacobian``
-        and ``timings``).
+        A warp that kept its Jacobians (any object with ``map``, ``pull`` and
+        ``timings``).
 
     Returns
     -------
@@ -55,10 +53,10 @@ def build_report(result: Measurable) -> dict:
     """
     from .metrics import distortion
 
-    if result.jacobian is None:
+    if result.pull.jacobian is None:
         raise ValueError("this result kept no Jacobians to measure")
     t0 = time.perf_counter()
-    summary = distortion(result.jacobian).summary()
+    summary = distortion(result.pull.jacobian).summary()
     f = result.map
     timings = dict(result.timings)
     timings["metrics"] = time.perf_counter() - t0

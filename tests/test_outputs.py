@@ -1,0 +1,83 @@
+"""Tests of warpcli.outputs and of a run's outputs succeeding or failing together."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from helpers import star, write_png, write_polygon
+from warpcli.errors import ImageIOError
+from warpcli.outputs import PENDING_MARKER, PendingOutputs
+
+
+def test_pending_outputs_are_renamed_together(tmp_path):
+    with PendingOutputs() as out:
+        a = out.path(tmp_path / "a.png")
+        b = out.path(tmp_path / "b.json")
+        assert os.path.basename(a).startswith(".a" + PENDING_MARKER) and a.endswith(".png")
+        open(a, "w").write("a")
+        open(b, "w").write("b")
+        assert sorted(os.listdir(tmp_path)) == sorted(os.path.basename(p) for p in (a, b))
+    assert sorted(os.listdir(tmp_path)) == ["a.png", "b.json"]
+
+
+def test_a_failure_leaves_nothing_and_names_the_final_path(tmp_path):
+    with pytest.raises(ImageIOError) as info:
+        with PendingOutputs() as out:
+            a = out.path(tmp_path / "a.png")
+            open(a, "w").write("a")
+            raise ImageIOError(f"{a}: cannot write: disk full")
+    assert os.listdir(tmp_path) == []
+    assert str(info.value) == f"{tmp_path / 'a.png'}: cannot write: disk full"
+
+
+def _inputs(tmp_path):
+    img = write_png(tmp_path / "in.png", np.full((64, 64, 3), 128, dtype=np.uint8))
+    src = write_polygon(tmp_path / "s.json", star(cx=32, cy=32, r_in=12, r_out=28))
+    dst = write_polygon(tmp_path / "d.json", star(cx=32, cy=32, r_in=10, r_out=30, phase=0.2))
+    return img, src, dst
+
+
+def test_a_failing_report_leaves_no_output_at_all(tmp_path, monkeypatch):
+    import warpcli.pipeline as pipeline
+
+    img, src, dst = _inputs(tmp_path)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+
+    def fail(path, doc):
+        raise ImageIOError(f"{path}: cannot write the report: No space left on device")
+
+    monkeypatch.setattr(pipeline, "_write_json", fail)
+    with pytest.raises(ImageIOError, match=r"out/r.json: cannot write the report"):
+        pipeline.warp_file(
+            img, out_dir / "o.png", src, dst, report_path=out_dir / "r.json", grid_path=out_dir / "g.png",
+            save_map=out_dir / "m.exr",
+        )  # fmt: skip
+    assert os.listdir(out_dir) == []
+
+
+def test_sigterm_while_writing_leaves_nothing(tmp_path):
+    """SIGTERM is handled like Ctrl-C: exit 143, one line, no output, no temporary file."""
+    img, src, dst = _inputs(tmp_path)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    script = f"""
+import os, signal, sys
+import warpcli.raster.imageio as io
+real = io._write
+def write_then_die(*args, **kwargs):
+    real(*args, **kwargs)
+    os.kill(os.getpid(), signal.SIGTERM)
+io._write = write_then_die
+from warpcli.cli import main
+sys.exit(main([{str(img)!r}, "--src", {src!r}, "--dst", {dst!r}, {str(out_dir / "o.png")!r}, "--report", {str(out_dir / "r.json")!r}]))
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == 143, done.stderr
+    assert done.stderr.strip() == "warp: terminated"
+    assert os.listdir(out_dir) == []
