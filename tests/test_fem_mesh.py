@@ -86,3 +86,35 @@ def test_auto_density_meshes_a_huge_polygon_quickly():
     huge = Polygon([[0, 0], [1e7, 0], [1e7, 1e7], [0, 1e7]])
     mesh = mesh_polygon(huge, auto_max_area(huge))
     assert mesh.n_triangles <= AUTO_MAX_TRIANGLES
+
+
+@pytest.mark.parametrize("size", [1e4, 1e6, 1e8])
+def test_a_polygon_far_larger_than_its_image_is_meshed_at_the_image(size):
+    # Uniform at the automatic density, the 1e8 square would need 1M triangles
+    # (the cap) of 8e10 px^2 each; graded from the image, the count grows
+    # with the logarithm of the size.
+    """Graded from the region of interest: the triangle count does not grow with the polygon,
+    and triangles over the image keep the image's automatic density."""
+    from warpcli.maps.fem.mesh import graded_from, triangle_areas
+
+    poly = Polygon([[-size, -size], [size, -size], [size, size], [-size, size]])
+    region = (0.0, 0.0, 64.0, 48.0)
+    assert graded_from(poly, region)
+    area = auto_max_area(poly, region)
+    assert area == auto_max_area(Polygon([[0, 0], [64, 0], [64, 48], [0, 48]]))
+    m = mesh_polygon(poly, area, region=region)
+    assert m.n_triangles < 500_000
+    c = m.vertices[m.triangles].mean(axis=1)
+    over = (c[:, 0] > 0) & (c[:, 0] < 64) & (c[:, 1] > 0) & (c[:, 1] < 48)
+    assert np.abs(triangle_areas(m.vertices, m.triangles))[over].max() <= area * (1 + 1e-9)
+
+
+def test_a_polygon_near_its_image_is_meshed_as_without_a_region():
+    from warpcli.maps.fem.mesh import graded_from
+
+    poly = Polygon(star(cx=64, cy=64, r_in=20, r_out=70))  # reaches a little beyond a 128 px image
+    region = (0.0, 0.0, 128.0, 128.0)
+    assert not graded_from(poly, region)
+    a = mesh_polygon(poly, auto_max_area(poly, region), region=region)
+    b = mesh_polygon(poly, auto_max_area(poly))
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.triangles, b.triangles)

@@ -167,7 +167,8 @@ def warp_image(
     fmap = warp_map
     if fmap is None:
         stage("building the map")
-        fmap = BijectiveMap.between(src, dst, opts.map)
+        regions = ((0.0, 0.0, float(img.shape[1]), float(img.shape[0])), (0.0, 0.0, float(width), float(height)))
+        fmap = BijectiveMap.between(src, dst, opts.map, regions=regions)
         timings.update(fmap.timings)
     elif not (_same_polygon(fmap.src, src) and _same_polygon(fmap.dst, dst)):
         raise InputError("warp_map was built between other polygons than src and dst")

@@ -16,6 +16,9 @@ from ..polygon import Polygon, check_pair
 from .base import ThetaMap, as_points
 from .registry import METHODS, THETAS
 
+#: A rectangle ``(xmin, ymin, xmax, ymax)`` in a polygon's coordinates.
+Region = tuple[float, float, float, float]
+
 #: The composition works through the output grid in bands of about this many
 #: pixels, so its temporary arrays stay small whatever the image size.
 BAND_PIXELS = 1 << 18
@@ -99,7 +102,13 @@ class BijectiveMap:
 
     @classmethod
     def between(
-        cls, src: Polygon, dst: Polygon, options: MapOptions | None = None, **changes: Any
+        cls,
+        src: Polygon,
+        dst: Polygon,
+        options: MapOptions | None = None,
+        *,
+        regions: tuple[Region | None, Region | None] = (None, None),
+        **changes: Any,
     ) -> BijectiveMap:
         """Build the map between two polygons (see `build_map`).
 
@@ -109,6 +118,9 @@ class BijectiveMap:
             Corresponding polygons: vertex i of ``src`` goes to vertex i of ``dst``.
         options : MapOptions or None
             How to build it; the defaults otherwise.
+        regions : (region, region)
+            Where the source and the target map will be evaluated, each
+            ``(xmin, ymin, xmax, ymax)`` or None (see `build_map`).
         **changes
             Fields of `MapOptions` to change, e.g. ``max_area=4``.
 
@@ -131,7 +143,7 @@ class BijectiveMap:
                 opts = dataclasses.replace(opts, **changes)
             except TypeError as err:
                 raise InputError(f"unknown map option: {err}") from None
-        return build_map(src, dst, opts)
+        return build_map(src, dst, opts, regions=regions)
 
     @property
     def src(self) -> Polygon:
@@ -316,7 +328,13 @@ def matmul2(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float6
     return out
 
 
-def build_map(src: Polygon, dst: Polygon, options: MapOptions | None = None) -> BijectiveMap:
+def build_map(
+    src: Polygon,
+    dst: Polygon,
+    options: MapOptions | None = None,
+    *,
+    regions: tuple[Region | None, Region | None] = (None, None),
+) -> BijectiveMap:
     """The construction policy: choose Theta, build both maps concurrently, certify.
 
     Parameters
@@ -325,6 +343,12 @@ def build_map(src: Polygon, dst: Polygon, options: MapOptions | None = None) -> 
         Corresponding polygons (vertex i of ``src`` goes to vertex i of ``dst``).
     options : MapOptions or None
         The method and Theta strategy by name, and their parameters.
+    regions : (region, region)
+        Where each map will be evaluated: the input and the output image,
+        ``(xmin, ymin, xmax, ymax)``, or None. A method may spend its accuracy
+        there (FEM meshes a polygon that reaches far beyond its image graded
+        from the image), so that the cost follows the images, not the
+        polygons' size.
 
     Returns
     -------
@@ -349,9 +373,9 @@ def build_map(src: Polygon, dst: Polygon, options: MapOptions | None = None) -> 
     # GIL. Each map is independent, so the results do not depend on the
     # scheduling.
     with ThreadPoolExecutor(max_workers=2) as pool:
-        source = pool.submit(method.build, src, theta, opts, "source")
+        source = pool.submit(method.build, src, theta, opts, "source", regions[0])
         pool.submit(method.prepare)
-        phi1 = method.build(dst, theta, opts, "target")
+        phi1 = method.build(dst, theta, opts, "target", regions[1])
         phi0 = source.result()
     result = BijectiveMap(phi0, phi1)
     for phi in (phi0, phi1):

@@ -28,7 +28,7 @@ class Entry:
 
 
 #: Methods that approximate a harmonic map onto Theta (the paper's §3.1).
-#: Each target is a module with ``build(polygon, theta, options, role)``,
+#: Each target is a module with ``build(polygon, theta, options, role, region)``,
 #: which returns a `warpcli.maps.base.ThetaMap`, and ``prepare()``, which
 #: loads what the method needs later (compiled kernels) while maps are solved.
 METHODS = {

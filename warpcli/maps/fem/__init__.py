@@ -218,7 +218,13 @@ def _inv2(m: NDArray[np.float64]) -> NDArray[np.float64]:
         ) / det[:, None, None]
 
 
-def build(polygon: Polygon, theta: Theta, options: MapOptions, role: str = "source") -> FEMMap:
+def build(
+    polygon: Polygon,
+    theta: Theta,
+    options: MapOptions,
+    role: str = "source",
+    region: tuple[float, float, float, float] | None = None,
+) -> FEMMap:
     """Mesh ``polygon`` and solve the discrete harmonic map onto ``theta``.
 
     Parameters
@@ -229,6 +235,9 @@ def build(polygon: Polygon, theta: Theta, options: MapOptions, role: str = "sour
         ``max_area`` (for this ``role``), ``weights`` and ``check`` are used.
     role : {"source", "target"}
         Which of the pair ``polygon`` is (picks its ``max_area``).
+    region : (xmin, ymin, xmax, ymax) or None
+        Where the map will be evaluated (its image); a polygon reaching far
+        beyond it is meshed graded from it (see `mesh.graded_from`).
 
     Returns
     -------
@@ -248,7 +257,7 @@ def build(polygon: Polygon, theta: Theta, options: MapOptions, role: str = "sour
     area = options.areas()[0 if role == "source" else 1]
     clock = time.perf_counter
     t0 = clock()
-    mesh = mesh_polygon(polygon, auto_max_area(polygon) if area is None else area)
+    mesh = mesh_polygon(polygon, auto_max_area(polygon, region) if area is None else area, region=region)
     t1 = clock()
     values = solve_dirichlet(mesh, theta.points, options.weights)
     phi = FEMMap(polygon, theta, mesh, values, options.weights, timings={"mesh": t1 - t0, "solve": clock() - t1})
