@@ -449,14 +449,28 @@ def test_polygon_file_named_like_an_image_is_not_overwritten(files, capsys):
         assert fh.read() == original
 
 
-def test_huge_polygon_at_pixel_density_is_refused_without_meshing(files):
+def test_huge_polygon_at_pixel_density_is_meshed_only_near_the_image(files):
+    """1e7 px at --max-area 1: the density applies where the image is; the mesh grows away from it."""
     side = 1e7
-    assert 2 * side * side > MAX_TRIANGLES  # the request is far over the limit
     big = write_polygon(files.dir / "big.json", [[0, 0], [side, 0], [side, side], [0, side]])
-    # A separate process, so that a regression that tries to mesh is killed
-    # by the timeout instead of hanging the test run.
+    # A separate process, so that a regression that tries to mesh the whole
+    # polygon at pixel density is killed by the timeout.
     proc = subprocess.run(
-        [sys.executable, "-m", "warpcli", *argv(files, "--max-area", "1", src=big, dst=big)],
+        [sys.executable, "-m", "warpcli", *argv(files, "--max-area", "1", "--report", "-", src=big, dst=big)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 0, proc.stderr
+    import json
+
+    report = json.loads(proc.stdout)
+    assert report["source_mesh"]["triangles"] < 1_000_000
+
+
+def test_a_density_too_fine_for_the_image_is_refused_without_meshing(files):
+    proc = subprocess.run(
+        [sys.executable, "-m", "warpcli", *argv(files, "--max-area", "1e-6")],
         capture_output=True,
         text=True,
         timeout=60,
@@ -465,11 +479,11 @@ def test_huge_polygon_at_pixel_density_is_refused_without_meshing(files):
     assert proc.stdout == ""
     lines = proc.stderr.splitlines()
     assert len(lines) == 1, proc.stderr
-    assert lines[0].startswith(f"warp: error: {big}: ")
+    assert lines[0].startswith((f"warp: error: {files.src}: ", f"warp: error: {files.dst}: "))
     assert f"{MAX_TRIANGLES:,}" in lines[0]
     assert "Traceback" not in proc.stderr
     assert not os.path.exists(files.out)
-    assert sorted(os.listdir(files.dir)) == ["big.json", "dst.json", "in.png", "src.json"]
+    assert sorted(os.listdir(files.dir)) == ["dst.json", "in.png", "src.json"]
 
 
 class _FakeTerminal(io.StringIO):

@@ -184,3 +184,322 @@ def test_straight_alpha_written_to_openexr_is_premultiplied(tmp_path):
     assert main([str(out), str(tmp_path / "again.png"), "--src", sq, "--dst", sq, "--interp", "nearest", "--dtype", "uint8"]) == 0
     back_png = read_image(tmp_path / "again.png").pixels[1, 1].astype(int)
     assert np.abs(back_png - [200, 100, 50, 128]).max() <= 1
+
+
+# --- Determinism, checked writes, hostile inputs -------------------------------------------
+
+import fnmatch  # noqa: E402
+import os  # noqa: E402
+import re  # noqa: E402
+import socket  # noqa: E402
+import stat  # noqa: E402
+import struct  # noqa: E402
+import threading  # noqa: E402
+import time  # noqa: E402
+import zlib  # noqa: E402
+
+from warpcli.errors import ImageInputError, ImageIOError  # noqa: E402
+from warpcli.raster import imageio  # noqa: E402
+from warpcli.raster.imageio import (  # noqa: E402
+    MAX_IMAGE_BYTES_ENV,
+    TEMP_NAME_GLOB,
+    TEMP_NAME_PATTERN,
+    RasterImage,
+    atomic_path,
+    check_fits,
+    check_output_path,
+    max_image_bytes,
+    write_image,
+)
+from warpcli.raster.stmap import save_stmap  # noqa: E402
+
+# Every format and pixel type warpcli writes, as (extension, dtype, channels).
+WRITE_CASES = [
+    ("png", np.uint8, 3), ("png", np.uint16, 4), ("jpg", np.uint8, 3), ("tif", np.uint8, 3),
+    ("tif", np.uint16, 2), ("tif", np.float32, 4), ("exr", np.float16, 3), ("exr", np.float32, 4),
+]  # fmt: skip
+WRITE_IDS = [f"{e}-{np.dtype(d).name}-{c}ch" for e, d, c in WRITE_CASES]
+
+
+def stmap_points(h, w):
+    rng = np.random.default_rng(5)
+    pts = rng.random((h, w, 2)) * [w, h]
+    pts[0, 0] = np.nan
+    return pts
+
+
+def test_every_format_is_byte_identical_run_after_run(tmp_path):
+    # OpenImageIO's TIFF and OpenEXR writers stamp the time of writing (to the
+    # second) unless told a DateTime: two writes a second apart must not differ.
+    images = {f"{e}-{np.dtype(d).name}.{e}": RasterImage(pattern(20, 24, c, d)) for e, d, c in WRITE_CASES}
+
+    def write_all(directory):
+        directory.mkdir()
+        for name, image in images.items():
+            write_image(directory / name, image)
+        for ext in ("exr", "tif"):
+            save_stmap(directory / f"map.{ext}", stmap_points(20, 24), (24, 20))
+        return sorted(p.name for p in directory.iterdir())
+
+    first = write_all(tmp_path / "a")
+    time.sleep(1.1)
+    assert write_all(tmp_path / "b") == first and len(first) == len(WRITE_CASES) + 2
+    for name in first:
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+        spec, _ = spec_of(tmp_path / "a" / name)
+        stamped = [a.name for a in spec.extra_attribs if a.name in ("DateTime", "Software", "HostComputer")]
+        assert stamped == [], (name, stamped)
+
+
+@pytest.mark.parametrize("ext", ["tif", "exr", "jpg", "png"])
+def test_an_input_datetime_is_kept_as_it_was(tmp_path, ext):
+    image = RasterImage(pattern(8, 8, 3, np.uint8), attributes=(("DateTime", "string", "2001:02:03 04:05:06"),))
+    write_image(tmp_path / f"a.{ext}", image)
+    back = read_image(tmp_path / f"a.{ext}")
+    if ext in ("tif", "exr"):  # the formats that store it (OpenImageIO's PNG and JPEG writers do not)
+        assert ("DateTime", "string", "2001:02:03 04:05:06") in back.attributes
+
+
+def temp_name_regex(stem, ext):
+    head, tail = TEMP_NAME_PATTERN.split("XXXXXXXX")
+    return re.escape(head.format(stem=stem)) + r"[a-z0-9_]{8}" + re.escape(tail.format(ext=ext))
+
+
+@pytest.mark.parametrize("name", ["out.png", "out.tar.exr", "noext", "ünï cödé.tif", "x" * 240 + ".png"])
+def test_temporary_files_are_hidden_recognisable_and_beside_the_output(tmp_path, name):
+    out = tmp_path / name
+    with atomic_path(str(out)) as tmp:
+        assert os.path.dirname(tmp) == str(tmp_path)  # same file system: an atomic rename
+        base = os.path.basename(tmp)
+        stem, ext = os.path.splitext(name)
+        assert base.startswith(".") and base.endswith(ext) and fnmatch.fnmatch(base, TEMP_NAME_GLOB)
+        if len(name) < 200:
+            assert re.fullmatch(temp_name_regex(stem, ext), base), base
+        else:  # shortened to fit the file system's limit, still recognisable
+            assert len(os.fsencode(base)) <= 255 and ".warpcli-tmp-" in base
+        with open(tmp, "w") as fh:
+            fh.write("data")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]
+    assert out.read_text() == "data"
+
+
+@pytest.mark.parametrize(
+    "failure,error,reason",
+    [
+        (RuntimeError("a bug"), RuntimeError, "a bug"),
+        (OSError(28, os.strerror(28)), ImageIOError, "No space left on device"),
+        (OSError(5, os.strerror(5)), ImageIOError, "Input/output error"),
+        (OSError(13, os.strerror(13)), ImageInputError, "Permission denied"),
+        (ImageIOError("x.png: its own message"), ImageIOError, "its own message"),
+    ],
+)
+def test_a_failed_body_leaves_nothing_and_names_the_file(tmp_path, failure, error, reason):
+    out = tmp_path / "out.json"
+    out.write_text("old")
+    with pytest.raises(error) as info:
+        with atomic_path(str(out)) as tmp:
+            with open(tmp, "w") as fh:
+                fh.write("partial")
+            raise failure
+    assert reason in str(info.value)
+    if isinstance(failure, OSError) and not isinstance(failure, ImageIOError):
+        assert str(info.value) == f"{out}: cannot write: {reason}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"] and out.read_text() == "old"
+
+
+def test_an_unwritable_pixel_type_leaves_nothing(tmp_path):
+    with pytest.raises(ImageIOError, match="unsupported pixel type complex64"):
+        write_image(tmp_path / "out.tif", RasterImage(np.zeros((4, 4, 1), dtype=np.complex64)))
+    assert list(tmp_path.iterdir()) == []
+
+
+def make_special(tmp_path, kind):
+    """A path to something that is not a regular file."""
+    if kind == "fifo":
+        os.mkfifo(tmp_path / "in.png")  # no writer: open() would block forever
+        return str(tmp_path / "in.png")
+    if kind == "socket":
+        sock = socket.socket(socket.AF_UNIX)
+        sock.bind(str(tmp_path / "in.png"))
+        return str(tmp_path / "in.png")
+    if kind == "symlink-to-zero":
+        os.symlink("/dev/zero", tmp_path / "in.png")
+        return str(tmp_path / "in.png")
+    if kind == "directory":
+        (tmp_path / "in.png").mkdir()
+        return str(tmp_path / "in.png")
+    return kind  # a device
+
+
+SPECIALS = {
+    "fifo": "FIFO", "socket": "socket", "/dev/zero": "character device", "/dev/null": "character device",
+    "/dev/urandom": "character device", "symlink-to-zero": "character device", "directory": "directory",
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("kind", list(SPECIALS))
+def test_anything_but_a_regular_file_is_refused_at_once(tmp_path, kind):
+    path = make_special(tmp_path, kind)
+    if not os.path.exists(path) and not stat.S_ISSOCK(os.lstat(path).st_mode):
+        pytest.skip(f"{path} does not exist here")
+    result = {}
+
+    def read():
+        try:
+            read_image(path)
+        except ImageInputError as err:
+            result["error"] = err
+
+    reader = threading.Thread(target=read, daemon=True)  # a hang must fail the test, not stall it
+    reader.start()
+    reader.join(timeout=20)
+    assert not reader.is_alive(), f"read_image({path!r}) blocked"
+    msg = str(result["error"])
+    assert msg.startswith(f"{path}: is a") and SPECIALS[kind] in msg and "\n" not in msg
+
+
+def test_an_output_that_is_not_a_regular_file_is_never_replaced(tmp_path):
+    os.mkfifo(tmp_path / "out.png")
+    os.mkfifo(tmp_path / "report.json")
+    with pytest.raises(ImageInputError, match="is a FIFO .*an output must be a regular file"):
+        check_output_path(tmp_path / "out.png")
+    with pytest.raises(ImageInputError, match="is a FIFO"):
+        check_output_path(tmp_path / "report.json", image=False)
+    with pytest.raises(ImageInputError, match="is a FIFO"):
+        write_image(tmp_path / "out.png", RasterImage(pattern(4, 4, 3, np.uint8)))
+    with pytest.raises(ImageInputError, match="is a FIFO"):
+        with atomic_path(str(tmp_path / "report.json")):
+            pass
+    assert all(stat.S_ISFIFO(os.lstat(p).st_mode) for p in tmp_path.iterdir())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png", "report.json"]
+
+
+def png_of_zeros(path, w, h, rows=100):
+    """A valid w x h 8-bit grey PNG of zeros, built in a few milliseconds and
+    kilobytes: one deflate block of `rows` rows, repeated (each ends with a full
+    flush, so it does not refer back), and the Adler-32 of h * (w + 1) zeros."""
+    assert h % rows == 0
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    block = bytes((w + 1) * rows)  # each row: filter type 0, then w zeros
+    co = zlib.compressobj(9)
+    first = co.compress(block) + co.flush(zlib.Z_FULL_FLUSH)
+    again = co.compress(block) + co.flush(zlib.Z_FULL_FLUSH)
+    end = co.flush()[:-4]  # the final block, without the checksum of two blocks
+    adler = ((len(block) * (h // rows)) % 65521) << 16 | 1  # a = 1, b = n for n zeros
+    data = first + again * (h // rows - 1) + end + struct.pack(">I", adler)
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0)
+    with open(path, "wb") as fh:
+        fh.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", data) + chunk(b"IEND", b""))
+    return str(path)
+
+
+def test_the_generated_png_of_zeros_is_valid(tmp_path):
+    img = read_image(png_of_zeros(tmp_path / "z.png", 300, 200, rows=20))
+    assert img.pixels.shape == (200, 300, 1) and img.pixels.dtype == np.uint8 and not img.pixels.any()
+
+
+def test_an_image_too_large_for_memory_is_refused_from_its_header(tmp_path, monkeypatch):
+    # 30000 x 30000 decodes to 858 MiB from 0.9 MB of PNG: refused before any pixel is decoded.
+    big = png_of_zeros(tmp_path / "big.png", 30000, 30000)
+    assert os.path.getsize(big) < 2_000_000
+    monkeypatch.setenv(MAX_IMAGE_BYTES_ENV, str(100 * 2**20))
+    with pytest.raises(ImageInputError) as info:
+        read_image(big)
+    assert str(info.value) == (
+        f"{big}: a 30000 x 30000 image of 1 channel(s) x 1 byte needs 858 MiB of memory, "
+        f"more than the 100 MiB warpcli may use ({MAX_IMAGE_BYTES_ENV})"
+    )
+
+
+@pytest.mark.parametrize("ext,dtype,channels", WRITE_CASES, ids=WRITE_IDS)
+def test_the_memory_limit_counts_every_byte(tmp_path, monkeypatch, ext, dtype, channels):
+    # The limit is exact: the image's own size is allowed, one byte less is not.
+    path = tmp_path / f"in.{ext}"
+    write_image(path, RasterImage(pattern(12, 10, channels, dtype)))
+    stored = 12 * 10 * (3 if ext == "jpg" else channels) * np.dtype(dtype).itemsize
+    monkeypatch.setenv(MAX_IMAGE_BYTES_ENV, str(stored))
+    assert read_image(path).pixels.nbytes == stored
+    monkeypatch.setenv(MAX_IMAGE_BYTES_ENV, str(stored - 1))
+    with pytest.raises(ImageInputError, match=rf"^{re.escape(str(path))}: a 10 x 12 image of .* needs {stored} bytes"):
+        read_image(path)
+
+
+def test_an_oriented_image_counts_twice(tmp_path, monkeypatch):
+    inp = write(tmp_path / "in.tif", pattern(10, 12, 3, np.uint8), attrs=[("Orientation", "int", 6)])
+    monkeypatch.setenv(MAX_IMAGE_BYTES_ENV, str(2 * 360 - 1))  # read, then reoriented
+    with pytest.raises(ImageInputError, match="2 copies, to apply the orientation"):
+        read_image(inp)
+    monkeypatch.setenv(MAX_IMAGE_BYTES_ENV, str(2 * 360))
+    assert read_image(inp).pixels.shape == (12, 10, 3)
+
+
+def test_the_default_limit_is_a_share_of_the_available_memory(tmp_path, monkeypatch):
+    monkeypatch.delenv(MAX_IMAGE_BYTES_ENV, raising=False)
+    monkeypatch.setattr(imageio, "_available_memory", lambda: 40_000)
+    assert max_image_bytes() == int(40_000 * imageio.MEMORY_FRACTION)
+    small = write(tmp_path / "small.png", pattern(64, 64, 3, np.uint8))  # 12 KiB
+    large = write(tmp_path / "large.png", pattern(128, 128, 3, np.uint8))  # 48 KiB
+    assert read_image(small).pixels.shape == (64, 64, 3)
+    with pytest.raises(ImageInputError, match=f"of the available memory; set {MAX_IMAGE_BYTES_ENV}"):
+        read_image(large)
+    monkeypatch.setattr(imageio, "_available_memory", lambda: None)  # unknown: no limit
+    assert max_image_bytes() > 2**60
+
+
+def test_the_real_memory_limit_is_sane(monkeypatch):
+    monkeypatch.delenv(MAX_IMAGE_BYTES_ENV, raising=False)
+    limit = max_image_bytes()
+    assert 2**20 < limit < 2**60  # at least 1 MiB, and bounded by this machine
+
+
+@pytest.mark.parametrize(
+    "dims,fits",
+    [((640, 480, 3, 1), True), ((1000, 1000, 1, 1), True), ((1000, 1000, 1, 2), False),
+     ((100000, 100000, 4, 4), False), ((0, 10, 3, 4), True), ((2**31, 2**31, 4, 8), False)],
+)  # fmt: skip
+def test_check_fits(monkeypatch, dims, fits):
+    monkeypatch.setenv(MAX_IMAGE_BYTES_ENV, "1000000")
+    what = "--size {}x{}".format(*dims[:2])
+    if fits:
+        check_fits(*dims, what)
+        return
+    with pytest.raises(ImageInputError) as info:
+        check_fits(*dims, what)
+    w, h, c, b = dims
+    msg = str(info.value)
+    assert msg.startswith(f"{what}: a {w} x {h} image of {c} channel(s) x {b} byte")
+    assert msg.endswith(f"more than the 977 KiB warpcli may use ({MAX_IMAGE_BYTES_ENV})") and "\n" not in msg
+
+
+def test_check_fits_names_the_size_it_needs(monkeypatch):
+    monkeypatch.setenv(MAX_IMAGE_BYTES_ENV, str(2**30))
+    with pytest.raises(ImageInputError, match=r"^--size 100000x100000: .* needs 149 GiB of memory, more than the 1.0 GiB"):
+        check_fits(100000, 100000, 4, 4, "--size 100000x100000")
+
+
+@pytest.mark.parametrize("value", ["abc", "0", "-5", "1.5e9"])
+def test_a_bad_limit_is_refused_by_name(monkeypatch, value):
+    monkeypatch.setenv(MAX_IMAGE_BYTES_ENV, value)
+    with pytest.raises(ImageInputError, match=f"^{MAX_IMAGE_BYTES_ENV}='{re.escape(value)}': not a positive whole number"):
+        check_fits(1, 1, 1, 1, "x.png")
+
+
+@pytest.mark.parametrize("ext,dtype,channels", WRITE_CASES, ids=WRITE_IDS)
+@pytest.mark.parametrize("keep", [0.0, 0.01, 0.3, 0.6, 0.95])
+def test_a_truncated_image_fails_on_one_line_and_prints_nothing_else(tmp_path, capfd, ext, dtype, channels, keep):
+    # libpng prints "libpng error: ..." on file descriptor 2 itself: captured
+    # and folded into warpcli's message, never shown.
+    whole = tmp_path / f"whole.{ext}"
+    write_image(whole, RasterImage(pattern(48, 64, channels, dtype)))
+    data = whole.read_bytes()
+    cut = tmp_path / f"cut.{ext}"
+    cut.write_bytes(data[: int(len(data) * keep)])
+    capfd.readouterr()
+    with pytest.raises(ImageInputError) as info:
+        read_image(cut)
+    msg = str(info.value)
+    assert msg.startswith(f"{cut}: cannot read image: ") and "\n" not in msg
+    assert capfd.readouterr() == ("", "")

@@ -9,7 +9,8 @@ import pytest
 from helpers import read_pixels, regular, star, write_png, write_polygon
 from warpcli.cli import main
 from warpcli.grid import pixel_centres
-from warpcli.raster.stmap import load_stmap, save_stmap
+from warpcli.errors import ImageInputError
+from warpcli.raster.stmap import check_stmap_path, load_stmap, save_stmap
 
 
 @pytest.fixture
@@ -86,7 +87,7 @@ def test_forward_map_inverts_the_inverse_map(scene):
     args = [scene["image"], str(d / "out.png"), "--src", scene["src"], "--dst", scene["dst"]]
     assert main([*args, "--save-map", str(d / "inv.exr"), "--save-forward-map", str(d / "fwd.exr")]) == 0
     inv = load_stmap(d / "inv.exr", (112, 96))  # output pixel -> input point
-    fwd = load_stmap(d / "fwd.exr", (112, 96))  # input pixel -> output point
+    fwd = load_stmap(d / "fwd.exr", (112, 96), kind="forward")  # input pixel -> output point
     # Following the inverse map from an output pixel, then the forward map from
     # the input pixel nearest to it, lands back within about a pixel.
     ok = np.isfinite(inv[..., 0])
@@ -162,3 +163,94 @@ def test_oiiotool_st_warp_agrees_with_warpcli(scene):
     x, y = inv[..., 0], inv[..., 1]
     inner = np.isfinite(x) & (x > 1.5) & (x < 110.5) & (y > 1.5) & (y < 94.5)
     assert np.abs(theirs[inner] - ours[inner]).max() <= 1
+
+
+def grid_points(w, h):
+    """The identity map of a w x h image, with one undefined pixel."""
+    pts = pixel_centres(w, h).reshape(h, w, 2).copy()
+    pts[1, 2] = np.nan
+    return pts
+
+
+@pytest.mark.parametrize("name", ["m.png", "m.jpg", "m.PNG", "m.bmp", "m.webp", "m"])
+def test_stmaps_are_never_written_in_8_bits(tmp_path, name):
+    # An 8-bit map would quantize s and t to 1/255 of the image: a blocky warp.
+    with pytest.raises(ImageInputError) as info:
+        save_stmap(tmp_path / name, grid_points(5, 4), (5, 4))
+    assert str(info.value) == f"{tmp_path / name}: an STMap must be float OpenEXR (.exr) or TIFF (.tif, .tiff)"
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(ImageInputError, match="must be float OpenEXR"):
+        check_stmap_path(name)
+
+
+@pytest.mark.parametrize("ext", ["exr", "tif", "tiff", "EXR", "TIF"])
+@pytest.mark.parametrize("kind", ["inverse", "forward"])
+@pytest.mark.parametrize("t_up", [False, True])
+def test_float_stmaps_round_trip_with_their_header(tmp_path, ext, kind, t_up):
+    # TIFF keeps no attribute of warpcli's: the header travels in the
+    # ImageDescription, so the kind and the way t runs survive in both formats.
+    pts = grid_points(7, 5) * 3.0
+    path = tmp_path / f"m.{ext}"
+    check_stmap_path(path)
+    save_stmap(path, pts, (21, 15), kind=kind, t_up=t_up)
+    assert read_pixels(path).dtype == np.float32
+    back = load_stmap(path, (21, 15), kind=kind)  # the header says which way t runs
+    assert np.array_equal(np.isnan(back), np.isnan(pts))
+    np.testing.assert_allclose(back[np.isfinite(pts)], pts[np.isfinite(pts)], rtol=1e-6)
+
+
+@pytest.mark.parametrize("ext", ["exr", "tif"])
+def test_a_map_of_the_other_kind_is_refused(tmp_path, ext):
+    save_stmap(tmp_path / f"fwd.{ext}", grid_points(4, 3), (4, 3), kind="forward")
+    save_stmap(tmp_path / f"inv.{ext}", grid_points(4, 3), (4, 3), kind="inverse")
+    with pytest.raises(ImageInputError) as forward:
+        load_stmap(tmp_path / f"fwd.{ext}", (4, 3))  # apply-map's default: the inverse map
+    with pytest.raises(ImageInputError) as inverse:
+        load_stmap(tmp_path / f"inv.{ext}", (4, 3), kind="forward")
+    msg = str(forward.value)
+    assert msg.startswith(f"{tmp_path / f'fwd.{ext}'}: ") and "\n" not in msg
+    assert "forward map" in msg and "inverse map" in msg and "--save-map" in msg
+    assert "inverse map" in str(inverse.value) and "not a forward map" in str(inverse.value)
+    # Asked for explicitly, each kind loads.
+    assert np.isfinite(load_stmap(tmp_path / f"fwd.{ext}", (4, 3), kind="forward")).sum() == 22
+    assert np.isfinite(load_stmap(tmp_path / f"inv.{ext}", (4, 3))).sum() == 22
+
+
+def test_a_map_without_a_header_is_taken_as_asked(tmp_path):
+    # A float STMap from elsewhere (Nuke, oiiotool) has no warpcli header.
+    px = np.zeros((2, 2, 3), dtype=np.float32)
+    px[..., 0], px[..., 1] = [[0.25, 0.75]] * 2, [[0.25] * 2, [0.75] * 2]
+    spec = oiio.ImageSpec(2, 2, 3, "float")
+    out = oiio.ImageOutput.create(str(tmp_path / "m.exr"))
+    assert out.open(str(tmp_path / "m.exr"), spec) and out.write_image(px)
+    out.close()
+    for kind in ("inverse", "forward"):
+        np.testing.assert_allclose(load_stmap(tmp_path / "m.exr", (2, 2), kind=kind), [[[0.5, 0.5], [1.5, 0.5]], [[0.5, 1.5], [1.5, 1.5]]])
+
+
+def test_apply_map_refuses_a_forward_map(scene, capsys):
+    d = scene["dir"]
+    save_stmap(d / "fwd.exr", grid_points(112, 96), (112, 96), kind="forward")
+    assert main(["apply-map", str(d / "fwd.exr"), scene["image"], str(d / "x.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"warp: error: {d / 'fwd.exr'}: this is a forward map")
+    assert not (d / "x.png").exists()
+
+
+def test_a_map_of_an_unknown_kind_is_refused(tmp_path):
+    px = np.zeros((2, 2, 4), dtype=np.float32)
+    spec = oiio.ImageSpec(2, 2, 4, "float")
+    spec.attribute("warpcli:map", "sideways")
+    out = oiio.ImageOutput.create(str(tmp_path / "m.exr"))
+    assert out.open(str(tmp_path / "m.exr"), spec) and out.write_image(px)
+    out.close()
+    with pytest.raises(ImageInputError, match="unknown kind warpcli:map='sideways', not 'inverse'"):
+        load_stmap(tmp_path / "m.exr", (2, 2))
+
+
+def test_unknown_kinds_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="unknown map kind"):
+        save_stmap(tmp_path / "m.exr", grid_points(4, 3), (4, 3), kind="backward")
+    with pytest.raises(ValueError, match="unknown map kind"):
+        load_stmap(tmp_path / "m.exr", (4, 3), kind="backward")
+    assert list(tmp_path.iterdir()) == []

@@ -20,7 +20,7 @@ from .maps.compose import BijectiveMap, PullBack
 from .options import WarpOptions
 from .polygon import Polygon, check_pair, read_polygon
 from .outputs import PendingOutputs
-from .raster.imageio import RasterImage, check_output_path, convert_pixels, read_image, write_image
+from .raster.imageio import RasterImage, check_fits, check_output_path, convert_pixels, read_image, write_image
 from .raster.pixels import unit
 from .raster.resample import EdgeCoverage, edge_coverage, resample
 from .report import build_report
@@ -161,6 +161,9 @@ def warp_image(
     dst = dst if isinstance(dst, Polygon) else Polygon(dst, name="dst")
     check_pair(src, dst)
     width, height = opts.size if opts.size is not None else (img.shape[1], img.shape[0])
+    # The output in the working type, and per pixel of the window the source
+    # point and the Jacobian (2 + 4 float64): refuse what cannot fit at once.
+    check_fits(width, height, img.shape[2] + 12, 4, f"an output of {width}x{height}")
     bg = _background(opts.background, img)
     stage = progress or (lambda name: None)
     timings: dict[str, float] = {}
@@ -315,6 +318,11 @@ def warp_file(
         check_output_path(path, inputs=inputs)
     if report_path is not None and os.fspath(report_path) != "-":
         check_output_path(report_path, inputs=inputs, image=False)
+    from .raster.stmap import check_stmap_path
+
+    for path in (save_map, save_forward_map):
+        if path is not None:
+            check_stmap_path(path)
     outputs = [os.path.abspath(os.fspath(p)) for p in (output_path, *extra, report_path) if p not in (None, "-")]
     if len(set(outputs)) != len(outputs):
         raise InputError(f"{os.fspath(output_path)}: the same path is given for two outputs")

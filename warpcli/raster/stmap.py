@@ -1,4 +1,4 @@
-"""Maps as files: STMaps (normalized source coordinates per pixel) in OpenEXR.
+"""Maps as files: STMaps (normalized source coordinates per pixel) in float OpenEXR or TIFF.
 
 Convention (OpenImageIO's ``st_warp``; Nuke's STMap node with ``t`` up): the
 pixel at (row r, column c) of an STMap holds, in channels R and G, the point
@@ -15,6 +15,7 @@ black); B is 0. The header says which way t runs and what the map is.
 from __future__ import annotations
 
 import os
+import re
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +28,38 @@ from .pixels import to_unit
 #: input -> output) and which way t runs ("down" or "up").
 KIND_ATTRIBUTE = "warpcli:map"
 T_ATTRIBUTE = "warpcli:t"
+#: The kinds of map.
+KINDS = ("inverse", "forward")
+#: File extensions an STMap may have: formats that store float32.
+STMAP_EXTENSIONS = (".exr", ".tif", ".tiff")
+
+# TIFF keeps no attribute of its own choosing: the header is repeated in the
+# ImageDescription, where every format keeps it.
+_DESCRIPTION = "warpcli STMap: " + KIND_ATTRIBUTE + "={kind}, " + T_ATTRIBUTE + "={t}"
+_DESCRIBED = re.compile(r"(warpcli:map|warpcli:t)=(\w+)")
+
+
+def check_stmap_path(path: str | os.PathLike[str]) -> None:
+    """Refuse, before any work, an STMap path in a format that cannot hold float.
+
+    An 8-bit map (PNG, JPEG) quantizes s and t to 1/255 of the image: a
+    blocky warp. `save_stmap` writes float32, so the file must be OpenEXR or
+    TIFF.
+
+    Raises
+    ------
+    ImageInputError
+        If the extension is not one of `STMAP_EXTENSIONS`.
+
+    >>> check_stmap_path("map.exr")
+    >>> check_stmap_path("map.png")
+    Traceback (most recent call last):
+    ...
+    warpcli.errors.ImageInputError: map.png: an STMap must be float OpenEXR (.exr) or TIFF (.tif, .tiff)
+    """
+    name = os.fspath(path)
+    if os.path.splitext(name)[1].lower() not in STMAP_EXTENSIONS:
+        raise ImageInputError(f"{name}: an STMap must be float OpenEXR (.exr) or TIFF (.tif, .tiff)")
 
 
 def save_stmap(
@@ -37,7 +70,11 @@ def save_stmap(
     kind: str = "inverse",
     t_up: bool = False,
 ) -> None:
-    """Write a map as a float32 RGBA OpenEXR STMap (atomically).
+    """Write a map as a float32 RGBA STMap, OpenEXR or TIFF (atomically).
+
+    The path is checked first (`check_stmap_path`): an STMap is never written
+    as 8-bit PNG or JPEG. The header (``warpcli:map``, ``warpcli:t``) is also
+    written in the ImageDescription, which TIFF keeps.
 
     Parameters
     ----------
@@ -49,7 +86,17 @@ def save_stmap(
     kind : {"inverse", "forward"}
     t_up : bool
         Nuke's orientation (t up) instead of OpenImageIO's (t down).
+
+    Raises
+    ------
+    ImageInputError
+        If ``path`` is not an .exr, .tif or .tiff file, or cannot be written.
+    ImageIOError
+        If writing fails.
     """
+    check_stmap_path(path)
+    if kind not in KINDS:
+        raise ValueError(f"unknown map kind {kind!r}; choose one of {', '.join(KINDS)}")
     w, h = size
     s = points[..., 0] / w
     t = points[..., 1] / h
@@ -60,18 +107,24 @@ def save_stmap(
     rgba[..., 0] = np.where(ok, s, -1.0)
     rgba[..., 1] = np.where(ok, t, -1.0)
     rgba[..., 3] = ok
+    t_dir = "up" if t_up else "down"
     attrs = (
         (KIND_ATTRIBUTE, "string", kind),
-        (T_ATTRIBUTE, "string", "up" if t_up else "down"),
+        (T_ATTRIBUTE, "string", t_dir),
+        ("ImageDescription", "string", _DESCRIPTION.format(kind=kind, t=t_dir)),
         ("compression", "string", "zip"),
     )
     write_image(path, RasterImage(rgba, ("R", "G", "B", "A"), 3, attrs))
 
 
 def load_stmap(
-    path: str | os.PathLike[str], size: tuple[int, int], *, t_up: bool | None = None
+    path: str | os.PathLike[str], size: tuple[int, int], *, t_up: bool | None = None, kind: str = "inverse"
 ) -> NDArray[np.float64]:
     """Read an STMap as continuous points in an image of ``size``.
+
+    A map whose header says it is of the other kind is refused: applying a
+    forward map as if it were the inverse gives a wrong warp without any sign
+    of it. A map without a header (from Nuke, say) is taken to be ``kind``.
 
     Parameters
     ----------
@@ -79,6 +132,10 @@ def load_stmap(
         Size of the image the map samples.
     t_up : bool or None
         Which way t runs; None: as the file's header says, else down.
+    kind : {"inverse", "forward"}
+        The kind of map wanted: "inverse" (output -> input, what apply-map
+        applies; written by ``--save-map``) or "forward" (input -> output,
+        ``--save-forward-map``).
 
     Returns
     -------
@@ -88,15 +145,28 @@ def load_stmap(
     Raises
     ------
     ImageInputError
-        If the file is not an image with at least two channels.
+        If the file is not an image with at least two channels, or its header
+        says it is a map of the other kind.
     """
+    if kind not in KINDS:
+        raise ValueError(f"unknown map kind {kind!r}; choose one of {', '.join(KINDS)}")
     name = os.fspath(path)
     img = read_image(name)
     px = to_unit(img.pixels)  # an integer STMap spans 0..1
     if px.shape[2] < 2:
         raise ImageInputError(f"{name}: an STMap needs two channels (s, t), this image has {px.shape[2]}")
+    header = _header(img.attributes)
+    found = header.get(KIND_ATTRIBUTE, kind)
+    if found != kind:
+        if found == "forward":
+            raise ImageInputError(
+                f"{name}: this is a forward map (input -> output); apply-map needs the inverse map "
+                "(output -> input) written by --save-map"
+            )
+        if found == "inverse":
+            raise ImageInputError(f"{name}: this is an inverse map (output -> input), not a forward map")
+        raise ImageInputError(f"{name}: an STMap of unknown kind {KIND_ATTRIBUTE}={found!r}, not {kind!r}")
     if t_up is None:
-        header = dict((n, v) for n, _, v in img.attributes)
         t_up = header.get(T_ATTRIBUTE) == "up"
     w, h = size
     s = px[..., 0]
@@ -109,3 +179,14 @@ def load_stmap(
     points = np.stack([s * w, t * h], axis=-1)
     points[~ok] = np.nan
     return points
+
+
+def _header(attributes) -> dict:
+    """warpcli's header: its own attributes, else what the ImageDescription says."""
+    attrs = {name: value for name, _, value in attributes}
+    header = {key: value for key, value in attrs.items() if key in (KIND_ATTRIBUTE, T_ATTRIBUTE)}
+    description = attrs.get("ImageDescription")
+    if isinstance(description, str) and description.startswith("warpcli STMap:"):
+        for key, value in _DESCRIBED.findall(description):
+            header.setdefault(key, value)
+    return header
