@@ -199,17 +199,19 @@ class _Sampling:
 
     pull: PullBack
     coverage: EdgeCoverage | None
-    footprints: bool  # resample with the Jacobians (antialiasing where the map shrinks)
+    # Resample with the Jacobians: footprints where the map shrinks (linear),
+    # coverage along the pre-image of the input's border (linear and cubic).
+    jacobians: bool
 
 
 def _sampling(fmap: BijectiveMap, width: int, height: int, opts: WarpOptions, *, keep_jacobian: bool) -> _Sampling:
-    footprints = opts.antialias and opts.interp == "linear"
-    pull = fmap.pull_back(width, height, jacobian=keep_jacobian or footprints)
+    jacobians = opts.antialias and opts.interp != "nearest"
+    pull = fmap.pull_back(width, height, jacobian=keep_jacobian or jacobians)
     coverage = None
     if opts.antialias and opts.interp != "nearest":
         cov = edge_coverage(fmap.dst.points, np.isfinite(pull.points[..., 0]), pull.origin)
         coverage = dataclasses.replace(cov, source_points=fmap.inverse_boundary(cov.edge, cov.t))
-    return _Sampling(pull, coverage, footprints)
+    return _Sampling(pull, coverage, jacobians)
 
 
 def _resample_with(
@@ -225,7 +227,7 @@ def _resample_with(
 
     pull = plan.pull
     width, height = pull.size
-    window = sample(pull.points, pull.jacobian if plan.footprints else None, plan.coverage)
+    window = sample(pull.points, pull.jacobian if plan.jacobians else None, plan.coverage)
     if window.shape[:2] == (height, width):
         return window
     # Pixels outside the window have no pre-image: the background, exactly as

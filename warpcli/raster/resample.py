@@ -57,10 +57,12 @@ def resample(
         is); straight colour is premultiplied to blend and divided back after
         (``nearest`` does not blend, so it takes pixels exactly as they are).
     jacobian : (H2, W2, 2, 2) array_like of float or None
-        With ``linear``: the Jacobian of the inverse map at each output pixel
-        (d source / d output; NaN where unknown), to average each pixel over
-        its footprint in the source (antialiasing where the map shrinks; see
-        `warpcli.raster._kernels.sample_linear_aa`).
+        The Jacobian of the inverse map at each output pixel (d source /
+        d output; NaN where unknown), for antialiasing: with ``linear``, each
+        pixel is averaged over its footprint in the source where the map
+        shrinks (see `warpcli.raster._kernels.sample_linear_aa`); with
+        ``linear`` and ``cubic``, pixels crossed by the pre-image of the
+        input's border are covered in proportion (see `_border_coverage`).
     coverage : EdgeCoverage or None
         Antialias the target polygon's edge: the fraction of each edge pixel
         inside the polygon goes into alpha (with an alpha channel) or blends
@@ -97,6 +99,15 @@ def resample(
         if missing.any():
             points = points.copy()
             points[coverage.pixels[missing]] = coverage.source_points[missing]
+    border = None
+    if jacobian is not None and interp != "nearest":
+        border = _border_coverage(points, np.asarray(jacobian, dtype=np.float64).reshape(-1, 2, 2), w, h)
+        if border is not None:
+            # Pixels just beyond the input's border take the colour at the
+            # border, blended by how much of them the input covers.
+            points = points.copy() if coverage is None or not missing.any() else points
+            points[border[0], 0] = np.clip(points[border[0], 0], 0.0, w)
+            points[border[0], 1] = np.clip(points[border[0], 1], 0.0, h)
     bg = np.ascontiguousarray(np.broadcast_to(np.asarray(background, dtype=np.float64), (nc,)))
     work_dtype = np.float64 if img.dtype == np.float64 else np.float32
     if associated_alpha or interp == "nearest":
@@ -147,16 +158,61 @@ def resample(
             if c != alpha_channel_blend:
                 out[:, c] *= inv
     if coverage is not None:
-        cov = coverage.fraction.astype(work_dtype)[:, None]
-        px = coverage.pixels
-        if alpha_channel is not None:
-            if associated_alpha:
-                out[px] *= cov
-            else:
-                out[px, alpha_channel] *= cov[:, 0]
-        else:
-            out[px] = cov * out[px] + (1 - cov) * bg.astype(work_dtype)
+        _blend(out, coverage.pixels, coverage.fraction.astype(work_dtype), bg.astype(work_dtype), alpha_channel, associated_alpha)
+    if border is not None:
+        _blend(out, border[0], border[1].astype(work_dtype), bg.astype(work_dtype), alpha_channel, associated_alpha)
     return _to_dtype(out.reshape(*out_shape, nc), img.dtype)
+
+
+def _blend(out, pixels, fraction, bg, alpha_channel, associated_alpha) -> None:
+    """Pixels covered only by ``fraction``: alpha scaled by it, or blended with the background."""
+    cov = fraction[:, None]
+    if alpha_channel is not None:
+        if associated_alpha:
+            out[pixels] *= cov
+        else:
+            out[pixels, alpha_channel] *= cov[:, 0]
+    else:
+        out[pixels] = cov * out[pixels] + (1 - cov) * bg
+
+
+def _border_coverage(points, jacobian, w: int, h: int):
+    """Output pixels crossed by the pre-image of the input's border, and the share of each inside.
+
+    Where the source polygon runs past the input image, the input's border
+    is an edge in the output like the target polygon's: it gets the same
+    distance-field coverage, ``clip(1/2 + s, 0, 1)`` with s the signed
+    distance from the source point to the border measured in output pixels
+    (the distance in source pixels over ``|J^T n|``, n the border's normal).
+    Only for pixels sampled once (columns of J at most 1.3 long, where the
+    map does not shrink): where it shrinks, the footprint sampler already
+    averages over the border.
+
+    Returns
+    -------
+    (pixels, fraction) or None
+        Flat pixel indices and coverages in (0, 1); None if there are none.
+    """
+    x = points[:, 0]
+    y = points[:, 1]
+    with np.errstate(invalid="ignore"):
+        dx = np.minimum(x, w - x)
+        dy = np.minimum(y, h - y)
+        near = np.flatnonzero(np.minimum(dx, dy) < 1.0)
+    if near.size == 0:
+        return None
+    j = jacobian[near]
+    single = (j[:, 0, 0] ** 2 + j[:, 1, 0] ** 2 <= 1.69) & (j[:, 0, 1] ** 2 + j[:, 1, 1] ** 2 <= 1.69)
+    near, j = near[single], j[single]
+    gx = np.hypot(j[:, 0, 0], j[:, 0, 1])  # |J^T e_x|: how fast x changes per output pixel
+    gy = np.hypot(j[:, 1, 0], j[:, 1, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.minimum(dx[near] / gx, dy[near] / gy)
+    frac = np.clip(0.5 + s, 0.0, 1.0)
+    keep = (frac > 0) & (frac < 1)
+    if not keep.any():
+        return None
+    return near[keep], frac[keep]
 
 
 # Image types the compiled samplers read directly.
