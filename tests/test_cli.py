@@ -725,3 +725,10 @@ def test_apply_map_is_a_subcommand(files, capsys):
     assert os.path.exists(out)
     assert main(["apply-map", "--help"]) == 0
     assert capsys.readouterr().out.startswith("Usage: warp apply-map [OPTIONS] MAP INPUT OUTPUT")
+
+
+def test_verbose_shows_every_stage_including_metrics(files, capsys):
+    assert main(argv(files, "-v", "--report", str(files.dir / "r.json"), "--heatmap", str(files.dir / "h.png"))) == 0
+    err = capsys.readouterr().err
+    for stage in ("mesh", "solve", "compose", "resample", "read", "write", "figures", "metrics"):
+        assert f"warp: {stage}" in err, stage

@@ -129,3 +129,32 @@ def test_triangle_jacobians_of_an_affine_map():
     assert math.isfinite(j.sum())
     inv = triangle_jacobians(values, mesh.vertices, mesh.triangles)
     np.testing.assert_allclose(inv @ j, np.broadcast_to(np.eye(2), j.shape), atol=1e-12)
+
+
+def test_blockwise_summary_and_measure_equal_the_whole_computation():
+    from warpcli.report.metrics import distortion, measure, summarize
+
+    res = _warp(Polygon(l_shape(size=100)), Polygon(star(3, 64, 64, 30, 60, 0.2)))
+    j = res.pull.jacobian
+    whole = distortion(j).summary()
+    parts = summarize(j, block=997)
+    assert parts["min_jacobian_det"] == whole["min_jacobian_det"]
+    for name in ("conformal", "isometric"):
+        assert parts[name]["max"] == whole[name]["max"]
+        assert parts[name]["mean"] == pytest.approx(whole[name]["mean"], rel=1e-12)
+    np.testing.assert_array_equal(measure(j, "isometric", block=997).ravel(), distortion(j).isometric)
+    assert res.measure("conformal").shape == (128, 128)
+
+
+def test_figures_scale_with_the_picture():
+    from warpcli.report.figures import _legend, grid_figure, stroke
+
+    assert stroke(300, 500) == 1 and stroke(3000, 4000) == 2
+    assert _legend(500, "t", 2.0, 10.0, (2, 10)).shape[1] == 150
+    assert _legend(3000, "t", 2.0, 10.0, (2, 10)).shape[1] == 450
+    img = np.zeros((2400, 2400, 3), dtype=np.uint8)
+    sq = Polygon([[100.0, 100.0], [2300.0, 100.0], [2300.0, 2300.0], [100.0, 2300.0]])
+    inv = np.full((2400, 2400, 2), np.nan)
+    fig = grid_figure(img, inv, sq, sq)
+    # Grid lines two pixels wide: rows 75 and 76 are light, 77 is not (step 150).
+    assert fig[75, 10, 0] > 150 and fig[76, 10, 0] > 150 and fig[77, 10, 0] == 0

@@ -89,3 +89,29 @@ def inside_polygon(points: ArrayLike, vertices: ArrayLike) -> NDArray[np.bool_]:
             xint = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
         inside[s : s + block] = (crosses & (x < xint)).sum(axis=1) % 2 == 1
     return inside
+
+
+def clip_segments(
+    a: NDArray[np.float64], d: NDArray[np.float64], box: tuple[float, float, float, float]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Parameter range ``[t_lo, t_hi]`` of the segments ``a + t d``, t in [0, 1], inside a box
+    ``(xmin, ymin, xmax, ymax)`` (Liang-Barsky); ``t_lo > t_hi`` where a segment misses it.
+
+    >>> lo, hi = clip_segments(np.array([[-10.0, 5.0]]), np.array([[40.0, 0.0]]), (0.0, 0.0, 20.0, 10.0))
+    >>> lo.tolist(), hi.tolist()
+    ([0.25], [0.75])
+    """
+    t_lo = np.zeros(len(a))
+    t_hi = np.ones(len(a))
+    lo = np.array(box[:2])
+    hi = np.array(box[2:])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(2):
+            p, q = d[:, k], a[:, k]
+            t1 = (lo[k] - q) / p
+            t2 = (hi[k] - q) / p
+            enter = np.where(p != 0, np.minimum(t1, t2), np.where((q >= lo[k]) & (q <= hi[k]), -np.inf, np.inf))
+            leave = np.where(p != 0, np.maximum(t1, t2), np.where((q >= lo[k]) & (q <= hi[k]), np.inf, -np.inf))
+            t_lo = np.maximum(t_lo, enter)
+            t_hi = np.minimum(t_hi, leave)
+    return t_lo, t_hi

@@ -69,6 +69,29 @@ class WarpResult:
         output); NaN outside the target; None if the warp kept none."""
         return None if self.pull.jacobian is None else self.pull.spread(self.pull.jacobian)
 
+    def measure(self, name: str) -> NDArray[np.float64]:
+        """One distortion measure at every output pixel: (H, W), NaN outside the target.
+
+        Parameters
+        ----------
+        name : {"conformal", "isometric", "det", "weight"}
+            See `warpcli.report.metrics.Distortion`.
+
+        Returns
+        -------
+        (H, W) ndarray of float
+
+        Raises
+        ------
+        ValueError
+            If the result kept no Jacobians.
+        """
+        from .report.metrics import measure
+
+        if self.pull.jacobian is None:
+            raise ValueError("this result kept no Jacobians")
+        return self.pull.spread(measure(self.pull.jacobian, name))
+
     def distortion(self) -> Distortion:
         """Distortion of the map at every output pixel (flattened, row-major; NaN outside the target).
 
@@ -364,10 +387,10 @@ def warp_file(
             stage("drawing figures")
             if grid_path is not None:
                 fig = figures.grid_figure(image.pixels, result.inverse_map, src, dst, alpha_channel=image.alpha_channel)
-                write_image(pending.path(grid_path), RasterImage(fig))
+                write_image(pending.path(grid_path), figures.picture(fig))
             if heatmap_path is not None:
-                values = getattr(result.distortion(), heatmap_measure).reshape(result.inverse_map.shape[:2])
-                write_image(pending.path(heatmap_path), RasterImage(figures.heatmap_figure(values, heatmap_measure)))
+                values = result.measure(heatmap_measure)
+                write_image(pending.path(heatmap_path), figures.picture(figures.heatmap_figure(values, heatmap_measure)))
             result.timings["figures"] = clock() - t0
         if save_map is not None or save_forward_map is not None:
             from .raster.stmap import save_stmap

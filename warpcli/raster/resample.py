@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
+from ..grid import clip_segments
 from ..options import INTERPOLATIONS
 from .pixels import unit
 
@@ -281,7 +282,7 @@ def edge_coverage(
     d = np.roll(dst, -1, axis=0) - dst
     length = np.hypot(d[:, 0], d[:, 1])
     # The part of each edge within one pixel of the window (Liang-Barsky).
-    t_lo, t_hi = _clip_segments(a, d, (c0 - 1.0, r0 - 1.0, c0 + width + 1.0, r0 + height + 1.0))
+    t_lo, t_hi = clip_segments(a, d, (c0 - 1.0, r0 - 1.0, c0 + width + 1.0, r0 + height + 1.0))
     crosses = np.flatnonzero(t_lo <= t_hi)
     span = (t_hi - t_lo)[crosses]
     count = np.ceil(length[crosses] * span / 0.5).astype(np.int64) + 1
@@ -317,25 +318,6 @@ def edge_coverage(
     frac = np.clip(0.5 + sign * dist, 0.0, 1.0)
     keep = (frac > 0) & (frac < 1)
     return EdgeCoverage(pix[keep], frac[keep], edge[keep], t[keep])
-
-
-def _clip_segments(a: NDArray[np.float64], d: NDArray[np.float64], box: tuple[float, float, float, float]):
-    """Parameter range ``[t_lo, t_hi]`` of the segments ``a + t d``, t in [0, 1], inside a box
-    ``(xmin, ymin, xmax, ymax)``; ``t_lo > t_hi`` where a segment misses it."""
-    t_lo = np.zeros(len(a))
-    t_hi = np.ones(len(a))
-    lo = np.array(box[:2])
-    hi = np.array(box[2:])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for k in range(2):
-            p, q = d[:, k], a[:, k]
-            t1 = (lo[k] - q) / p
-            t2 = (hi[k] - q) / p
-            enter = np.where(p != 0, np.minimum(t1, t2), np.where((q >= lo[k]) & (q <= hi[k]), -np.inf, np.inf))
-            leave = np.where(p != 0, np.maximum(t1, t2), np.where((q >= lo[k]) & (q <= hi[k]), np.inf, -np.inf))
-            t_lo = np.maximum(t_lo, enter)
-            t_hi = np.minimum(t_hi, leave)
-    return t_lo, t_hi
 
 
 def _to_dtype(values: NDArray, dtype: np.dtype) -> NDArray:
