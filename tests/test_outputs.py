@@ -50,10 +50,10 @@ def test_a_failing_report_leaves_no_output_at_all(tmp_path, monkeypatch):
     out_dir.mkdir()
 
     def fail(path, doc):
-        raise ImageIOError(f"{path}: cannot write the report: No space left on device")
+        raise ImageIOError(f"{path}: cannot write: No space left on device")
 
     monkeypatch.setattr(pipeline, "_write_json", fail)
-    with pytest.raises(ImageIOError, match=r"out/r.json: cannot write the report"):
+    with pytest.raises(ImageIOError, match=r"out/r.json: cannot write"):
         pipeline.warp_file(
             img, out_dir / "o.png", src, dst, report_path=out_dir / "r.json", grid_path=out_dir / "g.png",
             save_map=out_dir / "m.exr",

@@ -66,3 +66,24 @@ def nearest_edge(
     e = np.argmin(dist2, axis=1)
     rows = np.arange(len(q))
     return e, t[rows, e], np.sqrt(dist2[rows, e])
+
+
+def to_theta_parameter(t: ArrayLike, behaviour: str = "linear") -> NDArray[np.float64]:
+    """The boundary behaviour (the paper's §2 and §5.2): the parameter along Theta's edge
+    of parameter t along the polygon's edge: t (linear) or t^2 (quadratic).
+
+    >>> to_theta_parameter([0.5], "quadratic").tolist()
+    [0.25]
+    """
+    s = np.asarray(t, dtype=np.float64)
+    return s * s if behaviour == "quadratic" else s
+
+
+def from_theta_parameter(s: ArrayLike, behaviour: str = "linear") -> NDArray[np.float64]:
+    """The inverse of `to_theta_parameter`.
+
+    >>> from_theta_parameter([0.25], "quadratic").tolist()
+    [0.5]
+    """
+    u = np.asarray(s, dtype=np.float64)
+    return np.sqrt(np.clip(u, 0.0, 1.0)) if behaviour == "quadratic" else u

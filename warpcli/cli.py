@@ -13,7 +13,7 @@ import click
 from . import __version__
 from .errors import InputError, WarpError
 from .maps.registry import METHODS, THETAS
-from .options import DTYPES, HEATMAP_MEASURES, INTERPOLATIONS, STMAP_T, WEIGHTS
+from .options import BOUNDARIES, DTYPES, HEATMAP_MEASURES, INTERPOLATIONS, STMAP_T, WEIGHTS
 
 #: Exit statuses; decided here and nowhere else.
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
@@ -143,11 +143,21 @@ class DefaultGroup(click.Group):
 )
 @click.option(
     "--theta",
-    type=click.Choice(tuple(THETAS)),
     default="regular",
     show_default=True,
-    help="The convex intermediate polygon: " + "; ".join(f"{k}: {v.help}" for k, v in THETAS.items()) + ".",
+    metavar="|".join(THETAS) + "|FILE.json",
+    help="The convex intermediate polygon: " + "; ".join(f"{k}: {v.help}" for k, v in THETAS.items())
+    + "; or a JSON file of n [x, y] vertices, strictly convex (as --save-theta writes).",
 )
+@click.option(
+    "--boundary",
+    type=click.Choice(BOUNDARIES),
+    help="Boundary behaviour of DST (the paper's 5.2): the point at parameter t of an edge goes to t (linear) or t^2 "
+    "(quadratic) along Theta's edge.  [default: linear]",
+)
+@click.option("--src-boundary", type=click.Choice(BOUNDARIES), default="linear", show_default=True, help="Boundary behaviour of SRC.")
+@click.option("--dst-boundary", type=click.Choice(BOUNDARIES), default="linear", show_default=True, help="Boundary behaviour of DST (--boundary sets it).")
+@click.option("--save-theta", type=click.Path(dir_okay=False), help="Write the Theta this run used as JSON (to reuse with --theta FILE.json).")
 @click.option(
     "--max-area",
     default="auto",
@@ -193,8 +203,8 @@ class DefaultGroup(click.Group):
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
     paths, src_path, dst_path, src_label, dst_label, out_dir, out_name, interp, size, dtype, background, method, theta,
-    max_area, antialias, weights, report_path, grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map,
-    stmap_t, verbose, quiet,
+    boundary, src_boundary, dst_boundary, save_theta, max_area, antialias, weights, report_path, grid_path,
+    heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t, verbose, quiet,
 ):  # fmt: skip
     """Warp INPUT so that polygon SRC goes onto polygon DST; write OUTPUT.
 
@@ -214,14 +224,19 @@ def warp(
     _configure_logging(verbose, quiet)
     from .options import MapOptions, WarpOptions
 
+    if boundary is not None:
+        dst_boundary = boundary
     options = WarpOptions(
-        MapOptions(method=method, theta=theta, max_area=max_area, weights=weights),
+        MapOptions(
+            method=method, theta=theta, max_area=max_area, weights=weights, src_boundary=src_boundary,
+            dst_boundary=dst_boundary,
+        ),
         interp=interp, background=tuple(background), antialias=antialias, size=size, dtype=dtype,
     )  # fmt: skip
     if out_dir is not None:
         single_only = {
             "--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path,
-            "--save-map": save_map, "--save-forward-map": save_forward_map, "--size": size,
+            "--save-map": save_map, "--save-forward-map": save_forward_map, "--size": size, "--save-theta": save_theta,
         }  # fmt: skip
         used = [name for name, value in single_only.items() if value is not None]
         if used:
@@ -248,6 +263,7 @@ def warp(
             save_forward_map=save_forward_map,
             stmap_t_up=stmap_t == "up",
             report_path=report_path,
+            save_theta=save_theta,
             grid_path=grid_path,
             heatmap_path=heatmap_path,
             heatmap_measure=heatmap_measure,

@@ -23,6 +23,8 @@ WEIGHTS = ("cotan", "positive")
 HEATMAP_MEASURES = ("conformal", "isometric", "det")
 #: Which way an STMap's t coordinate runs.
 STMAP_T = ("down", "up")
+#: Boundary behaviours: parameter t of a polygon edge goes to t, or t^2, of Theta's edge.
+BOUNDARIES = ("linear", "quadratic")
 
 
 def _choice(what: str, value: object, choices) -> None:
@@ -51,7 +53,8 @@ class MapOptions:
         of `warpcli.maps.registry.METHODS` (``"fem"``).
     theta : str
         Name of the strategy that chooses the convex intermediate polygon Theta,
-        a key of `warpcli.maps.registry.THETAS` (``"regular"``).
+        a key of `warpcli.maps.registry.THETAS` (``"regular"``, ``"cyclic"``),
+        or a JSON file holding one (n ``[x, y]`` vertices, strictly convex).
     max_area : float, (float, float) or None
         FEM: largest triangle area in square pixels, for both meshes or
         (source, target); None: automatic (`warpcli.maps.fem.mesh.auto_max_area`).
@@ -62,6 +65,10 @@ class MapOptions:
     check : bool
         Certify that neither map folds (and let a method repair what it can);
         never hand back a folding map.
+    src_boundary, dst_boundary : {"linear", "quadratic"}
+        The boundary behaviour of each side (§5.2): the point at parameter t
+        of an edge goes to parameter t (linear) or t^2 (quadratic) of Theta's
+        edge. The paper makes the target quadratic.
 
     Raises
     ------
@@ -74,10 +81,17 @@ class MapOptions:
     max_area: float | tuple[float, float] | None = None
     weights: str = "cotan"
     check: bool = True
+    src_boundary: str = "linear"
+    dst_boundary: str = "linear"
 
     def __post_init__(self) -> None:
         _choice("method", self.method, METHODS)
-        _choice("Theta", self.theta, THETAS)
+        if self.theta not in THETAS and not str(self.theta).lower().endswith(".json"):
+            raise InputError(
+                f"unknown Theta {self.theta!r}; choose one of {', '.join(THETAS)} or give a JSON file (.json)"
+            )
+        _choice("source boundary", self.src_boundary, BOUNDARIES)
+        _choice("target boundary", self.dst_boundary, BOUNDARIES)
         _choice("weights", self.weights, WEIGHTS)
         if self.max_area is not None:
             if isinstance(self.max_area, (tuple, list)):

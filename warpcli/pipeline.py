@@ -277,6 +277,7 @@ def warp_file(
     options: WarpOptions | None = None,
     *,
     report_path: str | os.PathLike[str] | None = None,
+    save_theta: str | os.PathLike[str] | None = None,
     grid_path: str | os.PathLike[str] | None = None,
     heatmap_path: str | os.PathLike[str] | None = None,
     heatmap_measure: str = "conformal",
@@ -305,6 +306,9 @@ def warp_file(
     report_path : path-like or None
         Write the JSON report of `build_report` there; ``"-"`` computes it
         (``result.report``) without writing a file.
+    save_theta : path-like or None
+        Write the Theta the map used as JSON (``{"points": [[x, y], ...]}``),
+        to pass back as ``theta`` (a file) to later runs.
     grid_path, heatmap_path : path-like or None
         Write `warpcli.report.figures.grid_figure` / `heatmap_figure` there.
     heatmap_measure : {"conformal", "isometric", "det"}
@@ -343,12 +347,16 @@ def warp_file(
         check_output_path(path, inputs=inputs)
     if report_path is not None and os.fspath(report_path) != "-":
         check_output_path(report_path, inputs=inputs, image=False)
+    if save_theta is not None:
+        check_output_path(save_theta, inputs=inputs, image=False)
     from .raster.stmap import check_stmap_path
 
     for path in (save_map, save_forward_map):
         if path is not None:
             check_stmap_path(path)
-    outputs = [os.path.abspath(os.fspath(p)) for p in (output_path, *extra, report_path) if p not in (None, "-")]
+    outputs = [
+        os.path.abspath(os.fspath(p)) for p in (output_path, *extra, report_path, save_theta) if p not in (None, "-")
+    ]
     if len(set(outputs)) != len(outputs):
         raise InputError(f"{os.fspath(output_path)}: the same path is given for two outputs")
     src = read_polygon(src_path, src_label)
@@ -407,6 +415,9 @@ def warp_file(
                 fwd = result.map.forward_grid(image.width, image.height)
                 save_stmap(pending.path(save_forward_map), fwd, (out_w, out_h), kind="forward", t_up=stmap_t_up)
             result.timings["maps"] = clock() - t0
+        if save_theta is not None:
+            theta = result.map.theta
+            _write_json(pending.path(save_theta), {"theta": theta.name, "points": theta.points.tolist()})
         if report_path is not None:
             stage("measuring distortion")
             doc = build_report(result)
@@ -427,7 +438,7 @@ def _write_json(path: str, doc: dict) -> None:
             fh.flush()
             os.fsync(fh.fileno())
     except OSError as err:
-        raise ImageIOError(f"{path}: cannot write the report: {err.strerror or err}") from err
+        raise ImageIOError(f"{path}: cannot write: {err.strerror or err}") from err
 
 
 @dataclass(frozen=True)

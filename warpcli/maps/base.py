@@ -15,7 +15,7 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..boundary import edge_points
+from ..boundary import edge_points, from_theta_parameter, to_theta_parameter
 from ..errors import InputError
 from ..grid import inside_polygon, pixel_centres
 from ..polygon import Polygon
@@ -101,6 +101,8 @@ class ThetaMap(ABC):
         The image.
     timings : dict of str to float
         Seconds spent building the map, per stage.
+    boundary : {"linear", "quadratic"}
+        The boundary behaviour (§5.2, `to_theta_parameter`).
 
     References
     ----------
@@ -111,6 +113,7 @@ class ThetaMap(ABC):
     polygon: Polygon
     theta: Theta
     timings: dict[str, float] = field(default_factory=dict, kw_only=True)
+    boundary: str = field(default="linear", kw_only=True)
 
     #: The method's registry name.
     method: ClassVar[str] = ""
@@ -188,15 +191,13 @@ class ThetaMap(ABC):
         return GridSample(pixels, mapped.points[ok], jac)
 
     def to_theta_parameter(self, t: ArrayLike) -> NDArray[np.float64]:
-        """The boundary behaviour: the parameter along Theta's edge i of parameter t along the polygon's edge i.
-
-        Linear boundary data (the paper's default, §2): the same parameter.
-        """
-        return np.asarray(t, dtype=np.float64)
+        """The boundary behaviour: the parameter along Theta's edge i of parameter t along the
+        polygon's edge i (linear: t, the paper's default, §2; quadratic: t^2, §5.2)."""
+        return to_theta_parameter(t, self.boundary)
 
     def from_theta_parameter(self, s: ArrayLike) -> NDArray[np.float64]:
         """The inverse of `to_theta_parameter`."""
-        return np.asarray(s, dtype=np.float64)
+        return from_theta_parameter(s, self.boundary)
 
     def boundary_to_theta(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
         """The boundary data: the image in Theta of the point at parameter t on polygon edge i."""

@@ -14,7 +14,8 @@ from ..grid import window
 from ..options import MapOptions
 from ..polygon import Polygon, check_pair
 from .base import ThetaMap, as_points
-from .registry import METHODS, THETAS
+from .registry import METHODS
+from .theta import theta_for
 
 #: A rectangle ``(xmin, ymin, xmax, ymax)`` in a polygon's coordinates.
 Region = tuple[float, float, float, float]
@@ -366,7 +367,7 @@ def build_map(
     """
     opts = options or MapOptions()
     check_pair(src, dst)
-    theta = THETAS[opts.theta].load()(src, dst, opts)
+    theta = theta_for(src, dst, opts)
     method = METHODS[opts.method].load()
     # The target is built here while the source is built on a second thread,
     # and the method's kernels load on a third: solvers (SuperLU) release the

@@ -39,4 +39,5 @@ METHODS = {
 #: Each target is a function ``(src, dst, options) -> Theta``.
 THETAS = {
     "regular": Entry("warpcli.maps.theta:regular", "the regular n-gon"),
+    "cyclic": Entry("warpcli.maps.theta:cyclic", "inscribed in a circle, edges as long as the mean of the polygons' edges"),
 }

@@ -100,7 +100,156 @@ def regular_polygon(n: int) -> NDArray[np.float64]:
 
 
 def regular(src: Polygon, dst: Polygon, options: object = None) -> Theta:
-    """Strategy ``regular``: the regular n-gon (the paper's default, §2)."""
+    """Strategy ``regular``: the regular n-gon (the paper's default, §2).
+
+    Parameters
+    ----------
+    src, dst : Polygon
+        The polygons (only their vertex count is used).
+    options : MapOptions or None
+
+    Returns
+    -------
+    Theta
+    """
     return Theta(regular_polygon(src.n), name="regular")
+
+
+def cyclic(src: Polygon, dst: Polygon, options: object = None) -> Theta:
+    """Strategy ``cyclic``: inscribed in a circle, edge lengths proportional to the mean
+    length of the corresponding source and target edges (the paper's Fig. 11).
+
+    Parameters
+    ----------
+    src, dst : Polygon
+    options : MapOptions or None
+
+    Returns
+    -------
+    Theta
+        Inscribed in the unit circle, vertex 0 at angle 0, positive shoelace area.
+    """
+    lengths = 0.5 * (_edge_lengths(src.points) + _edge_lengths(dst.points))
+    return Theta(cyclic_polygon(lengths), name="cyclic")
+
+
+def _edge_lengths(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    d = np.roll(points, -1, axis=0) - points
+    return np.hypot(d[:, 0], d[:, 1])
+
+
+def cyclic_polygon(lengths: ArrayLike) -> NDArray[np.float64]:
+    """The polygon inscribed in the unit circle whose edge lengths are proportional to ``lengths``.
+
+    Edge i subtends the central angle ``2 asin(l_i / 2R)`` for the circumradius
+    R that makes the angles sum to 2 pi; when even ``R = max(l) / 2`` leaves
+    them short of 2 pi, the longest edge is the one whose arc holds the
+    centre (angle ``2 pi - 2 asin(l / 2R)``). A solution exists when every
+    length is shorter than the sum of the others (a polygon inequality, which
+    the edges of any polygon satisfy).
+
+    Parameters
+    ----------
+    lengths : (n,) array_like of float
+        Positive.
+
+    Returns
+    -------
+    (n, 2) ndarray of float
+
+    Raises
+    ------
+    InputError
+        If no cyclic polygon has these edge lengths.
+
+    Examples
+    --------
+    >>> p = cyclic_polygon([1.0, 1.0, 1.0, 1.0])
+    >>> np.allclose(p, regular_polygon(4))
+    True
+    """
+    lengths = np.asarray(lengths, dtype=np.float64)
+    n = len(lengths)
+    if n < 3 or not np.all(lengths > 0) or not np.isfinite(lengths).all():
+        raise InputError(f"a cyclic Theta needs at least 3 positive edge lengths, got {lengths.tolist()}")
+    longest = int(np.argmax(lengths))
+    if lengths[longest] >= lengths.sum() - lengths[longest]:
+        raise InputError("no cyclic polygon has these edge lengths: one is as long as all the others together")
+    half = lengths / lengths[longest]  # l_i / l_max, so that R >= 1/2
+    lo = 0.5
+
+    def angles(r: float, centre_inside: bool) -> NDArray[np.float64]:
+        a = 2.0 * np.arcsin(np.minimum(half / (2.0 * r), 1.0))
+        if not centre_inside:
+            a[longest] = 2.0 * np.pi - a[longest]
+        return a
+
+    # Centre inside (every edge subtends less than pi): the angle sum falls as
+    # R grows from l_max / 2; if it is already below 2 pi there, the centre
+    # lies outside, across the longest edge, and the sum then grows with R.
+    centre_inside = angles(lo, True).sum() >= 2.0 * np.pi
+    hi = 1.0
+    while (angles(hi, centre_inside).sum() - 2.0 * np.pi) * (1 if centre_inside else -1) > 0:
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        excess = angles(mid, centre_inside).sum() - 2.0 * np.pi
+        if (excess > 0) == centre_inside:
+            lo = mid
+        else:
+            hi = mid
+    a = angles(0.5 * (lo + hi), centre_inside)
+    at = np.concatenate([[0.0], np.cumsum(a)[:-1]])
+    return np.stack([np.cos(at), np.sin(at)], axis=1)
+
+
+def from_file(path: str, n: int) -> Theta:
+    """A user's Theta from a JSON file: n vertices, strictly convex, either orientation.
+
+    The file holds an array of ``[x, y]`` pairs, or an object with a
+    ``"points"`` member holding one (as written by ``--save-theta``).
+
+    Parameters
+    ----------
+    path : str
+    n : int
+        The polygons' vertex count.
+
+    Returns
+    -------
+    Theta
+
+    Raises
+    ------
+    InputError
+        If the file cannot be read, is not such an array, has another vertex
+        count, or is not strictly convex; the message names the file.
+    """
+    import json
+
+    try:
+        with open(path, "rb") as fh:
+            doc = json.loads(fh.read(1 << 20).decode("utf-8"))
+    except (OSError, ValueError, RecursionError) as err:
+        raise InputError(f"{path}: cannot read Theta: {getattr(err, 'strerror', None) or err}") from None
+    pts = doc.get("points") if isinstance(doc, dict) else doc
+    try:
+        arr = np.array(pts, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: Theta must be an array of [x, y] pairs") from None
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise InputError(f"{path}: Theta must be an array of [x, y] pairs")
+    if len(arr) != n:
+        raise InputError(f"{path}: Theta has {len(arr)} vertices but the polygons have {n}")
+    return Theta(arr, name=path)
+
+
+def theta_for(src: Polygon, dst: Polygon, options) -> Theta:
+    """The Theta ``options.theta`` asks for: a registered strategy's, or a file's."""
+    from .registry import THETAS
+
+    if options.theta in THETAS:
+        return THETAS[options.theta].load()(src, dst, options)
+    return from_file(options.theta, src.n)
 
 

@@ -232,7 +232,8 @@ def build(
     polygon : Polygon
     theta : Theta
     options : MapOptions
-        ``max_area`` (for this ``role``), ``weights`` and ``check`` are used.
+        ``max_area`` and the boundary behaviour (for this ``role``),
+        ``weights`` and ``check`` are used.
     role : {"source", "target"}
         Which of the pair ``polygon`` is (picks its ``max_area``).
     region : (xmin, ymin, xmax, ymax) or None
@@ -257,10 +258,13 @@ def build(
     area = options.areas()[0 if role == "source" else 1]
     clock = time.perf_counter
     t0 = clock()
-    mesh = mesh_polygon(polygon, auto_max_area(polygon, region) if area is None else area, region=region)
+    boundary = options.src_boundary if role == "source" else options.dst_boundary
+    mesh = mesh_polygon(polygon, auto_max_area(polygon, region) if area is None else area, region=region, boundary=boundary)
     t1 = clock()
-    values = solve_dirichlet(mesh, theta.points, options.weights)
-    phi = FEMMap(polygon, theta, mesh, values, options.weights, timings={"mesh": t1 - t0, "solve": clock() - t1})
+    values = solve_dirichlet(mesh, theta.points, options.weights, boundary)
+    phi = FEMMap(
+        polygon, theta, mesh, values, options.weights, timings={"mesh": t1 - t0, "solve": clock() - t1}, boundary=boundary
+    )
     if options.check:
         phi = repaired(phi)
     return phi
@@ -276,8 +280,8 @@ def repaired(phi: FEMMap) -> FEMMap:
         phi.polygon.name,
         flips,
     )
-    values = solve_dirichlet(phi.mesh, phi.theta.points, "positive")
-    return FEMMap(phi.polygon, phi.theta, phi.mesh, values, "positive", timings=phi.timings)
+    values = solve_dirichlet(phi.mesh, phi.theta.points, "positive", phi.boundary)
+    return FEMMap(phi.polygon, phi.theta, phi.mesh, values, "positive", timings=phi.timings, boundary=phi.boundary)
 
 
 def prepare() -> None:

@@ -31,6 +31,9 @@ AUTO_AREA_DIVISOR = 35.0
 #: Triangle's minimum-angle bound (degrees) for quality meshing.
 MIN_ANGLE = 30.0
 
+#: Quadratic boundary data: nodes per edge, evenly spaced in Theta's parameter.
+QUADRATIC_NODES = 16
+
 #: A polygon that reaches further than this many times the size of its region
 #: of interest (the image the map is evaluated on) beyond that region is meshed
 #: graded from it: the automatic density follows the region's size, and edge
@@ -143,6 +146,7 @@ def mesh_polygon(
     *,
     grade: bool = True,
     region: tuple[float, float, float, float] | None = None,
+    boundary: str = "linear",
 ) -> TriMesh:
     """Mesh a polygon with a quality constrained Delaunay triangulation.
 
@@ -165,6 +169,11 @@ def mesh_polygon(
         Where the map will be evaluated (the image). A polygon reaching far
         beyond it (see `graded_from`) gets ``max_area`` near the region and
         triangles growing with the distance from it.
+    boundary : {"linear", "quadratic"}
+        The boundary behaviour the mesh will carry: quadratic data (t goes to
+        t^2 of Theta's edge) gets nodes at ``t = sqrt(k / QUADRATIC_NODES)`` on
+        every edge, evenly spaced in Theta, so that the piecewise-linear data
+        follows the parabola on short edges too.
 
     Returns
     -------
@@ -198,7 +207,7 @@ def mesh_polygon(
             f"{MAX_TRIANGLES:,}; use a larger maximum triangle area"
         )
     n = polygon.n
-    pts, markers = _boundary_points(polygon, max_area, grade)
+    pts, markers = _boundary_points(polygon, max_area, grade, boundary == "quadratic")
     m = len(pts)
     seg = np.stack([np.arange(m), (np.arange(m) + 1) % m], axis=1)
     # Marker of a boundary point: 2 + i for polygon vertex i, 2 + n + i for a
@@ -286,7 +295,7 @@ def _nearest_distance(points: NDArray[np.float64], sites: NDArray[np.float64]) -
     return best
 
 
-def _boundary_points(polygon: Polygon, max_area: float, grade: bool):
+def _boundary_points(polygon: Polygon, max_area: float, grade: bool, quadratic: bool = False):
     """Boundary points in order, with Triangle markers; graded towards reflex vertices."""
     p = polygon.points
     n = polygon.n
@@ -302,6 +311,8 @@ def _boundary_points(polygon: Polygon, max_area: float, grade: bool):
         b = p[(i + 1) % n]
         length = float(np.hypot(*(b - a)))
         t = _edge_params(length, h, bool(reflex[i]), bool(reflex[(i + 1) % n]))
+        if quadratic:
+            t = np.unique(np.concatenate([t, np.sqrt(np.arange(1, QUADRATIC_NODES) / QUADRATIC_NODES)]))
         pieces.append(a + t[:, None] * (b - a))
         mk = np.full(len(t), 2 + n + i, dtype=np.int32)
         mk[0] = 2 + i

@@ -6,7 +6,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from ...boundary import edge_points
+from ...boundary import edge_points, to_theta_parameter
 from ...errors import InputError
 from ...options import WEIGHTS
 from ...polygon import signed_area
@@ -99,13 +99,15 @@ def mean_value_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.in
     return (sp.diags(np.asarray(w_mat.sum(axis=1)).ravel()) - w_mat).tocsr()
 
 
-def boundary_values(mesh: TriMesh, theta: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Piecewise-linear Dirichlet data: a node at parameter t on edge i goes to
-    ``(1 - t) w_i + t w_{i+1}`` (Section 2, linear boundary behaviour)."""
-    return edge_points(theta, mesh.boundary_edge, mesh.boundary_t)
+def boundary_values(mesh: TriMesh, theta: NDArray[np.float64], boundary: str = "linear") -> NDArray[np.float64]:
+    """Dirichlet data: a node at parameter t on edge i goes to ``(1 - s) w_i + s w_{i+1}``,
+    s = t (linear boundary behaviour, §2) or t^2 (quadratic, §5.2)."""
+    return edge_points(theta, mesh.boundary_edge, to_theta_parameter(mesh.boundary_t, boundary))
 
 
-def solve_dirichlet(mesh: TriMesh, theta: NDArray[np.float64], weights: str = "cotan") -> NDArray[np.float64]:
+def solve_dirichlet(
+    mesh: TriMesh, theta: NDArray[np.float64], weights: str = "cotan", boundary: str = "linear"
+) -> NDArray[np.float64]:
     """Solve the discrete Dirichlet problem for both coordinates (Section 3.1.1).
 
     Parameters
@@ -116,6 +118,8 @@ def solve_dirichlet(mesh: TriMesh, theta: NDArray[np.float64], weights: str = "c
     weights : {"cotan", "positive"}
         ``cotan``: the FEM (cotangent) Laplacian, the harmonic map;
         ``positive``: mean-value weights, one-to-one on any mesh (Section 3.1.4).
+    boundary : {"linear", "quadratic"}
+        The boundary behaviour (`boundary_values`).
 
     Returns
     -------
@@ -127,7 +131,7 @@ def solve_dirichlet(mesh: TriMesh, theta: NDArray[np.float64], weights: str = "c
     theta = np.asarray(theta, dtype=np.float64)
     nv = mesh.n_vertices
     values = np.zeros((nv, 2))
-    values[mesh.boundary] = boundary_values(mesh, theta)
+    values[mesh.boundary] = boundary_values(mesh, theta, boundary)
     is_b = np.zeros(nv, dtype=bool)
     is_b[mesh.boundary] = True
     interior = np.flatnonzero(~is_b)

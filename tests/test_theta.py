@@ -1,0 +1,123 @@
+"""Tests of warpcli.maps.theta and the boundary behaviours: the freedom of the paper's §5."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from helpers import comb, l_shape, read_pixels, regular, simple_polygons, spiral, star, write_png, write_polygon
+from warpcli import BijectiveMap, InputError, MapOptions, Polygon
+from warpcli.maps.theta import Theta, cyclic, cyclic_polygon, from_file, regular_polygon
+
+CONCAVE = {"star": star(), "L": l_shape(), "comb": comb(), "spiral": spiral()}
+
+
+def _lengths(p):
+    d = np.roll(p, -1, axis=0) - p
+    return np.hypot(d[:, 0], d[:, 1])
+
+
+@given(st.integers(3, 40).flatmap(lambda n: st.tuples(simple_polygons(n), simple_polygons(n))))
+def test_cyclic_theta_is_inscribed_with_the_mean_edge_lengths(pair):
+    src, dst = Polygon(pair[0]), Polygon(pair[1])
+    theta = cyclic(src, dst)
+    np.testing.assert_allclose(np.hypot(*theta.points.T), 1.0, atol=1e-12)
+    want = 0.5 * (_lengths(src.points) + _lengths(dst.points))
+    got = _lengths(theta.points)
+    np.testing.assert_allclose(got / got.sum(), want / want.sum(), rtol=1e-9)
+
+
+def test_cyclic_polygon_with_the_centre_outside():
+    """One edge nearly as long as the others together: its arc holds the centre."""
+    p = cyclic_polygon([8.0, 3.0, 3.0, 3.0])
+    got = _lengths(p)
+    np.testing.assert_allclose(got / got.sum(), np.array([8, 3, 3, 3]) / 17, rtol=1e-9)
+    assert Theta(p).n == 4  # strictly convex
+    with pytest.raises(InputError, match="no cyclic polygon"):
+        cyclic_polygon([10.0, 3.0, 3.0, 4.0])
+    np.testing.assert_allclose(cyclic_polygon([1.0] * 6), regular_polygon(6), atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "points, match",
+    [
+        ([[0, 0], [1, 0], [0.2, 0.2], [0, 1]], "convex"),  # reflex vertex
+        ([[0, 0], [1, 0], [2, 0], [1, 1]], "convex"),  # collinear
+        ([[0, 0], [1, 0], [0, 1], [1, 1]], "convex"),  # bow-tie
+        ([[0, 0], [1, 0]], "at least 3"),
+        ([[1.0, 0.0], [math.cos(0.8 * math.pi), math.sin(0.8 * math.pi)], [math.cos(1.6 * math.pi), math.sin(1.6 * math.pi)], [math.cos(0.4 * math.pi), math.sin(0.4 * math.pi)], [math.cos(1.2 * math.pi), math.sin(1.2 * math.pi)]], "convex"),  # pentagram
+    ],
+)
+def test_a_theta_that_is_not_strictly_convex_is_refused(points, match):
+    with pytest.raises(InputError, match=match):
+        Theta(np.array(points, dtype=float))
+
+
+def test_a_user_theta_file_is_checked(tmp_path):
+    path = tmp_path / "theta.json"
+    path.write_text(json.dumps(regular_polygon(5).tolist()))
+    with pytest.raises(InputError, match="has 5 vertices but the polygons have 6"):
+        from_file(str(path), 6)
+    path.write_text("[[0, 0], [1")
+    with pytest.raises(InputError, match="cannot read Theta"):
+        from_file(str(path), 5)
+    with pytest.raises(InputError, match="cannot read Theta"):
+        from_file(str(tmp_path / "missing.json"), 5)
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_a_mirrored_user_theta_gives_the_same_map(tmp_path, flip):
+    """Either orientation: a Theta reflected (a linear map of the plane) leaves f unchanged."""
+    src, dst = Polygon(star()), Polygon(star(r_in=18, phase=0.3))
+    w = regular_polygon(12) * ([1.0, -1.0] if flip else [1.0, 1.0])
+    path = tmp_path / "theta.json"
+    path.write_text(json.dumps({"points": w.tolist()}))
+    f = BijectiveMap.between(src, dst, MapOptions(theta=str(path)))
+    g = BijectiveMap.between(src, dst)
+    p = src.points.mean(axis=0) + np.random.default_rng(2).uniform(-10, 10, (500, 2))
+    np.testing.assert_allclose(f.forward(p), g.forward(p), atol=1e-9)
+
+
+@pytest.mark.parametrize("name", sorted(CONCAVE))
+@pytest.mark.parametrize("theta", ["regular", "cyclic"])
+def test_quadratic_boundaries_keep_edges_on_edges_and_never_fold(name, theta):
+    src = CONCAVE[name]
+    dst = regular(len(src), r=55.0, phase=0.2)
+    f = BijectiveMap.between(Polygon(src), Polygon(dst), MapOptions(theta=theta, dst_boundary="quadratic"))
+    assert all(c.ok for c in f.certificates())
+    n = len(src)
+    t = np.linspace(0.0, 1.0, 11)
+    for i in range(n):
+        on_src = src[i] + t[:, None] * (src[(i + 1) % n] - src[i])
+        # Linear on SRC, quadratic on DST: t on a source edge is t on Theta's,
+        # which is sqrt(t) on the target's.
+        on_dst = dst[i] + np.sqrt(t)[:, None] * (dst[(i + 1) % n] - dst[i])
+        image = f.forward(on_src)
+        # Onto the edge exactly; at the quadratic parameter exactly at mesh
+        # nodes, and between them to the mesh's resolution (the FEM boundary
+        # data is linear between nodes).
+        e = dst[(i + 1) % n] - dst[i]
+        off_line = np.abs((image - dst[i]) @ np.array([-e[1], e[0]])) / np.hypot(*e)
+        assert off_line.max() < 1e-7
+        np.testing.assert_allclose(image, on_dst, atol=0.25)  # ~ h^2 / (8 u), h the node spacing
+        np.testing.assert_allclose(f.inverse_boundary(np.full(len(t), i), np.sqrt(t)), on_src, atol=1e-9)
+
+
+def test_save_theta_round_trips_through_the_cli(tmp_path):
+    from warpcli.cli import main
+
+    img = write_png(tmp_path / "in.png", np.random.default_rng(1).integers(0, 256, (128, 128, 3), dtype=np.uint8))
+    src = write_polygon(tmp_path / "s.json", star())
+    dst = write_polygon(tmp_path / "d.json", star(r_in=15, phase=0.2))
+    common = [img, "--src", src, "--dst", dst]
+    assert main([*common[:1], str(tmp_path / "a.png"), *common[1:], "--theta", "cyclic", "--save-theta", str(tmp_path / "t.json")]) == 0
+    assert main([*common[:1], str(tmp_path / "b.png"), *common[1:], "--theta", str(tmp_path / "t.json")]) == 0
+    np.testing.assert_array_equal(read_pixels(tmp_path / "a.png"), read_pixels(tmp_path / "b.png"))
+    saved = json.loads((tmp_path / "t.json").read_text())
+    assert saved["theta"] == "cyclic" and len(saved["points"]) == 12
+    assert main([*common[:1], str(tmp_path / "c.png"), *common[1:], "--theta", str(tmp_path / "nope.json")]) == 2
