@@ -121,3 +121,32 @@ def test_save_theta_round_trips_through_the_cli(tmp_path):
     saved = json.loads((tmp_path / "t.json").read_text())
     assert saved["theta"] == "cyclic" and len(saved["points"]) == 12
     assert main([*common[:1], str(tmp_path / "c.png"), *common[1:], "--theta", str(tmp_path / "nope.json")]) == 2
+
+
+@pytest.mark.parametrize("energy", ["conformal", "isometric"])
+def test_optimized_theta_lowers_the_energy_and_stays_strictly_convex(energy):
+    from warpcli.optimize import optimized
+
+    src = Polygon(l_shape())
+    dst = Polygon(np.array([[10, 20], [40, 10], [120, 30], [110, 110], [60, 118], [15, 90]], dtype=float))
+    opts = MapOptions(theta="optimized", energy=energy)
+    theta = optimized(src, dst, opts)
+    assert theta.notes["after"] <= theta.notes["before"]
+    assert theta.notes["after"] < theta.notes["before"] * 0.999
+    Theta(theta.points)  # strictly convex, or this raises
+    again = optimized(src, dst, opts)
+    np.testing.assert_array_equal(theta.points, again.points)  # deterministic
+    f = BijectiveMap.between(src, dst, opts)
+    assert all(c.ok for c in f.certificates())
+
+
+def test_the_report_gives_the_optimized_energies(tmp_path):
+    from warpcli import build_report, warp_image
+
+    img = np.zeros((128, 128, 1), dtype=np.float32)
+    res = warp_image(img, l_shape(), regular(6, r=55.0), theta="optimized")
+    rep = build_report(res)
+    assert rep["theta"]["name"] == "optimized" and rep["theta"]["after"] < rep["theta"]["before"]
+    assert list(rep)[:3] == ["vertices", "theta", "source_mesh"]
+    plain = build_report(warp_image(img, l_shape(), regular(6, r=55.0)))
+    assert "theta" not in plain

@@ -23,6 +23,8 @@ WEIGHTS = ("cotan", "positive")
 HEATMAP_MEASURES = ("conformal", "isometric", "det")
 #: Which way an STMap's t coordinate runs.
 STMAP_T = ("down", "up")
+#: Energies the Theta optimization can lower.
+ENERGIES = ("conformal", "isometric")
 #: Boundary behaviours: parameter t of a polygon edge goes to t, or t^2, of Theta's edge.
 BOUNDARIES = ("linear", "quadratic")
 
@@ -69,6 +71,10 @@ class MapOptions:
         The boundary behaviour of each side (§5.2): the point at parameter t
         of an edge goes to parameter t (linear) or t^2 (quadratic) of Theta's
         edge. The paper makes the target quadratic.
+    energy : {"conformal", "isometric"}
+        What ``theta="optimized"`` lowers: the area-weighted mean distortion.
+    theta_start : {"regular", "cyclic"}
+        Where the optimization starts.
 
     Raises
     ------
@@ -83,6 +89,8 @@ class MapOptions:
     check: bool = True
     src_boundary: str = "linear"
     dst_boundary: str = "linear"
+    energy: str = "conformal"
+    theta_start: str = "regular"
 
     def __post_init__(self) -> None:
         _choice("method", self.method, METHODS)
@@ -90,6 +98,8 @@ class MapOptions:
             raise InputError(
                 f"unknown Theta {self.theta!r}; choose one of {', '.join(THETAS)} or give a JSON file (.json)"
             )
+        _choice("energy", self.energy, ENERGIES)
+        _choice("start of the Theta optimization", self.theta_start, ("regular", "cyclic"))
         _choice("source boundary", self.src_boundary, BOUNDARIES)
         _choice("target boundary", self.dst_boundary, BOUNDARIES)
         _choice("weights", self.weights, WEIGHTS)

@@ -192,7 +192,7 @@ def warp_image(
     timings: dict[str, float] = {}
     fmap = warp_map
     if fmap is None:
-        stage("building the map")
+        stage("optimizing Theta and building the map" if opts.map.theta == "optimized" else "building the map")
         regions = ((0.0, 0.0, float(img.shape[1]), float(img.shape[0])), (0.0, 0.0, float(width), float(height)))
         fmap = BijectiveMap.between(src, dst, opts.map, regions=regions)
         timings.update(fmap.timings)

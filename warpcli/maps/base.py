@@ -211,6 +211,11 @@ class ThetaMap(ABC):
         """What only this method knows, for the report (for FEM: the mesh's size)."""
         return {}
 
+    def retarget(self, theta: Theta) -> ThetaMap | None:
+        """The map of the same polygon onto another Theta, if the method can reuse its work
+        (FEM: the factorization); None otherwise (then it is built anew)."""
+        return None
+
 
 def as_points(points: ArrayLike) -> NDArray[np.float64]:
     """Points as a (K, 2) float array, or `InputError`."""

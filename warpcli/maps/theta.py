@@ -24,6 +24,8 @@ class Theta:
         Vertices in order, either orientation.
     name : str
         Where it came from (a strategy's name or a file), for messages and reports.
+    notes : dict
+        What the strategy reports about it (the optimization's energies).
 
     Raises
     ------
@@ -38,6 +40,7 @@ class Theta:
 
     points: NDArray[np.float64]
     name: str = field(default="theta")
+    notes: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         pts = np.array(self.points, dtype=np.float64)

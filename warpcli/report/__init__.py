@@ -60,8 +60,10 @@ def build_report(result: Measurable) -> dict:
     f = result.map
     result.timings["metrics"] = time.perf_counter() - t0
     timings = dict(result.timings)
+    theta = {"theta": {"name": f.theta.name, **f.theta.notes}} if f.theta.notes else {}
     return {
         "vertices": f.src.n,
+        **theta,
         **f.describe(),
         "flipped_triangles": f.flipped_triangles(),
         "min_jacobian_det": summary["min_jacobian_det"],

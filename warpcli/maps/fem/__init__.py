@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -23,7 +23,7 @@ from ..base import Certificate, GridSample, Mapped, ThetaMap, as_points
 from ..theta import Theta
 from .locate import TriangleLocator, affine_coefficients, barycentric_combine, triangle_neighbours
 from .mesh import TriMesh, auto_max_area, mesh_polygon
-from .solve import flipped_triangles, solve_dirichlet
+from .solve import DirichletSolver, flipped_triangles, solve_dirichlet
 
 log = logging.getLogger("warpcli")
 
@@ -57,6 +57,7 @@ class FEMMap(ThetaMap):
     mesh: TriMesh
     values: NDArray[np.float64]
     weights: str = "cotan"
+    solver: DirichletSolver | None = field(default=None, repr=False, kw_only=True)
 
     method = "fem"
 
@@ -100,6 +101,19 @@ class FEMMap(ThetaMap):
 
     def describe(self) -> dict:
         return {"mesh": {"vertices": self.mesh.n_vertices, "triangles": self.mesh.n_triangles}}
+
+    def retarget(self, theta: Theta) -> FEMMap:
+        """The map of the same mesh onto another Theta: one back-substitution (§5.1)."""
+        solver = self.solver or DirichletSolver(self.mesh, self.weights)
+        new = FEMMap(
+            self.polygon, theta, self.mesh, solver.solve(theta.points, self.boundary), self.weights,
+            boundary=self.boundary, solver=solver,
+        )  # fmt: skip
+        # What depends on the mesh alone is shared.
+        for name in ("_triangles", "_domain_locator", "_domain_coefficients", "_coherent_order", "_neighbours"):
+            if name in self.__dict__:
+                new.__dict__[name] = self.__dict__[name]
+        return new
 
     def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
         tri, bary = self._domain_locator.locate(as_points(points))
@@ -261,10 +275,12 @@ def build(
     boundary = options.src_boundary if role == "source" else options.dst_boundary
     mesh = mesh_polygon(polygon, auto_max_area(polygon, region) if area is None else area, region=region, boundary=boundary)
     t1 = clock()
-    values = solve_dirichlet(mesh, theta.points, options.weights, boundary)
+    solver = DirichletSolver(mesh, options.weights)
+    values = solver.solve(theta.points, boundary)
     phi = FEMMap(
-        polygon, theta, mesh, values, options.weights, timings={"mesh": t1 - t0, "solve": clock() - t1}, boundary=boundary
-    )
+        polygon, theta, mesh, values, options.weights, timings={"mesh": t1 - t0, "solve": clock() - t1},
+        boundary=boundary, solver=solver,
+    )  # fmt: skip
     if options.check:
         phi = repaired(phi)
     return phi

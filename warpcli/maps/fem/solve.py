@@ -126,33 +126,59 @@ def solve_dirichlet(
     (N, 2) ndarray of float
         The image in Theta of every mesh vertex.
     """
-    from scipy.sparse.linalg import splu
+    return DirichletSolver(mesh, weights).solve(theta, boundary)
 
-    theta = np.asarray(theta, dtype=np.float64)
-    nv = mesh.n_vertices
-    values = np.zeros((nv, 2))
-    values[mesh.boundary] = boundary_values(mesh, theta, boundary)
-    is_b = np.zeros(nv, dtype=bool)
-    is_b[mesh.boundary] = True
-    interior = np.flatnonzero(~is_b)
-    if weights not in WEIGHTS:
-        raise InputError(f"unknown weights {weights!r}; choose one of {', '.join(WEIGHTS)}")
-    if interior.size:
-        if weights == "cotan":
-            k = cotan_laplacian(mesh.vertices, mesh.triangles)
-        else:
-            k = mean_value_laplacian(mesh.vertices, mesh.triangles)
-        k_i = k[interior]
-        k_ii = k_i[:, interior].tocsc()
-        rhs = -(k_i[:, mesh.boundary] @ values[mesh.boundary])
-        # K_II is an M-matrix (diagonally dominant, non-positive off-diagonal):
-        # a fill-reducing ordering of A^T + A without pivoting is exact and the
-        # fastest direct solve here; the cotangent matrix is also symmetric.
-        lu = splu(
-            k_ii,
-            permc_spec="MMD_AT_PLUS_A",
-            diag_pivot_thresh=0.0,
-            options={"SymmetricMode": weights == "cotan"},
-        )
-        values[interior] = lu.solve(np.ascontiguousarray(rhs))
-    return values
+
+class DirichletSolver:
+    """The Dirichlet problem on one mesh, factorized once, for any boundary data.
+
+    The Laplacian depends on the mesh and the weights only; Theta and the
+    boundary behaviour enter through the right-hand side. So maps of one mesh
+    onto many Thetas (the optimization of §5.1) cost one factorization and a
+    back-substitution each.
+
+    Parameters
+    ----------
+    mesh : TriMesh
+    weights : {"cotan", "positive"}
+    """
+
+    def __init__(self, mesh: TriMesh, weights: str = "cotan") -> None:
+        from scipy.sparse.linalg import splu
+
+        if weights not in WEIGHTS:
+            raise InputError(f"unknown weights {weights!r}; choose one of {', '.join(WEIGHTS)}")
+        self.mesh = mesh
+        self.weights = weights
+        nv = mesh.n_vertices
+        is_b = np.zeros(nv, dtype=bool)
+        is_b[mesh.boundary] = True
+        self.interior = np.flatnonzero(~is_b)
+        self._lu = None
+        if self.interior.size:
+            if weights == "cotan":
+                k = cotan_laplacian(mesh.vertices, mesh.triangles)
+            else:
+                k = mean_value_laplacian(mesh.vertices, mesh.triangles)
+            k_i = k[self.interior]
+            k_ii = k_i[:, self.interior].tocsc()
+            self._k_ib = k_i[:, mesh.boundary]
+            # K_II is an M-matrix (diagonally dominant, non-positive off-diagonal):
+            # a fill-reducing ordering of A^T + A without pivoting is exact and the
+            # fastest direct solve here; the cotangent matrix is also symmetric.
+            self._lu = splu(
+                k_ii,
+                permc_spec="MMD_AT_PLUS_A",
+                diag_pivot_thresh=0.0,
+                options={"SymmetricMode": weights == "cotan"},
+            )
+
+    def solve(self, theta: NDArray[np.float64], boundary: str = "linear") -> NDArray[np.float64]:
+        """The image in Theta of every mesh vertex, (N, 2), for boundary data onto ``theta``."""
+        theta = np.asarray(theta, dtype=np.float64)
+        values = np.zeros((self.mesh.n_vertices, 2))
+        values[self.mesh.boundary] = boundary_values(self.mesh, theta, boundary)
+        if self._lu is not None:
+            rhs = -(self._k_ib @ values[self.mesh.boundary])
+            values[self.interior] = self._lu.solve(np.ascontiguousarray(rhs))
+        return values
