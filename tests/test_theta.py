@@ -150,3 +150,40 @@ def test_the_report_gives_the_optimized_energies(tmp_path):
     assert list(rep)[:3] == ["vertices", "theta", "source_mesh"]
     plain = build_report(warp_image(img, l_shape(), regular(6, r=55.0)))
     assert "theta" not in plain
+
+
+def test_mixed_conditions_map_a_rectangle_affinely_and_refuse_other_counts():
+    """Natural conditions: a rectangle onto a rectangle is the affine map (x = X / w solves them)."""
+    src = Polygon([[10.0, 20.0], [110.0, 20.0], [110.0, 70.0], [10.0, 70.0]])
+    dst = Polygon([[5.0, 5.0], [65.0, 5.0], [65.0, 125.0], [5.0, 125.0]])
+    f = BijectiveMap.between(src, dst, MapOptions(conditions="mixed"))
+    p = np.random.default_rng(3).uniform([12, 22], [108, 68], (500, 2))
+    expected = (p - [10.0, 20.0]) * [0.6, 2.4] + [5.0, 5.0]
+    np.testing.assert_allclose(f.forward(p), expected, atol=1e-6)
+    with pytest.raises(InputError, match="quadrilaterals"):
+        BijectiveMap.between(Polygon(star()), Polygon(star(phase=0.2)), MapOptions(conditions="mixed"))
+
+
+@pytest.mark.parametrize(
+    "quad",
+    [
+        [[10, 10], [120, 20], [60, 50], [20, 110]],  # a dart (concave)
+        [[10, 60], [60, 10], [118, 60], [60, 118]],  # a diamond
+        [[5, 5], [120, 5], [120, 40], [5, 120]],
+    ],
+)
+def test_mixed_conditions_are_certified_and_keep_edges_on_edges(quad):
+    src = Polygon(np.array(quad, dtype=float))
+    dst = Polygon([[8.0, 8.0], [120.0, 8.0], [120.0, 120.0], [8.0, 120.0]])
+    f = BijectiveMap.between(src, dst, MapOptions(conditions="mixed"))
+    assert all(c.ok for c in f.certificates())  # else FoldOverError would have been raised
+    for i in range(4):
+        a, b = src.points[i], src.points[(i + 1) % 4]
+        t = np.linspace(0.05, 0.95, 9)
+        img = f.forward(a + t[:, None] * (b - a))
+        c, d = dst.points[i], dst.points[(i + 1) % 4]
+        e = d - c
+        off = np.abs((img - c) @ np.array([-e[1], e[0]])) / np.hypot(*e)
+        assert np.nanmax(off) < 1e-6  # onto the edge (sliding along it)
+        along = (img - c) @ e / (e @ e)
+        assert np.all(np.diff(along) > 0)  # in order: no fold along the edge

@@ -13,7 +13,7 @@ import click
 from . import __version__
 from .errors import InputError, WarpError
 from .maps.registry import METHODS, THETAS
-from .options import BOUNDARIES, DTYPES, ENERGIES, HEATMAP_MEASURES, INTERPOLATIONS, STMAP_T, WEIGHTS
+from .options import BOUNDARIES, CONDITIONS, DTYPES, ENERGIES, HEATMAP_MEASURES, INTERPOLATIONS, STMAP_T, WEIGHTS
 
 #: Exit statuses; decided here and nowhere else.
 EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
@@ -161,6 +161,14 @@ class DefaultGroup(click.Group):
 @click.option("--energy", type=click.Choice(ENERGIES), default="conformal", show_default=True, help="What --theta optimized lowers: the area-weighted mean distortion.")
 @click.option("--theta-start", type=click.Choice(("regular", "cyclic")), default="regular", show_default=True, help="Where --theta optimized starts.")
 @click.option(
+    "--conditions",
+    type=click.Choice(CONDITIONS),
+    default="dirichlet",
+    show_default=True,
+    help="EXPERIMENTAL mixed: quadrilaterals onto the unit square with natural boundary conditions (the paper's 5.2); "
+    "edges still go onto edges, sliding along them; every result is checked for fold-overs.",
+)
+@click.option(
     "--max-area",
     default="auto",
     show_default=True,
@@ -205,7 +213,7 @@ class DefaultGroup(click.Group):
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
     paths, src_path, dst_path, src_label, dst_label, out_dir, out_name, interp, size, dtype, background, method, theta,
-    boundary, src_boundary, dst_boundary, save_theta, energy, theta_start, max_area, antialias, weights, report_path, grid_path,
+    boundary, src_boundary, dst_boundary, save_theta, energy, theta_start, conditions, max_area, antialias, weights, report_path, grid_path,
     heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t, verbose, quiet,
 ):  # fmt: skip
     """Warp INPUT so that polygon SRC goes onto polygon DST; write OUTPUT.
@@ -231,7 +239,7 @@ def warp(
     options = WarpOptions(
         MapOptions(
             method=method, theta=theta, max_area=max_area, weights=weights, src_boundary=src_boundary,
-            dst_boundary=dst_boundary, energy=energy, theta_start=theta_start,
+            dst_boundary=dst_boundary, energy=energy, theta_start=theta_start, conditions=conditions,
         ),
         interp=interp, background=tuple(background), antialias=antialias, size=size, dtype=dtype,
     )  # fmt: skip

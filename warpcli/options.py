@@ -23,6 +23,8 @@ WEIGHTS = ("cotan", "positive")
 HEATMAP_MEASURES = ("conformal", "isometric", "det")
 #: Which way an STMap's t coordinate runs.
 STMAP_T = ("down", "up")
+#: Boundary conditions: Dirichlet everywhere, or the experimental mixed conditions of §5.2.
+CONDITIONS = ("dirichlet", "mixed")
 #: Energies the Theta optimization can lower.
 ENERGIES = ("conformal", "isometric")
 #: Boundary behaviours: parameter t of a polygon edge goes to t, or t^2, of Theta's edge.
@@ -75,6 +77,11 @@ class MapOptions:
         What ``theta="optimized"`` lowers: the area-weighted mean distortion.
     theta_start : {"regular", "cyclic"}
         Where the optimization starts.
+    conditions : {"dirichlet", "mixed"}
+        Experimental (§5.2, quadrilaterals only): ``mixed`` maps onto the unit
+        square with natural boundary conditions, each coordinate prescribed on
+        the two edges where it is constant and free to slide along the others;
+        the result is still certified, never folded.
 
     Raises
     ------
@@ -91,6 +98,7 @@ class MapOptions:
     dst_boundary: str = "linear"
     energy: str = "conformal"
     theta_start: str = "regular"
+    conditions: str = "dirichlet"
 
     def __post_init__(self) -> None:
         _choice("method", self.method, METHODS)
@@ -99,6 +107,9 @@ class MapOptions:
                 f"unknown Theta {self.theta!r}; choose one of {', '.join(THETAS)} or give a JSON file (.json)"
             )
         _choice("energy", self.energy, ENERGIES)
+        _choice("boundary conditions", self.conditions, CONDITIONS)
+        if self.conditions == "mixed" and self.method != "fem":
+            raise InputError("mixed boundary conditions are implemented for --method fem only")
         _choice("start of the Theta optimization", self.theta_start, ("regular", "cyclic"))
         _choice("source boundary", self.src_boundary, BOUNDARIES)
         _choice("target boundary", self.dst_boundary, BOUNDARIES)

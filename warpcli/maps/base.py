@@ -190,22 +190,23 @@ class ThetaMap(ABC):
         jac = mapped.jacobian[ok] if mapped.jacobian is not None else None
         return GridSample(pixels, mapped.points[ok], jac)
 
-    def to_theta_parameter(self, t: ArrayLike) -> NDArray[np.float64]:
+    def to_theta_parameter(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
         """The boundary behaviour: the parameter along Theta's edge i of parameter t along the
-        polygon's edge i (linear: t, the paper's default, §2; quadratic: t^2, §5.2)."""
+        polygon's edge i (linear: t, the paper's default, §2; quadratic: t^2, §5.2; a map with
+        natural boundary conditions slides along the edge as its solution says)."""
         return to_theta_parameter(t, self.boundary)
 
-    def from_theta_parameter(self, s: ArrayLike) -> NDArray[np.float64]:
+    def from_theta_parameter(self, edge: ArrayLike, s: ArrayLike) -> NDArray[np.float64]:
         """The inverse of `to_theta_parameter`."""
         return from_theta_parameter(s, self.boundary)
 
     def boundary_to_theta(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
         """The boundary data: the image in Theta of the point at parameter t on polygon edge i."""
-        return edge_points(self.theta.points, edge, self.to_theta_parameter(t))
+        return edge_points(self.theta.points, edge, self.to_theta_parameter(edge, t))
 
     def boundary_from_theta(self, edge: ArrayLike, s: ArrayLike) -> NDArray[np.float64]:
         """The inverse boundary data: the polygon point that goes to parameter s on Theta's edge i."""
-        return edge_points(self.polygon.points, edge, self.from_theta_parameter(s))
+        return edge_points(self.polygon.points, edge, self.from_theta_parameter(edge, s))
 
     def describe(self) -> dict:
         """What only this method knows, for the report (for FEM: the mesh's size)."""

@@ -239,7 +239,7 @@ class BijectiveMap:
 
     def inverse_boundary(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
         """The exact boundary map backwards: the source point of parameter t on target edge i."""
-        return self.phi0.boundary_from_theta(edge, self.phi1.to_theta_parameter(t))
+        return self.phi0.boundary_from_theta(edge, self.phi1.to_theta_parameter(edge, t))
 
     def pull_back(self, width: int, height: int, *, jacobian: bool = True) -> PullBack:
         """f^-1 (and its Jacobian) at the pixel centres of a ``width`` x ``height`` output grid.

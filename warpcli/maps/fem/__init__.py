@@ -58,6 +58,7 @@ class FEMMap(ThetaMap):
     values: NDArray[np.float64]
     weights: str = "cotan"
     solver: DirichletSolver | None = field(default=None, repr=False, kw_only=True)
+    conditions: str = field(default="dirichlet", kw_only=True)
 
     method = "fem"
 
@@ -102,12 +103,51 @@ class FEMMap(ThetaMap):
     def describe(self) -> dict:
         return {"mesh": {"vertices": self.mesh.n_vertices, "triangles": self.mesh.n_triangles}}
 
+    def to_theta_parameter(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
+        if self.conditions != "mixed":
+            return super().to_theta_parameter(edge, t)
+        return self._slide(edge, t, forward=True)
+
+    def from_theta_parameter(self, edge: ArrayLike, s: ArrayLike) -> NDArray[np.float64]:
+        if self.conditions != "mixed":
+            return super().from_theta_parameter(edge, s)
+        return self._slide(edge, s, forward=False)
+
+    def _slide(self, edge: ArrayLike, u: ArrayLike, *, forward: bool) -> NDArray[np.float64]:
+        """Natural boundary conditions let the boundary slide along Theta's edges: the
+        parameter correspondence is the solution's, piecewise linear between nodes."""
+        e = np.broadcast_to(np.asarray(edge, dtype=np.intp), np.shape(u))
+        u = np.asarray(u, dtype=np.float64)
+        out = np.empty(u.shape)
+        for i, (t_nodes, s_nodes) in enumerate(self._edge_tables):
+            on = e == i
+            if on.any():
+                out[on] = np.interp(u[on], t_nodes, s_nodes) if forward else np.interp(u[on], s_nodes, t_nodes)
+        return out
+
+    @cached_property
+    def _edge_tables(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Per polygon edge: the nodes' parameters along it and along Theta's edge (sorted)."""
+        m = self.mesh
+        w = self.theta.points
+        n = len(w)
+        tables = []
+        for i in range(n):
+            on = m.boundary_edge == i
+            t = np.concatenate([m.boundary_t[on], [1.0]])
+            a, d = w[i], w[(i + 1) % n] - w[i]
+            img = np.concatenate([self.values[m.boundary[on]], w[(i + 1) % n][None]])
+            s = np.clip((img - a) @ d / (d @ d), 0.0, 1.0)
+            order = np.argsort(t, kind="stable")
+            tables.append((t[order], np.maximum.accumulate(s[order])))
+        return tables
+
     def retarget(self, theta: Theta) -> FEMMap:
         """The map of the same mesh onto another Theta: one back-substitution (§5.1)."""
         solver = self.solver or DirichletSolver(self.mesh, self.weights)
         new = FEMMap(
             self.polygon, theta, self.mesh, solver.solve(theta.points, self.boundary), self.weights,
-            boundary=self.boundary, solver=solver,
+            boundary=self.boundary, solver=solver, conditions=self.conditions,
         )  # fmt: skip
         # What depends on the mesh alone is shared.
         for name in ("_triangles", "_domain_locator", "_domain_coefficients", "_coherent_order", "_neighbours"):
@@ -275,11 +315,16 @@ def build(
     boundary = options.src_boundary if role == "source" else options.dst_boundary
     mesh = mesh_polygon(polygon, auto_max_area(polygon, region) if area is None else area, region=region, boundary=boundary)
     t1 = clock()
-    solver = DirichletSolver(mesh, options.weights)
+    # Mixed conditions (§5.2; Theta the unit square): each coordinate is
+    # prescribed on the two edges where it is constant (x on the vertical
+    # edges 1 and 3, y on the horizontal edges 0 and 2) and slides freely
+    # (zero normal derivative) along the other two.
+    free = ((0, 2), (1, 3)) if options.conditions == "mixed" else ((), ())
+    solver = DirichletSolver(mesh, options.weights, free)
     values = solver.solve(theta.points, boundary)
     phi = FEMMap(
         polygon, theta, mesh, values, options.weights, timings={"mesh": t1 - t0, "solve": clock() - t1},
-        boundary=boundary, solver=solver,
+        boundary=boundary, solver=solver, conditions=options.conditions,
     )  # fmt: skip
     if options.check:
         phi = repaired(phi)
@@ -296,6 +341,8 @@ def repaired(phi: FEMMap) -> FEMMap:
         phi.polygon.name,
         flips,
     )
+    if phi.conditions == "mixed":
+        return phi  # no repair for the experimental natural conditions: the certificate says so
     values = solve_dirichlet(phi.mesh, phi.theta.points, "positive", phi.boundary)
     return FEMMap(phi.polygon, phi.theta, phi.mesh, values, "positive", timings=phi.timings, boundary=phi.boundary)
 

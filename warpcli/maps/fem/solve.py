@@ -141,44 +141,64 @@ class DirichletSolver:
     ----------
     mesh : TriMesh
     weights : {"cotan", "positive"}
+    free_edges : (edges, edges)
+        Natural boundary conditions (§5.2): for each coordinate, the polygon
+        edges along which it is free (zero normal derivative) instead of
+        prescribed; their nodes, but not the polygon's vertices, are then
+        unknowns of that coordinate's system. Empty (the default): Dirichlet
+        everywhere, one factorization for both coordinates.
     """
 
-    def __init__(self, mesh: TriMesh, weights: str = "cotan") -> None:
-        from scipy.sparse.linalg import splu
-
+    def __init__(self, mesh: TriMesh, weights: str = "cotan", free_edges: tuple = ((), ())) -> None:
         if weights not in WEIGHTS:
             raise InputError(f"unknown weights {weights!r}; choose one of {', '.join(WEIGHTS)}")
         self.mesh = mesh
         self.weights = weights
-        nv = mesh.n_vertices
-        is_b = np.zeros(nv, dtype=bool)
-        is_b[mesh.boundary] = True
-        self.interior = np.flatnonzero(~is_b)
-        self._lu = None
-        if self.interior.size:
-            if weights == "cotan":
-                k = cotan_laplacian(mesh.vertices, mesh.triangles)
-            else:
-                k = mean_value_laplacian(mesh.vertices, mesh.triangles)
-            k_i = k[self.interior]
-            k_ii = k_i[:, self.interior].tocsc()
-            self._k_ib = k_i[:, mesh.boundary]
-            # K_II is an M-matrix (diagonally dominant, non-positive off-diagonal):
-            # a fill-reducing ordering of A^T + A without pivoting is exact and the
-            # fastest direct solve here; the cotangent matrix is also symmetric.
-            self._lu = splu(
-                k_ii,
-                permc_spec="MMD_AT_PLUS_A",
-                diag_pivot_thresh=0.0,
-                options={"SymmetricMode": weights == "cotan"},
-            )
+        k = None
+        parts = []
+        groups = [((0, 1), tuple(free_edges[0]))] if tuple(free_edges[0]) == tuple(free_edges[1]) else [
+            ((0,), tuple(free_edges[0])), ((1,), tuple(free_edges[1]))
+        ]  # fmt: skip
+        for coords, free in groups:
+            fixed = np.zeros(mesh.n_vertices, dtype=bool)
+            fixed[mesh.boundary] = True
+            if free:
+                sliding = (mesh.boundary_t > 0) & np.isin(mesh.boundary_edge, free)
+                fixed[mesh.boundary[sliding]] = False
+            unknown = np.flatnonzero(~fixed)
+            known = mesh.boundary if not free else np.flatnonzero(fixed)
+            if unknown.size == 0:
+                parts.append((coords, unknown, known, None, None))
+                continue
+            if k is None:
+                k = cotan_laplacian(mesh.vertices, mesh.triangles) if weights == "cotan" else mean_value_laplacian(
+                    mesh.vertices, mesh.triangles
+                )  # fmt: skip
+            k_u = k[unknown]
+            parts.append((coords, unknown, known, _factorize(k_u[:, unknown].tocsc(), weights), k_u[:, known]))
+        self._parts = parts
 
     def solve(self, theta: NDArray[np.float64], boundary: str = "linear") -> NDArray[np.float64]:
         """The image in Theta of every mesh vertex, (N, 2), for boundary data onto ``theta``."""
         theta = np.asarray(theta, dtype=np.float64)
         values = np.zeros((self.mesh.n_vertices, 2))
         values[self.mesh.boundary] = boundary_values(self.mesh, theta, boundary)
-        if self._lu is not None:
-            rhs = -(self._k_ib @ values[self.mesh.boundary])
-            values[self.interior] = self._lu.solve(np.ascontiguousarray(rhs))
+        for coords, unknown, known, lu, k_uk in self._parts:
+            if lu is None:
+                continue
+            c = list(coords)
+            rhs = -(k_uk @ (values[known] if len(c) == 2 else values[known][:, c]))
+            values[np.ix_(unknown, c)] = lu.solve(np.ascontiguousarray(rhs)).reshape(len(unknown), len(c))
         return values
+
+
+def _factorize(k_uu, weights: str):
+    """SuperLU of the system matrix.
+
+    K_UU is an M-matrix (diagonally dominant, non-positive off-diagonal): a
+    fill-reducing ordering of A^T + A without pivoting is exact and the fastest
+    direct solve here; the cotangent matrix is also symmetric.
+    """
+    from scipy.sparse.linalg import splu
+
+    return splu(k_uu, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": weights == "cotan"})
