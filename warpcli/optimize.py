@@ -82,7 +82,7 @@ def optimized(src: Polygon, dst: Polygon, options) -> Theta:
         a = _onto(phi1, theta, method, dst, coarse, "target")
         b = _onto(phi0, theta, method, src, coarse, "source")
         m1 = a.evaluate(samples, jacobian=True)
-        m0 = b.inverse(m1.points, jacobian=True)
+        m0 = b.inverse(m1.points, jacobian=True, coherent=True)  # samples in grid order: walk, no locator
         value = summarize(matmul2(m0.jacobian, m1.jacobian))[options.energy]["mean"]
         return math.inf if value is None else value
 
