@@ -24,4 +24,6 @@ if _here != os.path.join(REPO, "warpcli"):
 
 # No unseeded randomness anywhere, tests included: the same examples every run.
 settings.register_profile("warpcli", derandomize=True, deadline=None, max_examples=40)
-settings.load_profile("warpcli")
+# Longer local fuzzing: WARPCLI_FUZZ=long python -m pytest tests/test_fuzz.py (random, many examples).
+settings.register_profile("long", derandomize=False, deadline=None, max_examples=2000)
+settings.load_profile("long" if os.environ.get("WARPCLI_FUZZ") == "long" else "warpcli")

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
+import threading
 
 import numpy as np
 import pytest
@@ -13,7 +15,16 @@ from hypothesis import strategies as st
 
 from helpers import l_shape, regular, star
 from warpcli.errors import InputError, PolygonError
-from warpcli.polygon import Polygon, check_pair, read_polygon, signed_area
+from warpcli.polygon import (
+    MAX_FILE_BYTES,
+    MIN_CLEARANCE,
+    MIN_CLEARANCE_RELATIVE,
+    Polygon,
+    check_pair,
+    clearance_floor,
+    read_polygon,
+    signed_area,
+)
 
 SQUARE = [[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]
 
@@ -89,13 +100,151 @@ def test_missing_file(tmp_path):
     assert "No such file" in str(info.value)
 
 
+def test_path_with_a_nul_character():
+    with pytest.raises(PolygonError, match="embedded null") as info:
+        read_polygon("a\0b.json")
+    assert str(info.value) == "'a\\x00b.json': cannot read polygon file: embedded null byte"
+
+
 def test_directory_is_not_a_polygon_file(tmp_path):
     (tmp_path / "dir.json").mkdir()
     path = str(tmp_path / "dir.json")
     with pytest.raises(PolygonError, match="cannot read polygon file") as info:
         read_polygon(path)
+    assert str(info.value) == f"{path}: cannot read polygon file: it is a directory, not a regular file"
+
+
+def read_in_thread(path, timeout=10.0):
+    """read_polygon(path) in a daemon thread: (finished, exception), so a hang fails instead of blocking."""
+    out = {}
+
+    def run():
+        try:
+            read_polygon(path)
+        except Exception as err:  # handed back to the test to check
+            out["err"] = err
+
+    worker = threading.Thread(target=run, daemon=True)
+    worker.start()
+    worker.join(timeout)
+    return not worker.is_alive(), out.get("err")
+
+
+def test_fifo_is_refused_without_waiting_for_a_writer(tmp_path):
+    path = str(tmp_path / "pipe.json")
+    os.mkfifo(path)  # no writer: opening it for reading in blocking mode would wait forever
+    finished, err = read_in_thread(path)
+    assert finished
+    assert isinstance(err, PolygonError)
+    assert str(err) == f"{path}: cannot read polygon file: it is a FIFO (named pipe), not a regular file"
+
+
+def test_fifo_swapped_in_after_the_check_is_refused(tmp_path, monkeypatch):
+    # The path passes the look before opening (a regular file then), but is a
+    # FIFO when opened: the non-blocking open returns, and fstat refuses it.
+    path = str(tmp_path / "pipe.json")
+    os.mkfifo(path)
+    regular = os.stat(write_text(tmp_path / "plain.json", "[]"))
+    real_stat = os.stat
+    monkeypatch.setattr(os, "stat", lambda p, *a, **k: regular if os.fspath(p) == path else real_stat(p, *a, **k))
+    finished, err = read_in_thread(path)
+    assert finished
+    assert isinstance(err, PolygonError)
+    assert "it is a FIFO (named pipe), not a regular file" in str(err)
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/zero"), reason="no /dev/zero")
+def test_device_is_refused_unread():
+    finished, err = read_in_thread("/dev/zero")
+    assert finished
+    assert isinstance(err, PolygonError)
+    assert str(err) == "/dev/zero: cannot read polygon file: it is a character device, not a regular file"
+
+
+def test_file_larger_than_the_limit_is_refused_unread(tmp_path):
+    path = str(tmp_path / "huge.json")
+    with open(path, "wb") as fh:
+        fh.truncate(7 << 30)  # sparse: 7 GiB of zero bytes that take no space
+    with pytest.raises(PolygonError, match="too large") as info:
+        read_polygon(path)
+    assert str(info.value) == f"{path}: polygon file is too large: 7 GiB, more than the limit of 64 MiB"
+    assert MAX_FILE_BYTES == 64 << 20
+
+
+def test_file_at_the_limit_is_read(tmp_path):
+    # Padding after the JSON value is whitespace: valid, and exactly MAX_FILE_BYTES long.
+    text = json.dumps(SQUARE)
+    path = write_text(tmp_path / "big.json", text + " " * (MAX_FILE_BYTES - len(text)))
+    assert os.path.getsize(path) == MAX_FILE_BYTES
+    assert read_polygon(path).points.tolist() == SQUARE
+
+
+def test_integer_of_thousands_of_digits(tmp_path):
+    # Python's int() refuses more than 4300 digits (a ValueError inside json.loads).
+    path = write_text(tmp_path / "digits.json", "[[0, 0], [1" + "0" * 4999 + ", 0], [0, 4]]")
+    with pytest.raises(PolygonError, match="out of range") as info:
+        read_polygon(path)
+    assert str(info.value) == (
+        f"{path}: vertex 1 has a coordinate out of range: an integer of 5000 digits "
+        "(coordinates must be within +-1e+09 pixels)"
+    )
+
+
+def test_integer_of_thousands_of_digits_elsewhere_is_ignored(tmp_path):
+    path = write_text(tmp_path / "digits.json", json.dumps({"points": SQUARE})[:-1] + ', "n": ' + "9" * 5000 + "}")
+    assert read_polygon(path).points.tolist() == SQUARE
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "[" + "[" * 900 + "]" * 900 + ", [0, 0], [1, 1]]",
+        '{"type": "Polygon", "coordinates": [[' + "[" * 900 + "]" * 900 + ", [0, 0], " + "[" * 900 + "]" * 900 + "]]}",
+        '{"shapes": [{"label": ' + "[" * 900 + "]" * 900 + ', "points": []}, {"points": []}]}',
+    ],
+    ids=["vertex", "geojson-ring", "labelme-label"],
+)
+def test_nesting_just_below_the_parser_limit(tmp_path, text):
+    # Parsed, but then compared or printed: still one line, never a RecursionError.
+    path = write_text(tmp_path / "deep.json", text)
+    with pytest.raises(PolygonError) as info:
+        read_polygon(path)
     assert str(info.value).startswith(f"{path}: ")
-    assert "directory" in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_byte_order_mark_is_ignored(tmp_path):
+    path = write_text(tmp_path / "bom.json", b"\xef\xbb\xbf" + json.dumps(SQUARE).encode())
+    assert read_polygon(path).points.tolist() == SQUARE
+
+
+def test_text_from_the_file_is_shown_on_one_line(tmp_path):
+    doc = {"shapes": [{"label": "left\nright", "points": PTS}, {"label": "\ud800", "points": PTS}]}
+    path = write_text(tmp_path / "lm.json", json.dumps(doc))
+    with pytest.raises(PolygonError, match="2 polygons") as info:
+        read_polygon(path)
+    msg = str(info.value)
+    assert msg == f'{path}: labelme file has 2 polygons ("left\\nright", "\\ud800"); choose one with a label option'
+    msg.encode("utf-8")  # no lone surrogate
+    geo = {"type": "Feature", "geometry": {"type": ["Line\nString"]}}
+    with pytest.raises(PolygonError, match="not a Polygon") as info:
+        read_polygon(write_text(tmp_path / "g.json", json.dumps(geo)))
+    assert str(info.value).endswith(': GeoJSON geometry is a ["Line\\nString"], not a Polygon')
+
+
+def test_labelme_labels_are_listed_up_to_ten(tmp_path):
+    doc = {"shapes": [{"label": f"s{k}", "points": PTS} for k in range(25)]}
+    path = write_text(tmp_path / "lm.json", json.dumps(doc))
+    with pytest.raises(PolygonError, match="25 polygons") as info:
+        read_polygon(path)
+    assert "(s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, ... (15 more))" in str(info.value)
+
+
+def test_geojson_features_must_be_an_array(tmp_path):
+    path = write_text(tmp_path / "fc.json", '{"type": "FeatureCollection", "features": 5}')
+    with pytest.raises(PolygonError, match="must be an array") as info:
+        read_polygon(path)
+    assert str(info.value) == f'{path}: GeoJSON FeatureCollection "features" must be an array'
 
 
 @pytest.mark.parametrize(
@@ -317,6 +466,101 @@ def test_check_pair_accepts_equal_counts():
     assert check_pair(Polygon(SQUARE), Polygon(regular(4))) is None
 
 
+# --- clearance: slivers, needles, slits ---------------------------------------
+
+
+@pytest.mark.parametrize("height", [1e-4, 1e-5, 1e-6])
+def test_needle_triangle_is_too_thin(height):
+    # Apex over the middle of a 1000 px base: every edge is long, but vertex 2
+    # is `height` from edge 0.
+    msg = polygon_error([[0, 0], [1000, 0], [500, height]])
+    assert msg == (
+        f"p.json: polygon is too thin: vertex 2 (500.0, {height:g}) is {height:g} px from edge 0 "
+        "(the minimum clearance is 0.001 px)"
+    )
+
+
+def test_sliver_rectangle_has_edges_too_short():
+    msg = polygon_error([[0, 0], [236, 0], [236, 0.0002], [0, 0.0002]])
+    assert msg == (
+        "p.json: edge 1 is too short: 0.0002 px from vertex 1 (236.0, 0.0) to vertex 2 (236.0, 0.0002) "
+        "(the minimum is 0.001 px)"
+    )
+
+
+def test_slit_with_a_closed_mouth_is_too_thin():
+    # A square with a V-shaped slit from the top edge down to (100, 50),
+    # its mouth 1e-12 px wide (this one crashed the mesher).
+    w = 1e-12
+    msg = polygon_error([[0, 0], [200, 0], [200, 200], [100 + w / 2, 200], [100, 50], [100 - w / 2, 200], [0, 200]])
+    assert msg.startswith("p.json: polygon is too thin: vertex 3 (100.0, 200.0) is 9.9476e-13 px from edge 4 ")
+
+
+@pytest.mark.parametrize("gap, ok", [(0.05, True), (0.0011, True), (0.0009, False), (1e-9, False)])
+def test_gap_between_two_arms(gap, ok):
+    # A U: two arms 100 px long, `gap` apart. Thin but deliberate at 0.05 px.
+    pts = [[0, 0], [100, 0], [100, 100], [50 + gap / 2, 100], [50 + gap / 2, 10], [50 - gap / 2, 10], [50 - gap / 2, 100], [0, 100]]
+    if ok:
+        assert Polygon(pts).n == 8
+    else:
+        assert "edge 4 is too short" in polygon_error(pts)
+
+
+def test_a_crossing_is_named_before_a_clearance_fault():
+    # The bow-tie again, with vertex 0 doubled 1e-4 px away (edge 4 too short).
+    msg = polygon_error([[0, 0], [40, 40], [40, 0], [0, 60], [0, 1e-4]])
+    assert msg == "p.json: polygon is self-intersecting: edges 0 and 2 cross at (24.0, 24.0)"
+
+
+def test_clearance_floor_grows_with_the_polygon():
+    assert clearance_floor(SQUARE) == MIN_CLEARANCE
+    # A 3e5 x 4e5 px triangle: diagonal 5e5 px, floor 0.5 px.
+    assert clearance_floor([[0, 0], [3e5, 0], [3e5, 4e5]]) == pytest.approx(MIN_CLEARANCE_RELATIVE * 5e5)
+    msg = polygon_error([[0, 0], [3e5, 0], [3e5, 4e5], [3e5 - 0.25, 4e5]])
+    assert msg == (
+        "p.json: edge 2 is too short: 0.25 px from vertex 2 (300000.0, 400000.0) to vertex 3 (300000.0, 400000.0) "
+        "(the minimum is 0.5 px for a polygon this large: 1e-06 of its bounding box's diagonal)"
+    )
+
+
+def test_needle_that_crashed_the_mesher_is_too_thin():
+    # 1e8 px long, 26 px wide at its base: a tip angle of 2.6e-7 rad.
+    # Its base is an edge only 26 px long, where the polygon's size asks for 100.
+    msg = polygon_error([[100000032.0, 24.0], [20.99605623705275, 34.19378348121512], [28.673896426063155, 9.373413418864791]])
+    assert msg == (
+        "p.json: edge 1 is too short: 25.9808 px from vertex 1 (20.9961, 34.1938) to vertex 2 (28.6739, 9.37341) "
+        "(the minimum is 100.0 px for a polygon this large: 1e-06 of its bounding box's diagonal)"
+    )
+
+
+def test_a_value_just_under_the_floor_is_shown_with_enough_digits():
+    msg = polygon_error([[0, 0], [100, 0], [100, 0.000999999]])
+    assert "0.000999999 px" in msg
+
+
+# --- far from the origin --------------------------------------------------------
+
+
+def test_small_polygon_far_from_the_origin_keeps_its_area():
+    # A 10 px square at 1e9 - 20: the plain shoelace sum would lose the
+    # area's digits in products near 1e18.
+    x0 = 1e9 - 20
+    pts = [[x0, x0], [x0 + 10, x0], [x0 + 10, x0 + 10], [x0, x0 + 10]]
+    poly = Polygon(pts)
+    assert poly.signed_area == 100.0
+    assert Polygon(pts[::-1]).signed_area == -100.0
+
+
+@pytest.mark.parametrize(
+    "offset, problem",
+    [(1e6, "edge 0 is too short: 1"), (-1e6, "edge 0 is too short: 1"), (999_999_000.0, "vertices 0 and 1 are repeated")],
+)
+def test_tiny_edge_far_from_the_origin(offset, problem):
+    # 1e-9 px is 8 units in the last place at 1e6, and rounds away at 1e9.
+    pts = np.array([[0, 0], [1e-9, 0], [100, 50], [0, 100]]) + offset
+    assert problem in polygon_error(pts)
+
+
 # --- valid polygons ----------------------------------------------------------
 
 
@@ -368,10 +612,11 @@ def test_a_straight_angle_vertex_is_accepted_and_not_reflex():
 
 @st.composite
 def star_shaped(draw):
-    """Random radii in [0.3, 1] at sorted random angles, every wedge under pi.
+    """Random radii in [15, 50] px at sorted random angles, every wedge under pi.
 
-    With each angular gap (including the wrap-around) below pi, the origin is
-    in the polygon's kernel, so the polygon is simple.
+    With each angular gap (including the wrap-around) below pi, the centre is
+    in the polygon's kernel, so the polygon is simple; with gaps over 1e-3 rad
+    its vertices are over 0.015 px apart, well clear of MIN_CLEARANCE.
     """
     angles = draw(
         st.lists(
@@ -384,8 +629,8 @@ def star_shaped(draw):
     angles = np.sort(np.array(angles))
     gaps = np.diff(np.append(angles, angles[0] + 2 * math.pi))
     assume(gaps.min() > 1e-3 and gaps.max() < math.pi - 1e-3)
-    radii = np.array(draw(st.lists(st.floats(0.3, 1.0), min_size=len(angles), max_size=len(angles))))
-    return np.stack([radii * np.cos(angles), radii * np.sin(angles)], axis=1)
+    radii = 50.0 * np.array(draw(st.lists(st.floats(0.3, 1.0), min_size=len(angles), max_size=len(angles))))
+    return 64.0 + np.stack([radii * np.cos(angles), radii * np.sin(angles)], axis=1)
 
 
 @given(star_shaped())

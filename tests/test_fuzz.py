@@ -1,0 +1,132 @@
+"""Fuzzing the whole command with hostile polygons: never a traceback, never a fold-over.
+
+Each example writes a polygon pair and runs ``warp`` in-process on a small
+image, with --report on stdout. Whatever the polygons (slivers, spikes,
+near-touching arms, 1e-9 edges, coordinates near 1e6 and 1e9, thousands of
+vertices, pairs that miss or cover the image, garbage), the run ends with
+exit 0 (a written image and a report with no flipped element) or exit 2 (one
+line on stderr naming a file, nothing written), within a time bound.
+
+CI runs a fixed, derandomized set (the "warpcli" profile); set
+WARPCLI_FUZZ=long for the profile of longer local runs (see conftest.py).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import signal
+import time
+from contextlib import redirect_stderr, redirect_stdout
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from helpers import simple_polygons, write_png, write_polygon
+from warpcli.cli import main
+
+#: Seconds one example may take (in-process; the bound catches hangs and blow-ups).
+TIME_LIMIT = 60
+
+
+def _scaled(points, scale, offset):
+    return np.asarray(points, dtype=float) * scale + offset
+
+
+@st.composite
+def hostile(draw, n: int):
+    """One polygon with n vertices (or about n), drawn from a family of hard cases."""
+    kind = draw(st.sampled_from(["valid", "sliver", "spike", "arms", "tiny-edge", "far", "garbage", "dense"]))
+    if kind == "valid":
+        pts = np.asarray(draw(simple_polygons(n)))
+        pts = _scaled(pts, draw(st.sampled_from([1e-3, 0.05, 1.0, 40.0, 1e4])), draw(st.sampled_from([0.0, -30.0, 1e6])))
+    elif kind == "sliver":
+        h = draw(st.sampled_from([1e-12, 1e-9, 1e-6, 1e-4, 1e-2]))
+        pts = np.array([[2.0, 20.0], [60.0, 20.0], [31.0, 20.0 + h]])
+    elif kind == "spike":
+        k = np.arange(n)
+        r = np.where(k == 0, draw(st.sampled_from([100.0, 1e4, 1e8])), 15.0)
+        a = 2 * math.pi * k / n + np.where(k == 0, 0.0, 0.3)
+        pts = np.stack([32 + r * np.cos(a), 24 + r * np.sin(a)], axis=1)
+    elif kind == "arms":
+        gap = draw(st.sampled_from([1e-9, 1e-6, 1e-3, 0.1]))
+        pts = np.array([[4, 4], [60, 4], [60, 20], [10, 20], [10, 20 + gap], [60, 20 + gap], [60, 44], [4, 44]], float)
+    elif kind == "tiny-edge":
+        pts = np.asarray(draw(simple_polygons(n)), dtype=float) * 0.4
+        pts = np.insert(pts, 1, pts[0] + [1e-9, 1e-9], axis=0)
+    elif kind == "far":
+        s = draw(st.sampled_from([1e6, 1e7, 1e9]))
+        pts = np.array([[-s, -s], [s, -s], [s, s], [-s, s]]) + draw(st.sampled_from([0.0, 3.0 * s]))
+    elif kind == "garbage":
+        pts = np.asarray(draw(st.lists(st.tuples(st.floats(-100, 200), st.floats(-100, 200)), min_size=3, max_size=9)))
+    else:  # dense: thousands of vertices on a wavy circle
+        m = draw(st.sampled_from([1000, 5000]))
+        a = 2 * math.pi * np.arange(m) / m
+        r = 20 * (1 + 0.2 * np.sin(7 * a))
+        pts = np.stack([32 + r * np.cos(a), 24 + r * np.sin(a)], axis=1)
+    return pts
+
+
+@st.composite
+def pairs(draw):
+    n = draw(st.integers(3, 12))
+    src = draw(hostile(n))
+    same_count = draw(st.booleans())
+    dst = draw(hostile(len(src))) if same_count else draw(hostile(n))
+    if same_count and len(dst) != len(src):
+        dst = dst[: len(src)] if len(dst) > len(src) else dst
+    return src, dst
+
+
+class _TimeLimit(Exception):
+    pass
+
+
+def _alarm(signum, frame):
+    raise _TimeLimit()
+
+
+@given(pairs())
+@settings(suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.function_scoped_fixture])
+def test_hostile_polygon_pairs(tmp_path_factory, pair):
+    d = tmp_path_factory.mktemp("fuzz")
+    img = write_png(d / "in.png", np.full((48, 64, 3), 120, dtype=np.uint8))
+    src = d / "src.json"
+    dst = d / "dst.json"
+    with open(src, "w") as fh:
+        json.dump(np.asarray(pair[0]).tolist(), fh)
+    with open(dst, "w") as fh:
+        json.dump(np.asarray(pair[1]).tolist(), fh)
+    out = d / "out.png"
+    if os.environ.get("WARPCLI_FUZZ_LOG"):
+        with open(os.environ["WARPCLI_FUZZ_LOG"], "a") as fh:
+            fh.write(json.dumps([np.asarray(p).tolist() for p in pair]) + "\n")
+    err, stdout = io.StringIO(), io.StringIO()
+    old = signal.signal(signal.SIGALRM, _alarm)
+    signal.alarm(TIME_LIMIT)
+    t0 = time.monotonic()
+    try:
+        with redirect_stderr(err), redirect_stdout(stdout):
+            code = main([str(img), str(out), "--src", str(src), "--dst", str(dst), "--report", "-"])
+    except _TimeLimit:
+        pytest.fail(f"more than {TIME_LIMIT} s: {pair}")
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+    lines = err.getvalue().splitlines()
+    assert "Traceback" not in err.getvalue()
+    assert all(line.startswith("warp: ") for line in lines), lines
+    if code == 0:
+        assert out.exists()
+        report = json.loads(stdout.getvalue())
+        assert report["flipped_triangles"] == 0
+    else:
+        assert code == 2, (code, lines)
+        errors = [line for line in lines if line.startswith("warp: error: ")]
+        assert len(errors) == 1 and (str(src) in errors[0] or str(dst) in errors[0] or "vertices" in errors[0]), lines
+        assert sorted(os.listdir(d)) == ["dst.json", "in.png", "src.json"]
+    assert time.monotonic() - t0 < TIME_LIMIT
