@@ -42,6 +42,11 @@ class Implementation:
 IMPLEMENTATIONS = {
     "fem-cotan": Implementation(MapOptions(method="fem", weights="cotan"), 1e-9, 1e-7, (0.05, 0.5)),
     "fem-positive": Implementation(MapOptions(method="fem", weights="positive"), 1e-9, 1e-7, (0.5, 3.0)),
+    # Meshless: linear functions are reproduced to rounding; the boundary is
+    # the exact Dirichlet data (evaluate and inverse use it there); accuracy
+    # against a similarity is that of the approximation near reflex corners.
+    "bem": Implementation(MapOptions(method="bem"), 1e-7, 1e-7, (0.02, 0.5)),
+    "mfs": Implementation(MapOptions(method="mfs"), 1e-7, 1e-7, (0.02, 0.5)),
 }
 
 CONCAVE = {"star": star(), "L": l_shape(), "comb": comb(), "spiral": spiral()}

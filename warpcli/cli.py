@@ -160,6 +160,7 @@ class DefaultGroup(click.Group):
 @click.option("--save-theta", type=click.Path(dir_okay=False), help="Write the Theta this run used as JSON (to reuse with --theta FILE.json).")
 @click.option("--energy", type=click.Choice(ENERGIES), default="conformal", show_default=True, help="What --theta optimized lowers: the area-weighted mean distortion.")
 @click.option("--theta-start", type=click.Choice(("regular", "cyclic")), default="regular", show_default=True, help="Where --theta optimized starts.")
+@click.option("--nodes", type=click.IntRange(3, 100_000), help="BEM/MFS: boundary nodes (BEM) or sites (MFS), m.  [default: max(256, 8 n)]")
 @click.option(
     "--conditions",
     type=click.Choice(CONDITIONS),
@@ -213,7 +214,7 @@ class DefaultGroup(click.Group):
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
     paths, src_path, dst_path, src_label, dst_label, out_dir, out_name, interp, size, dtype, background, method, theta,
-    boundary, src_boundary, dst_boundary, save_theta, energy, theta_start, conditions, max_area, antialias, weights, report_path, grid_path,
+    boundary, src_boundary, dst_boundary, save_theta, energy, theta_start, nodes, conditions, max_area, antialias, weights, report_path, grid_path,
     heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t, verbose, quiet,
 ):  # fmt: skip
     """Warp INPUT so that polygon SRC goes onto polygon DST; write OUTPUT.
@@ -239,7 +240,7 @@ def warp(
     options = WarpOptions(
         MapOptions(
             method=method, theta=theta, max_area=max_area, weights=weights, src_boundary=src_boundary,
-            dst_boundary=dst_boundary, energy=energy, theta_start=theta_start, conditions=conditions,
+            dst_boundary=dst_boundary, energy=energy, theta_start=theta_start, conditions=conditions, nodes=nodes,
         ),
         interp=interp, background=tuple(background), antialias=antialias, size=size, dtype=dtype,
     )  # fmt: skip

@@ -77,6 +77,9 @@ class MapOptions:
         What ``theta="optimized"`` lowers: the area-weighted mean distortion.
     theta_start : {"regular", "cyclic"}
         Where the optimization starts.
+    nodes : int or None
+        BEM and MFS: the number m of boundary nodes (BEM) or sites (MFS);
+        None: max(256, 8 n).
     conditions : {"dirichlet", "mixed"}
         Experimental (§5.2, quadrilaterals only): ``mixed`` maps onto the unit
         square with natural boundary conditions, each coordinate prescribed on
@@ -99,6 +102,7 @@ class MapOptions:
     energy: str = "conformal"
     theta_start: str = "regular"
     conditions: str = "dirichlet"
+    nodes: int | None = None
 
     def __post_init__(self) -> None:
         _choice("method", self.method, METHODS)
@@ -107,6 +111,8 @@ class MapOptions:
                 f"unknown Theta {self.theta!r}; choose one of {', '.join(THETAS)} or give a JSON file (.json)"
             )
         _choice("energy", self.energy, ENERGIES)
+        if self.nodes is not None and not (isinstance(self.nodes, int) and 3 <= self.nodes <= 100_000):
+            raise InputError(f"nodes must be a whole number from 3 to 100000, got {self.nodes!r}")
         _choice("boundary conditions", self.conditions, CONDITIONS)
         if self.conditions == "mixed" and self.method != "fem":
             raise InputError("mixed boundary conditions are implemented for --method fem only")

@@ -33,6 +33,8 @@ class Entry:
 #: loads what the method needs later (compiled kernels) while maps are solved.
 METHODS = {
     "fem": Entry("warpcli.maps.fem", "finite elements on a graded Delaunay mesh (§3.1.1): fast, exact on the boundary"),
+    "bem": Entry("warpcli.maps.meshless:BEM", "boundary elements (§3.1.2): smooth, analytic derivatives, slower"),
+    "mfs": Entry("warpcli.maps.meshless:MFS", "fundamental solutions (§3.1.3): smooth, analytic derivatives, fast to evaluate"),
 }
 
 #: Strategies that choose the convex intermediate polygon Theta (§2, §5.1).

@@ -1,0 +1,178 @@
+"""The method of fundamental solutions (paper §3.1.3): `warpcli.maps.mfs`, and its agreement with BEM."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from warpcli.maps.bem import _distance_to_boundary, fit_bem, points_in_polygon
+from warpcli.maps.mfs import fit_mfs
+
+# -- shapes -----------------------------------------------------------------
+
+
+def lshape() -> np.ndarray:
+    return np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]])
+
+
+def star(n: int = 6) -> np.ndarray:
+    th = np.pi / 2 + np.pi * np.arange(2 * n) / n
+    r = np.where(np.arange(2 * n) % 2 == 0, 1.0, 0.45)
+    return np.stack([r * np.cos(th), r * np.sin(th)], axis=1)
+
+
+def cshape() -> np.ndarray:
+    """A C with a narrow slot: outward offsets of the slot's walls cross the polygon."""
+    return np.array([[0, 0], [3, 0], [3, 1.3], [0.8, 1.3], [0.8, 1.7], [3, 1.7], [3, 3], [0, 3.0]])
+
+
+def shape(name: str, orientation: int, offset: float) -> np.ndarray:
+    base = {"L": lshape, "star": star, "C": cshape}[name]()
+    return base[::orientation] + offset
+
+
+def orientation_of(vertices: np.ndarray) -> float:
+    v = vertices - vertices.mean(axis=0)
+    return float(np.sign(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1])))
+
+
+def ngon_targets(vertices: np.ndarray) -> np.ndarray:
+    """Regular n-gon of circumradius 1 with the orientation of ``vertices``."""
+    n = len(vertices)
+    th = 2 * np.pi * np.arange(n) / n * orientation_of(vertices)
+    return np.stack([np.cos(th), np.sin(th)], axis=1)
+
+
+def grid_inside(vertices: np.ndarray, n: int, margin: float = 0.0) -> np.ndarray:
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    g = (np.arange(n) + 0.5) / n
+    X, Y = np.meshgrid(lo[0] + g * (hi[0] - lo[0]), lo[1] + g * (hi[1] - lo[1]))
+    q = np.stack([X.ravel(), Y.ravel()], axis=1)
+    q = q[points_in_polygon(q, vertices)]
+    return q[_distance_to_boundary(q, vertices) > max(margin, 1e-9) * np.max(hi - lo)]
+
+
+def boundary_samples(vertices: np.ndarray, targets: np.ndarray, per_edge: int):
+    """Points along every edge and the boundary data b there."""
+    t = (np.arange(per_edge) + 0.5) / per_edge
+    n = len(vertices)
+    pts = np.concatenate([vertices[i] + t[:, None] * (vertices[(i + 1) % n] - vertices[i]) for i in range(n)])
+    data = np.concatenate([(1 - t)[:, None] * targets[i] + t[:, None] * targets[(i + 1) % n] for i in range(n)])
+    return pts, data
+
+
+# -- exactness ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["L", "star"])
+@pytest.mark.parametrize("orientation", [1, -1])
+@pytest.mark.parametrize("offset", [0.0, 1e6])
+def test_affine_data_give_the_affine_map(name, orientation, offset):
+    P = shape(name, orientation, offset)
+    A = np.array([[0.7, -1.3], [0.4, 2.1]])
+    c = np.array([3.0, -5.0])
+    T = P @ A.T + c
+    sol = fit_mfs(P, T, m=96)
+    size = np.ptp(P, axis=0).max()
+    q = grid_inside(P, 25)
+    v, J = sol.value_and_jacobian(q)
+    tol = 1e-6 * np.abs(A).max() * size + 4 * np.finfo(float).eps * np.abs(T).max()
+    assert np.abs(v - (q @ A.T + c)).max() <= tol
+    assert np.abs(J - A).max() <= 1e-6 * np.abs(A).max()
+    np.testing.assert_array_equal(sol.value(q), v)
+    np.testing.assert_array_equal(sol.jacobian(q), J)
+
+
+def test_triangle_map_is_affine():
+    P = np.array([[0.0, 0.0], [3.0, 1.0], [1.0, 2.5]]) + 1e6
+    T = np.array([[1.0, 0.0], [-0.5, 0.8], [-0.5, -0.8]])
+    M = np.linalg.solve((P - P[0])[1:], (T - T[0])[1:]).T
+    sol = fit_mfs(P, T, m=64)
+    q = grid_inside(P, 20)
+    assert np.abs(sol.value(q) - (T[0] + (q - P[0]) @ M.T)).max() < 1e-9
+    assert np.abs(sol.jacobian(q) - M).max() < 1e-7
+    assert sol.residual < 1e-9
+
+
+@pytest.mark.parametrize("name", ["L", "star", "C"])
+@pytest.mark.parametrize("orientation", [1, -1])
+def test_sites_lie_outside_and_clear_of_the_polygon(name, orientation):
+    P = shape(name, orientation, 1e6)
+    sol = fit_mfs(P, ngon_targets(P), m=200)
+    local = (P - sol.frame.centre) / sol.frame.scale
+    assert sol.sites.shape == (200, 2) and sol.m == 200 and sol.k >= 4 * 200
+    assert not points_in_polygon(sol.sites, local).any()
+    assert _distance_to_boundary(sol.sites, local).min() > 0
+
+
+# -- agreement and accuracy ---------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["L", "star"])
+@pytest.mark.parametrize("orientation", [1, -1])
+def test_bem_and_mfs_agree_away_from_the_boundary(name, orientation):
+    P = shape(name, orientation, 1e6)
+    T = ngon_targets(P)  # Theta: regular n-gon of circumradius 1
+    q = grid_inside(P, 40, margin=0.05)
+    bem = fit_bem(P, T, m=192)
+    mfs = fit_mfs(P, T, m=192)
+    vb, Jb = bem.value_and_jacobian(q)
+    vm, Jm = mfs.value_and_jacobian(q)
+    assert np.abs(vb - vm).max() < 1e-3  # brief: 1e-3 relative to Theta; measured ~1e-5
+    assert np.abs(vb - vm).max() < 1e-4
+    assert np.abs(Jb - Jm).max() < 1e-3 * np.abs(Jb).max()
+
+
+@pytest.mark.parametrize("name", ["L", "star"])
+@pytest.mark.parametrize("orientation", [1, -1])
+def test_jacobian_determinant_is_positive(name, orientation):
+    """Both maps are practically bijective (paper §3.1.4) onto a regular n-gon of matching orientation."""
+    P = shape(name, orientation, 1e6)
+    T = ngon_targets(P)
+    q = grid_inside(P, 120)  # ~5-9k points, down to ~1e-4 of the size from the boundary
+    for fit in (fit_bem, fit_mfs):
+        J = fit(P, T, m=128).jacobian(q)
+        det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+        assert det.min() > 0, fit.__name__
+
+
+def test_boundary_deviation_shrinks_as_m_grows():
+    P = star() + 1e6
+    T = ngon_targets(P)
+    pts, data = boundary_samples(P, T, 60)
+    dev = [np.abs(fit_mfs(P, T, m=m).value(pts) - data).max() for m in (96, 192, 384)]
+    assert dev[0] > 2 * dev[1] > 4 * dev[2]
+    assert dev[2] < 1e-3
+
+
+def test_hessian_matches_finite_differences():
+    P = star()[::-1]
+    sol = fit_mfs(P, ngon_targets(P), m=128)
+    q = grid_inside(P, 12, margin=0.05)
+    H = sol.hessian(q)
+    h = 1e-5
+    fd = np.stack([(sol.jacobian(q + h * e) - sol.jacobian(q - h * e)) / (2 * h) for e in np.eye(2)], axis=-1)
+    assert np.abs(H - fd).max() < 1e-5 * np.abs(H).max()
+    assert np.abs(H[:, :, 0, 0] + H[:, :, 1, 1]).max() < 1e-10 * np.abs(H).max()
+    fdj = np.stack([(sol.value(q + h * e) - sol.value(q - h * e)) / (2 * h) for e in np.eye(2)], axis=-1)
+    J = sol.jacobian(q)
+    assert np.abs(J - fdj).max() < 1e-6 * np.abs(J).max()
+    moved = fit_mfs(P * 1e-3 + 1e6, ngon_targets(P), m=128)
+    np.testing.assert_allclose(moved.hessian(q * 1e-3 + 1e6) * 1e-6, H, atol=1e-5 * np.abs(H).max())
+    np.testing.assert_allclose(moved.jacobian(q * 1e-3 + 1e6) * 1e-3, J, atol=1e-6 * np.abs(J).max())
+
+
+def test_deterministic_and_validated():
+    P = lshape()
+    T = ngon_targets(P)
+    q = grid_inside(P, 10)
+    a, b = fit_mfs(P, T, m=64), fit_mfs(P, T, m=64)
+    np.testing.assert_array_equal(a.value(q), b.value(q))
+    with pytest.raises(ValueError):
+        fit_mfs(P, T, m=3)
+    with pytest.raises(ValueError):
+        fit_mfs(P, T, m=64, k=50)
+    with pytest.raises(ValueError):
+        fit_mfs(P, T[:-1])
+    assert a.value(np.zeros((0, 2))).shape == (0, 2)
+    assert a.hessian(np.array([0.5, 0.5])).shape == (1, 2, 2, 2)

@@ -1,0 +1,103 @@
+"""Pointwise inversion by damped Newton (paper §3.2): `warpcli.maps.newton`."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from warpcli.maps.bem import _distance_to_boundary, points_in_polygon
+from warpcli.maps.mfs import fit_mfs
+from warpcli.maps.newton import invert
+
+
+def star(n: int = 6) -> np.ndarray:
+    th = np.pi / 2 + np.pi * np.arange(2 * n) / n
+    r = np.where(np.arange(2 * n) % 2 == 0, 1.0, 0.45)
+    return np.stack([r * np.cos(th), r * np.sin(th)], axis=1)
+
+
+def test_inverse_of_forward_is_identity_for_the_mfs_map_on_a_star():
+    P = star() * 50.0 + 1e6
+    n = len(P)
+    th = 2 * np.pi * np.arange(n) / n
+    sol = fit_mfs(P, np.stack([np.cos(th), np.sin(th)], axis=1), m=128)
+    size = np.ptp(P, axis=0).max()
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    g = (np.arange(40) + 0.5) / 40
+    X, Y = np.meshgrid(lo[0] + g * (hi[0] - lo[0]), lo[1] + g * (hi[1] - lo[1]))
+    p = np.stack([X.ravel(), Y.ravel()], axis=1)
+    p = p[points_in_polygon(p, P) & (_distance_to_boundary(p, P) > 0.02 * size)]
+    x = sol.value(p)
+    # first guesses: the points moved by up to 2% of the size, kept inside
+    shift = 0.02 * size * np.stack([np.cos(7.0 * np.arange(len(p))), np.sin(7.0 * np.arange(len(p)))], axis=1)
+    guess = np.where(points_in_polygon(p + shift, P)[:, None], p + shift, p)
+    inside = lambda y: points_in_polygon(y, P)  # noqa: E731
+    y, ok = invert(sol.value, sol.jacobian, x, guess, inside=inside)
+    assert ok.all()
+    assert np.abs(y - p).max() < 1e-8 * size
+    assert inside(y).all()
+
+
+def bulge(y):
+    """A smooth bijection of the unit disc onto itself (radial profile r -> r (1 + r^2) / 2).
+
+    Convex profile: a full Newton step from near the centre towards a target
+    near the rim overshoots the disc, so the damping has to act.
+    """
+    r2 = np.sum(y * y, axis=1, keepdims=True)
+    return y * 0.5 * (1.0 + r2)
+
+
+def bulge_jac(y):
+    r2 = np.sum(y * y, axis=1)
+    return (0.5 * (1.0 + r2))[:, None, None] * np.eye(2) + y[:, :, None] * y[:, None, :]
+
+
+def in_disc(y):
+    return np.sum(y * y, axis=1) < 1.0
+
+
+def test_damping_keeps_iterates_in_the_domain_and_converges():
+    ang = np.linspace(0.0, 2 * np.pi, 50, endpoint=False)
+    y_true = 0.97 * np.stack([np.cos(ang), np.sin(ang)], axis=1)  # close to the boundary
+    x = bulge(y_true)
+    guess = -0.1 * y_true  # far away, on the other side
+
+    def guarded(y):  # "undefined" outside the domain: never evaluated there
+        assert in_disc(y).all()
+        return bulge(y)
+
+    rejected = []
+
+    def inside(y):
+        mask = in_disc(y)
+        rejected.append(int((~mask).sum()))
+        return mask
+
+    y, ok = invert(guarded, bulge_jac, x, guess, inside=inside, max_iter=50)
+    assert ok.all()
+    assert np.abs(y - y_true).max() < 1e-10
+    assert sum(rejected) > 0  # the damping did act
+
+
+def test_unreachable_targets_are_reported_not_converged():
+    x = np.array([[2.0, 0.0], [0.3, 0.2]])  # the first is outside the image (the unit disc)
+    y, ok = invert(bulge, bulge_jac, x, np.zeros((2, 2)) + 0.1, inside=in_disc)
+    assert not ok[0] and ok[1]
+    assert in_disc(y).all()
+    np.testing.assert_allclose(bulge(y[1:]), x[1:], atol=1e-12)
+
+
+def test_starting_outside_fails_and_exact_guesses_return_at_once():
+    y0 = np.array([[0.2, 0.1], [1.5, 0.0]])
+    calls = []
+
+    def fun(y):
+        calls.append(len(y))
+        return bulge(y)
+
+    y, ok = invert(fun, bulge_jac, bulge(y0[:1]).repeat(2, axis=0), y0, inside=in_disc)
+    assert ok.tolist() == [True, False]
+    np.testing.assert_array_equal(y, y0)
+    assert calls == [1]  # one evaluation, at the one inside start
+    y, ok = invert(bulge, bulge_jac, np.zeros((0, 2)), np.zeros((0, 2)))
+    assert y.shape == (0, 2) and ok.shape == (0,)

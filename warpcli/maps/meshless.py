@@ -1,0 +1,230 @@
+"""BEM and MFS as map methods (the paper's §3.1.2, §3.1.3, §3.2): smooth maps onto Theta without a mesh.
+
+`bem` and `mfs` compute closed-form approximations of the harmonic map with
+analytic derivatives; this module makes them `ThetaMap`s:
+
+- evaluate: the closed form inside the polygon; on its boundary the exact
+  boundary data (the Dirichlet data is known there; BEM's integrals are
+  singular at boundary nodes and both methods only approximate it);
+- inverse (§3.2): a piecewise-linear first guess from a triangulation of
+  the polygon mapped into Theta, then damped Newton steps on
+  ||x - phi(y)||^2 with the analytic Jacobian, constrained to the polygon
+  (`newton.invert`); points of Theta's boundary go through the exact
+  inverse boundary map;
+- certify: the sign of det J at a dense grid of samples (a smooth map has no
+  triangles to check; Radó-Kneser-Choquet holds for the exact map, and the
+  approximations converge to it as m grows).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..boundary import nearest_edge
+from ..grid import inside_polygon
+from ..polygon import Polygon
+from .base import Certificate, Mapped, ThetaMap, as_points
+from .theta import Theta
+
+#: Points closer than this (times the polygon's size) to its boundary take the exact boundary data.
+ON_BOUNDARY = 1e-9
+#: Samples of det J for the certificate.
+CERTIFY_SAMPLES = 40_000
+#: Triangles of the first-guess triangulation (§3.2).
+GUESS_TRIANGLES = 4000
+#: With the default m, a map that folds is fitted again with twice the nodes, up to this many.
+MAX_AUTO_NODES = 4096
+
+log = logging.getLogger("warpcli")
+
+
+@dataclass(eq=False)
+class SmoothMap(ThetaMap):
+    """A smooth map onto Theta given in closed form (a BEM or MFS solution).
+
+    Parameters
+    ----------
+    polygon : Polygon
+    theta : Theta
+    solution : BEMSolution or MFSSolution
+        ``value_and_jacobian(points)`` of the harmonic map, in the
+        polygon's coordinates.
+    method : str
+        ``"bem"`` or ``"mfs"``.
+
+    References
+    ----------
+    Schneider & Hormann, CAGD 2015, §3.1.2, §3.1.3, §3.2.
+    """
+
+    solution: Any = field(repr=False, default=None)
+    name: str = "bem"
+
+    @property
+    def method(self) -> str:  # type: ignore[override]
+        return self.name
+
+    @cached_property
+    def _size(self) -> float:
+        xmin, ymin, xmax, ymax = self.polygon.bounds
+        return max(xmax - xmin, ymax - ymin)
+
+    def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
+        p = as_points(points)
+        out = np.full(p.shape, np.nan)
+        jac = np.full((len(p), 2, 2), np.nan) if jacobian else None
+        finite = np.flatnonzero(np.isfinite(p).all(axis=1))
+        if finite.size:
+            edge, t, dist = nearest_edge(p[finite], self.polygon.points)
+            on = dist <= ON_BOUNDARY * self._size
+            inside = inside_polygon(p[finite], self.polygon.points) & ~on
+            k = finite[inside]
+            if k.size:
+                v, j = self.solution.value_and_jacobian(p[k])
+                out[k] = v
+                if jac is not None:
+                    jac[k] = j
+            b = finite[on]
+            out[b] = self.boundary_to_theta(edge[on], t[on])
+        return Mapped(out, jac)
+
+    def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
+        from .fem.locate import TriangleLocator, barycentric_combine
+        from .newton import invert
+
+        q = as_points(points)
+        out = np.full(q.shape, np.nan)
+        finite = np.flatnonzero(np.isfinite(q).all(axis=1))
+        w = self.theta.points
+        if finite.size:
+            edge, s, dist = nearest_edge(q[finite], w)
+            scale = float(np.ptp(w, axis=0).max())
+            on = dist <= ON_BOUNDARY * scale
+            inside = inside_polygon(q[finite], w) & ~on
+            out[finite[on]] = self.boundary_from_theta(edge[on], s[on])
+            k = finite[inside]
+            if k.size:
+                mesh, image = self._guess_mesh
+                tri, bary = TriangleLocator(image, mesh.triangles).locate(q[k])
+                guess = barycentric_combine(mesh.vertices, mesh.triangles, tri, bary)
+                # Points between the mapped triangulation and Theta's boundary
+                # (the approximation does not fit the boundary exactly): start
+                # from the nearest boundary point's pre-image, pulled inside.
+                lost = np.flatnonzero(tri < 0)
+                if lost.size:
+                    e2, s2, _ = nearest_edge(q[k[lost]], w)
+                    start = self.boundary_from_theta(e2, s2)
+                    centre = mesh.vertices[mesh.triangles[_nearest_triangles(mesh, start)]].mean(axis=1)
+                    guess[lost] = start + 0.01 * (centre - start)
+                # Converged when phi(y) is within rounding of x: relative to
+                # Theta, scaled by how far the polygon sits from the origin
+                # compared with its size (coordinates near 1e6 round at 1e-10).
+                far = float(np.abs(self.polygon.points).max()) / self._size
+                y, ok = invert(
+                    self.solution.value, self.solution.jacobian, q[k], guess, tol=1e-12 * max(1.0, 4.0 * far),
+                    inside=lambda pts: inside_polygon(pts, self.polygon.points),
+                )  # fmt: skip
+                y[~ok] = np.nan
+                out[k] = y
+        jac = None
+        if jacobian:
+            jac = np.full((len(q), 2, 2), np.nan)
+            got = np.flatnonzero(np.isfinite(out).all(axis=1))
+            if got.size:
+                j = self.evaluate(out[got], jacobian=True).jacobian
+                jac[got] = _inv2(j)
+        return Mapped(out, jac)
+
+    @cached_property
+    def _guess_mesh(self):
+        """A triangulation of the polygon and its image in Theta: the first guess of §3.2."""
+        from .fem.mesh import mesh_polygon
+
+        area = abs(self.polygon.signed_area)
+        mesh = mesh_polygon(self.polygon, max(area / GUESS_TRIANGLES, 1e-12 * area))
+        return mesh, self.evaluate(mesh.vertices).points
+
+    def certify(self) -> Certificate:
+        xmin, ymin, xmax, ymax = self.polygon.bounds
+        step = math.sqrt(abs(self.polygon.signed_area) / CERTIFY_SAMPLES)
+        xs = np.arange(xmin + step / 2, xmax, step)
+        ys = np.arange(ymin + step / 2, ymax, step)
+        pts = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+        pts = pts[inside_polygon(pts, self.polygon.points)]
+        j = self.solution.jacobian(pts)
+        det = j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0]
+        bad = ~(det * self.theta.orientation * np.sign(self.polygon.signed_area) > 0)
+        return Certificate(int(bad.sum()), len(pts), "samples")
+
+    def describe(self) -> dict:
+        return {"nodes": {"m": int(self.solution.m)}}
+
+
+def _nearest_triangles(mesh, points: NDArray[np.float64]) -> NDArray[np.intp]:
+    """The mesh triangle whose centroid is nearest each point (few points)."""
+    c = mesh.vertices[mesh.triangles].mean(axis=1)
+    return np.array([int(np.argmin(np.hypot(*(c - p).T))) for p in points], dtype=np.intp)
+
+
+def _inv2(m: NDArray[np.float64]) -> NDArray[np.float64]:
+    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
+    out = np.empty_like(m)
+    out[:, 0, 0] = m[:, 1, 1]
+    out[:, 0, 1] = -m[:, 0, 1]
+    out[:, 1, 0] = -m[:, 1, 0]
+    out[:, 1, 1] = m[:, 0, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return out / det[:, None, None]
+
+
+class _Method:
+    """A registry entry: ``build`` and ``prepare`` for one meshless method."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def build(self, polygon: Polygon, theta: Theta, options, role: str = "source", region=None) -> SmoothMap:
+        boundary = options.src_boundary if role == "source" else options.dst_boundary
+        if boundary != "linear" or getattr(options, "conditions", "dirichlet") != "dirichlet":
+            from ..errors import InputError
+
+            raise InputError(f"--method {self.name} supports linear Dirichlet boundaries only (for now)")
+        t0 = time.perf_counter()
+        m = options.nodes
+        while True:
+            phi = SmoothMap(polygon, theta, self._fit(polygon, theta, m), self.name)
+            # Repair what can be repaired: with the default m, a map whose
+            # certificate fails (MFS oscillates near reflex corners, the
+            # paper's Fig. 5) is fitted again with twice the nodes.
+            if options.nodes is not None or not options.check or phi.solution.m >= MAX_AUTO_NODES:
+                break
+            if phi.certify().ok:
+                break
+            m = 2 * phi.solution.m
+            log.warning("%s: the %s map folds with m = %d; fitting again with m = %d", polygon.name, self.name, phi.solution.m, m)
+        phi.timings["solve"] = time.perf_counter() - t0
+        return phi
+
+    def _fit(self, polygon: Polygon, theta: Theta, m: int | None):
+        if self.name == "bem":
+            from .bem import fit_bem
+
+            return fit_bem(polygon.points, theta.points, m)
+        from .mfs import fit_mfs
+
+        return fit_mfs(polygon.points, theta.points, m)
+
+    def prepare(self) -> None:
+        """Nothing to warm up beyond what the first fit compiles."""
+
+
+BEM = _Method("bem")
+MFS = _Method("mfs")
