@@ -723,3 +723,23 @@ def test_a_label_for_a_single_plain_polygon_is_an_error(tmp_path):
     path = write_text(tmp_path / "p.json", json.dumps(PTS))
     with pytest.raises(PolygonError, match="no labels"):
         read_polygon(path, label="face")
+
+
+def test_a_polygon_is_chosen_by_index_when_labels_do_not_tell_them_apart(tmp_path):
+    import json as _json
+
+    a = [[0, 0], [10, 0], [0, 10]]
+    b = [[20, 20], [30, 20], [20, 30]]
+    path = tmp_path / "two.json"
+    path.write_text(_json.dumps({"shapes": [{"label": "", "points": a}, {"label": "", "points": b}]}))
+    assert read_polygon(path, "#1").points.tolist() == [[20.0, 20.0], [30.0, 20.0], [20.0, 30.0]]
+    assert read_polygon(path, "#0").points.tolist() == [[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]
+    with pytest.raises(PolygonError, match="no polygon #2"):
+        read_polygon(path, "#2")
+    geo = tmp_path / "two.geojson"
+    feats = [{"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [p + [p[0]]]}} for p in (a, b)]
+    geo.write_text(_json.dumps({"type": "FeatureCollection", "features": feats}))
+    assert read_polygon(geo, "#1").points[0].tolist() == [20.0, 20.0]
+    # A shape literally labelled "#1" wins over the index.
+    path.write_text(_json.dumps({"shapes": [{"label": "#1", "points": a}, {"label": "", "points": b}]}))
+    assert read_polygon(path, "#1").points[0].tolist() == [0.0, 0.0]

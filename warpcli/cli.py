@@ -126,8 +126,8 @@ class DefaultGroup(click.Group):
 @click.argument("paths", metavar="INPUT OUTPUT | INPUT... --out-dir DIR", nargs=-1, type=click.Path(dir_okay=True))
 @click.option("--src", "src_path", required=True, type=click.Path(), help="Source polygon file (JSON, labelme or GeoJSON), in INPUT's pixel coordinates.")
 @click.option("--dst", "dst_path", required=True, type=click.Path(), help="Target polygon file (JSON, labelme or GeoJSON), in OUTPUT's pixel coordinates.")
-@click.option("--src-label", help="Which polygon of a labelme or GeoJSON --src file holding several.")
-@click.option("--dst-label", help="Which polygon of a labelme or GeoJSON --dst file holding several.")
+@click.option("--src-label", help="Which polygon of a labelme or GeoJSON --src file holding several: its label, or #N for the N-th (from 0).")
+@click.option("--dst-label", help="Which polygon of a labelme or GeoJSON --dst file holding several: its label, or #N for the N-th (from 0).")
 @click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
 @click.option("--out-name", default="{name}", show_default=True, help="Batch output file name: {name}, {stem}, {ext} of the input (the extension picks the format).")
 @interp_option

@@ -343,6 +343,16 @@ def _unlabelled(points: object, name: str, label: str | None) -> object:
     return points
 
 
+def _index_label(label: str) -> int | None:
+    """``"#N"`` chooses the N-th polygon of a file (from 0) when no shape is labelled so.
+
+    >>> _index_label("#2"), _index_label("mouth")
+    (2, None)
+    """
+    text = str(label)
+    return int(text[1:]) if text.startswith("#") and text[1:].isdigit() and len(text) < 12 else None
+
+
 def _labelme_points(doc: dict, name: str, label: str | None) -> object:
     shapes = doc["shapes"]
     if not isinstance(shapes, list):
@@ -351,6 +361,11 @@ def _labelme_points(doc: dict, name: str, label: str | None) -> object:
     labels = _list_text([s.get("label") for s in polys])
     if label is not None:
         chosen = [s for s in polys if s.get("label") == label]
+        index = _index_label(label)
+        if not chosen and index is not None:
+            if index >= len(polys):
+                raise PolygonError(f"{name}: labelme file has {len(polys)} polygon(s), so there is no polygon {label}")
+            chosen = [polys[index]]
         if len(chosen) != 1:
             what = "no" if not chosen else f"{len(chosen)}"
             raise PolygonError(
@@ -376,7 +391,13 @@ def _geojson_points(doc: dict, name: str, label: str | None) -> object:
             raise PolygonError(f'{name}: GeoJSON FeatureCollection "features" must be an array')
         features = [f for f in features if isinstance(f, dict)]
         if label is not None:
-            features = [f for f in features if label in _feature_names(f)]
+            named = [f for f in features if label in _feature_names(f)]
+            index = _index_label(label)
+            if not named and index is not None:
+                if index >= len(features):
+                    raise PolygonError(f"{name}: GeoJSON FeatureCollection has {len(features)} feature(s), so there is no feature {label}")
+                named = [features[index]]
+            features = named
         if len(features) != 1:
             which = f" labelled {label!r}" if label is not None else ""
             raise PolygonError(
