@@ -76,18 +76,16 @@ def inside_polygon(points: ArrayLike, vertices: ArrayLike) -> NDArray[np.bool_]:
     (K,) ndarray of bool
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    a = np.asarray(vertices, dtype=np.float64)
-    b = np.roll(a, -1, axis=0)
+    v = np.asarray(vertices, dtype=np.float64)
+    x, y = p[:, 0], p[:, 1]
     inside = np.zeros(len(p), dtype=bool)
-    # Blocks of points keep the K x n temporaries small.
-    block = max(1, (1 << 22) // max(len(a), 1))
-    for s in range(0, len(p), block):
-        x = p[s : s + block, 0:1]
-        y = p[s : s + block, 1:2]
-        crosses = (a[:, 1] > y) != (b[:, 1] > y)
+    for i in range(len(v)):  # a loop over edges, vectorized over points: memory O(K)
+        x0, y0 = v[i]
+        x1, y1 = v[(i + 1) % len(v)]
+        crosses = (y0 > y) != (y1 > y)
         with np.errstate(divide="ignore", invalid="ignore"):
-            xint = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
-        inside[s : s + block] = (crosses & (x < xint)).sum(axis=1) % 2 == 1
+            xc = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+        inside ^= crosses & (x < xc)
     return inside
 
 

@@ -58,6 +58,8 @@ from numba import njit, types
 from numba.extending import intrinsic
 from numpy.typing import ArrayLike, NDArray
 
+from ..grid import inside_polygon as points_in_polygon  # noqa: E402  (the one even-odd test)
+
 __all__ = ["BEMSolution", "fit_bem", "interior_angles", "points_in_polygon"]
 
 TWO_PI = 2.0 * np.pi
@@ -212,33 +214,6 @@ def interior_angles(vertices: ArrayLike) -> NDArray[np.float64]:
     cross = nxt[:, 0] * prv[:, 1] - nxt[:, 1] * prv[:, 0]
     dot = np.sum(nxt * prv, axis=1)
     return np.mod(np.arctan2(cross, dot), TWO_PI)
-
-
-def points_in_polygon(points: ArrayLike, vertices: ArrayLike) -> NDArray[np.bool_]:
-    """Even-odd point-in-polygon test.
-
-    Parameters
-    ----------
-    points : (K, 2) array_like of float
-    vertices : (n, 2) array_like of float
-
-    Returns
-    -------
-    (K,) ndarray of bool
-        True for points strictly inside (points on the boundary may go either way).
-    """
-    p = _as_points(points)
-    v = np.asarray(vertices, dtype=np.float64)
-    x, y = p[:, 0], p[:, 1]
-    inside = np.zeros(len(p), dtype=bool)
-    for i in range(len(v)):  # loop over edges, vectorised over points
-        x0, y0 = v[i]
-        x1, y1 = v[(i + 1) % len(v)]
-        crosses = (y0 > y) != (y1 > y)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xc = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
-        inside ^= crosses & (x < xc)
-    return inside
 
 
 def _distance_to_boundary(points: NDArray[np.float64], V: NDArray[np.float64]) -> NDArray[np.float64]:
