@@ -87,3 +87,42 @@ def from_theta_parameter(s: ArrayLike, behaviour: str = "linear") -> NDArray[np.
     """
     u = np.asarray(s, dtype=np.float64)
     return np.sqrt(np.clip(u, 0.0, 1.0)) if behaviour == "quadratic" else u
+
+
+def on_boundary(
+    points: ArrayLike, vertices: ArrayLike, tolerance: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+    """The points within ``tolerance`` of a polygon's boundary, with their nearest edge and parameter.
+
+    A loop over the edges, vectorized over the points: memory O(K) however
+    many vertices (where `nearest_edge` needs K x n).
+
+    Returns
+    -------
+    index : (J,) ndarray of int
+        Which points are that close.
+    edge : (J,) ndarray of int
+    t : (J,) ndarray of float in [0, 1]
+
+    Examples
+    --------
+    >>> on_boundary([[1.0, 0.0], [1.0, 0.5]], [[0, 0], [2, 0], [0, 2]], 1e-9)
+    (array([0]), array([0]), array([0.5]))
+    """
+    q = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    v = np.asarray(vertices, dtype=np.float64)
+    best = np.full(len(q), np.inf)
+    edge = np.zeros(len(q), dtype=np.intp)
+    param = np.zeros(len(q))
+    for i in range(len(v)):
+        a = v[i]
+        d = v[(i + 1) % len(v)] - a
+        rel = q - a
+        t = np.clip((rel @ d) / (d @ d), 0.0, 1.0)
+        dist = np.hypot(rel[:, 0] - t * d[0], rel[:, 1] - t * d[1])
+        closer = dist < best
+        best[closer] = dist[closer]
+        edge[closer] = i
+        param[closer] = t[closer]
+    index = np.flatnonzero(best <= tolerance)
+    return index, edge[index], param[index]

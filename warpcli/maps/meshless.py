@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..boundary import nearest_edge
+from ..boundary import nearest_edge, on_boundary
 from ..grid import inside_polygon
 from ..polygon import Polygon
 from .base import Certificate, Mapped, ThetaMap, as_points
@@ -83,17 +83,16 @@ class SmoothMap(ThetaMap):
         jac = np.full((len(p), 2, 2), np.nan) if jacobian else None
         finite = np.flatnonzero(np.isfinite(p).all(axis=1))
         if finite.size:
-            edge, t, dist = nearest_edge(p[finite], self.polygon.points)
-            on = dist <= ON_BOUNDARY * self._size
-            inside = inside_polygon(p[finite], self.polygon.points) & ~on
+            near, edge, t = on_boundary(p[finite], self.polygon.points, ON_BOUNDARY * self._size)
+            inside = inside_polygon(p[finite], self.polygon.points)
+            inside[near] = False
             k = finite[inside]
             if k.size:
                 v, j = self.solution.value_and_jacobian(p[k])
                 out[k] = v
                 if jac is not None:
                     jac[k] = j
-            b = finite[on]
-            out[b] = self.boundary_to_theta(edge[on], t[on])
+            out[finite[near]] = self.boundary_to_theta(edge, t)
         return Mapped(out, jac)
 
     def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
@@ -105,11 +104,11 @@ class SmoothMap(ThetaMap):
         finite = np.flatnonzero(np.isfinite(q).all(axis=1))
         w = self.theta.points
         if finite.size:
-            edge, s, dist = nearest_edge(q[finite], w)
             scale = float(np.ptp(w, axis=0).max())
-            on = dist <= ON_BOUNDARY * scale
-            inside = inside_polygon(q[finite], w) & ~on
-            out[finite[on]] = self.boundary_from_theta(edge[on], s[on])
+            near, edge, s = on_boundary(q[finite], w, ON_BOUNDARY * scale)
+            inside = inside_polygon(q[finite], w)
+            inside[near] = False
+            out[finite[near]] = self.boundary_from_theta(edge, s)
             k = finite[inside]
             if k.size:
                 mesh, image = self._guess_mesh
