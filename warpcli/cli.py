@@ -28,7 +28,8 @@ Exit status:
 
 WARP_EPILOG = EXIT_CODES + """
 \b
-Also: warp apply-map MAP.exr INPUT OUTPUT applies a saved map (see warp apply-map --help).
+Also: warp apply-map MAP.exr INPUT OUTPUT applies a saved map; warp points maps points and OBJ UVs
+(see warp apply-map --help, warp points --help).
 """
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -345,6 +346,38 @@ def apply_map(map_path, input_path, output_path, interp, background, dtype, stma
     apply_map_file(map_path, input_path, output_path, options, t_up=t_up)
 
 
+@click.command("points", context_settings=CONTEXT, epilog=EXIT_CODES)
+@click.argument("input_path", metavar="IN", type=click.Path())
+@click.argument("output_path", metavar="OUT", type=click.Path())
+@click.option("--src", "src_path", required=True, type=click.Path(), help="Source polygon file.")
+@click.option("--dst", "dst_path", required=True, type=click.Path(), help="Target polygon file.")
+@click.option("--src-label", help="Which polygon of a --src file holding several (a label or #N).")
+@click.option("--dst-label", help="Which polygon of a --dst file holding several (a label or #N).")
+@click.option("--inverse", is_flag=True, help="Map target points back to the source.")
+@click.option("--method", type=click.Choice(tuple(METHODS)), default="fem", show_default=True, help="How the harmonic maps are computed (bem and mfs are smooth).")
+@click.option("--texture-size", callback=_parse_size, metavar="WxH", help="OBJ: the texture's size in pixels (the polygons' units).")
+@click.option("--outside", type=click.Choice(("keep", "error")), default="keep", show_default=True, help="Points outside the polygon: left as they are (with a warning), or an error.")
+@quiet_option
+def points(input_path, output_path, src_path, dst_path, src_label, dst_label, inverse, method, texture_size, outside, quiet):
+    """Map points (JSON, CSV x,y, or an OBJ's vt texture coordinates) from SRC's coordinates to DST's.
+
+    An OBJ keeps every line but its vt lines byte for byte: a mesh's UVs move
+    from one texture layout (polygon SRC) to another (DST), the paper's 4.2.
+
+    \b
+    Example:
+      warp points --src layout_a.json --dst layout_b.json --texture-size 2048x2048 head.obj head_b.obj
+    """
+    _configure_logging(0, quiet)
+    from .options import MapOptions
+    from .points import map_points_file
+
+    map_points_file(
+        input_path, output_path, src_path, dst_path, MapOptions(method=method), inverse=inverse,
+        texture_size=texture_size, outside=outside, src_label=src_label, dst_label=dst_label,
+    )  # fmt: skip
+
+
 class Progress:
     """A one-line stage display on stderr for runs longer than ``delay`` seconds.
 
@@ -410,7 +443,9 @@ def _configure_logging(verbose: int, quiet: bool) -> None:
     log.propagate = False
 
 
-cli = DefaultGroup("warp", commands={"warp": warp, "apply-map": apply_map}, default="warp", context_settings=CONTEXT)
+cli = DefaultGroup(
+    "warp", commands={"warp": warp, "apply-map": apply_map, "points": points}, default="warp", context_settings=CONTEXT
+)
 
 
 class Terminated(BaseException):
@@ -434,7 +469,7 @@ def main(argv: list[str] | None = None) -> int:
     # warnings are not for the user of a command-line tool.
     warnings.simplefilter("ignore")
     args = list(sys.argv[1:] if argv is None else argv)
-    prog = "warp apply-map" if args[:1] == ["apply-map"] else "warp"
+    prog = f"warp {args[0]}" if args[:1] in (["apply-map"], ["points"]) else "warp"
     if not args:
         ctx = warp.make_context("warp", ["--help"], resilient_parsing=True)
         click.echo(warp.get_usage(ctx), err=True)
