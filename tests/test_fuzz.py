@@ -8,7 +8,8 @@ exit 0 (a written image and a report with no flipped element) or exit 2 (one
 line on stderr naming a file, nothing written), within a time bound.
 
 CI runs a fixed, derandomized set (the "warpcli" profile); set
-WARPCLI_FUZZ=long for the profile of longer local runs (see conftest.py).
+WARPCLI_FUZZ=long for the profile of longer local runs (see conftest.py), and
+WARPCLI_FUZZ_LOG=FILE to append each example as JSON to FILE (to replay a crash).
 """
 
 from __future__ import annotations

@@ -81,3 +81,12 @@ sys.exit(main([{str(img)!r}, "--src", {src!r}, "--dst", {dst!r}, {str(out_dir / 
     assert done.returncode == 143, done.stderr
     assert done.stderr.strip() == "warp: terminated"
     assert os.listdir(out_dir) == []
+
+
+def test_a_checked_write_to_a_full_device_is_one_error():
+    from warpcli.outputs import write_checked
+
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full here")
+    with pytest.raises(ImageIOError, match=r"^out.json: cannot write: No space left on device$"):
+        write_checked("/dev/full", b"{}\n" * 10000, "out.json")

@@ -42,8 +42,8 @@ def nearest_edge(
 ) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
     """The nearest point of a polygon's boundary to each point: edge, parameter, distance.
 
-    Cost and memory are K x n: for few points (rounding-error fallbacks) or
-    polygons with few vertices.
+    A loop over the edges, vectorized over the points: memory O(K) however
+    many vertices, and time K x n.
 
     Parameters
     ----------
@@ -53,19 +53,26 @@ def nearest_edge(
     Returns
     -------
     edge : (K,) ndarray of int
+        The first nearest edge.
     t : (K,) ndarray of float in [0, 1]
     distance : (K,) ndarray of float
     """
     q = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    a = np.asarray(vertices, dtype=np.float64)
-    d = np.roll(a, -1, axis=0) - a
-    rel = q[:, None, :] - a[None, :, :]
-    t = np.clip(np.einsum("kij,ij->ki", rel, d) / np.einsum("ij,ij->i", d, d), 0.0, 1.0)
-    near = a[None] + t[..., None] * d[None]
-    dist2 = ((q[:, None, :] - near) ** 2).sum(axis=2)
-    e = np.argmin(dist2, axis=1)
-    rows = np.arange(len(q))
-    return e, t[rows, e], np.sqrt(dist2[rows, e])
+    v = np.asarray(vertices, dtype=np.float64)
+    best = np.full(len(q), np.inf)
+    edge = np.zeros(len(q), dtype=np.intp)
+    param = np.zeros(len(q))
+    for i in range(len(v)):
+        a = v[i]
+        d = v[(i + 1) % len(v)] - a
+        rel = q - a
+        t = np.clip((rel @ d) / (d @ d), 0.0, 1.0)
+        dist = np.hypot(rel[:, 0] - t * d[0], rel[:, 1] - t * d[1])
+        closer = dist < best
+        best[closer] = dist[closer]
+        edge[closer] = i
+        param[closer] = t[closer]
+    return edge, param, best
 
 
 def to_theta_parameter(t: ArrayLike, behaviour: str = "linear") -> NDArray[np.float64]:
@@ -94,9 +101,6 @@ def on_boundary(
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
     """The points within ``tolerance`` of a polygon's boundary, with their nearest edge and parameter.
 
-    A loop over the edges, vectorized over the points: memory O(K) however
-    many vertices (where `nearest_edge` needs K x n).
-
     Returns
     -------
     index : (J,) ndarray of int
@@ -109,20 +113,6 @@ def on_boundary(
     >>> on_boundary([[1.0, 0.0], [1.0, 0.5]], [[0, 0], [2, 0], [0, 2]], 1e-9)
     (array([0]), array([0]), array([0.5]))
     """
-    q = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    v = np.asarray(vertices, dtype=np.float64)
-    best = np.full(len(q), np.inf)
-    edge = np.zeros(len(q), dtype=np.intp)
-    param = np.zeros(len(q))
-    for i in range(len(v)):
-        a = v[i]
-        d = v[(i + 1) % len(v)] - a
-        rel = q - a
-        t = np.clip((rel @ d) / (d @ d), 0.0, 1.0)
-        dist = np.hypot(rel[:, 0] - t * d[0], rel[:, 1] - t * d[1])
-        closer = dist < best
-        best[closer] = dist[closer]
-        edge[closer] = i
-        param[closer] = t[closer]
-    index = np.flatnonzero(best <= tolerance)
-    return index, edge[index], param[index]
+    edge, t, dist = nearest_edge(points, vertices)
+    index = np.flatnonzero(dist <= tolerance)
+    return index, edge[index], t[index]

@@ -21,8 +21,7 @@ from numpy.typing import NDArray
 
 from .errors import InputError
 from .grid import inside_polygon
-from .maps.base import ThetaMap
-from .maps.compose import matmul2
+from .maps.base import ThetaMap, matmul2
 from .maps.registry import METHODS
 from .maps.theta import Theta, cyclic, regular
 from .polygon import Polygon

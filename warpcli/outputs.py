@@ -89,3 +89,20 @@ def _remove(paths) -> None:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+
+
+def write_checked(path: str, data: bytes, shown_name: str | os.PathLike[str] | None = None) -> None:
+    """Write bytes and make sure they reached the disk (a full disk is an error, not a success).
+
+    Raises
+    ------
+    ImageIOError
+        Naming ``shown_name`` (else ``path``) and the system's reason.
+    """
+    try:
+        with open(path, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+    except OSError as err:
+        raise ImageIOError(f"{os.fspath(shown_name or path)}: cannot write: {err.strerror or err}") from err

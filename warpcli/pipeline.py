@@ -19,7 +19,7 @@ from .errors import InputError, WarpError
 from .maps.compose import BijectiveMap, PullBack
 from .options import WarpOptions
 from .polygon import Polygon, check_pair, read_polygon
-from .outputs import PendingOutputs
+from .outputs import PendingOutputs, write_checked
 from .raster.imageio import RasterImage, check_fits, check_output_path, convert_pixels, read_image, write_image
 from .raster.pixels import unit
 from .raster.resample import EdgeCoverage, edge_coverage, resample
@@ -428,17 +428,8 @@ def warp_file(
 
 
 def _write_json(path: str, doc: dict) -> None:
-    """Write a JSON document, checking the write (a full disk is an error, not a success)."""
-    from .errors import ImageIOError
-
-    try:
-        with open(path, "w") as fh:
-            json.dump(doc, fh, indent=2)
-            fh.write("\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-    except OSError as err:
-        raise ImageIOError(f"{path}: cannot write: {err.strerror or err}") from err
+    """Write a JSON document, checked (see `warpcli.outputs.write_checked`)."""
+    write_checked(path, (json.dumps(doc, indent=2) + "\n").encode())
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from .errors import InputError
 from .maps.compose import BijectiveMap
 from .options import MapOptions
-from .outputs import PendingOutputs
+from .outputs import PendingOutputs, write_checked
 from .polygon import check_pair, read_polygon
 
 log = logging.getLogger("warpcli")
@@ -131,10 +131,7 @@ def map_points_file(
         log.warning("%s: %d point(s) lie outside %s and are left as they are", name, int(lost.sum()), poly.name)
         moved[lost] = pts[lost]
     with PendingOutputs() as pending:
-        with open(pending.path(output_path), "wb") as fh:
-            fh.write(write(moved))
-            fh.flush()
-            os.fsync(fh.fileno())
+        write_checked(pending.path(output_path), write(moved), output_path)
     return PointsResult(int((~lost).sum()), int(lost.sum()))
 
 

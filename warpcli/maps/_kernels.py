@@ -12,7 +12,7 @@ from numba import njit
 def scatter_products(a, b, index, out):
     """``out[index[k]] = a[k] @ b[k]`` for stacks of 2x2 matrices.
 
-    Written out term by term, the same arithmetic as `warpcli.maps.compose.matmul2`.
+    Written out term by term, the same arithmetic as `warpcli.maps.base.matmul2`.
     """
     for k in range(index.shape[0]):
         i = index[k]

@@ -224,3 +224,22 @@ def as_points(points: ArrayLike) -> NDArray[np.float64]:
     if p.ndim != 2 or p.shape[1] != 2:
         raise InputError(f"points must be a (K, 2) array, got shape {p.shape}")
     return p
+
+
+def matmul2(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a @ b`` for stacks of 2x2 matrices, written out (the same rounding everywhere)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    for i in range(2):
+        for j in range(2):
+            out[..., i, j] = a[..., i, 0] * b[..., 0, j] + a[..., i, 1] * b[..., 1, j]
+    return out
+
+
+def inv2(m: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Inverses of a stack of 2x2 matrices, in closed form (inf or NaN where singular)."""
+    det = m[..., 0, 0] * m[..., 1, 1] - m[..., 0, 1] * m[..., 1, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.stack(
+            [np.stack([m[..., 1, 1], -m[..., 0, 1]], axis=-1), np.stack([-m[..., 1, 0], m[..., 0, 0]], axis=-1)],
+            axis=-2,
+        ) / det[..., None, None]

@@ -13,7 +13,7 @@ from ..errors import FoldOverError, InputError
 from ..grid import window
 from ..options import MapOptions
 from ..polygon import Polygon, check_pair
-from .base import ThetaMap, as_points
+from .base import ThetaMap, as_points, matmul2
 from .registry import METHODS
 from .theta import theta_for
 
@@ -318,15 +318,6 @@ def _through_theta(phi_grid: ThetaMap, phi_other: ThetaMap, width: int, height: 
     return PullBack(
         points.reshape(*shape, 2), None if jac is None else jac.reshape(*shape, 2, 2), (r0, c0), (width, height)
     )
-
-
-def matmul2(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``a @ b`` for stacks of 2x2 matrices, written out (the same rounding everywhere)."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    for i in range(2):
-        for j in range(2):
-            out[..., i, j] = a[..., i, 0] * b[..., 0, j] + a[..., i, 1] * b[..., 1, j]
-    return out
 
 
 def build_map(

@@ -31,7 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..boundary import nearest_edge, on_boundary
 from ..grid import inside_polygon
 from ..polygon import Polygon
-from .base import Certificate, Mapped, ThetaMap, as_points
+from .base import Certificate, Mapped, ThetaMap, as_points, inv2
 from .theta import Theta
 
 #: Points closer than this (times the polygon's size) to its boundary take the exact boundary data.
@@ -139,7 +139,7 @@ class SmoothMap(ThetaMap):
             got = np.flatnonzero(np.isfinite(out).all(axis=1))
             if got.size:
                 j = self.evaluate(out[got], jacobian=True).jacobian
-                jac[got] = _inv2(j)
+                jac[got] = inv2(j)
         return Mapped(out, jac)
 
     @cached_property
@@ -171,17 +171,6 @@ def _nearest_triangles(mesh, points: NDArray[np.float64]) -> NDArray[np.intp]:
     """The mesh triangle whose centroid is nearest each point (few points)."""
     c = mesh.vertices[mesh.triangles].mean(axis=1)
     return np.array([int(np.argmin(np.hypot(*(c - p).T))) for p in points], dtype=np.intp)
-
-
-def _inv2(m: NDArray[np.float64]) -> NDArray[np.float64]:
-    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
-    out = np.empty_like(m)
-    out[:, 0, 0] = m[:, 1, 1]
-    out[:, 0, 1] = -m[:, 0, 1]
-    out[:, 1, 0] = -m[:, 1, 0]
-    out[:, 1, 1] = m[:, 0, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return out / det[:, None, None]
 
 
 class _Method:

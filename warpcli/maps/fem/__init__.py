@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from ...boundary import nearest_edge
 from ...options import MapOptions
 from ...polygon import Polygon
-from ..base import Certificate, GridSample, Mapped, ThetaMap, as_points
+from ..base import Certificate, GridSample, Mapped, ThetaMap, as_points, inv2
 from ..theta import Theta
 from .locate import TriangleLocator, affine_coefficients, barycentric_combine, triangle_neighbours
 from .mesh import TriMesh, auto_max_area, mesh_polygon
@@ -260,16 +260,7 @@ def triangle_jacobians(
     t = triangles
     e = np.stack([domain[t[:, 1]] - domain[t[:, 0]], domain[t[:, 2]] - domain[t[:, 0]]], axis=2)  # columns
     g = np.stack([image[t[:, 1]] - image[t[:, 0]], image[t[:, 2]] - image[t[:, 0]]], axis=2)
-    return g @ _inv2(e)
-
-
-def _inv2(m: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Inverses of a stack of 2x2 matrices, in closed form."""
-    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.stack(
-            [np.stack([m[:, 1, 1], -m[:, 0, 1]], axis=1), np.stack([-m[:, 1, 0], m[:, 0, 0]], axis=1)], axis=1
-        ) / det[:, None, None]
+    return g @ inv2(e)
 
 
 def build(
