@@ -1,6 +1,7 @@
 """Distortion by choice of Theta and boundary behaviour, in the style of the paper's Table 2.
 
-    python bench/theta_table.py            # prints a markdown table (about 2 minutes)
+    python bench/theta_table.py                     # FEM: a markdown table (about 2 minutes)
+    python bench/theta_table.py --method mfs --pairs U  # another method, some pairs
 
 For each polygon pair (the two sample pairs and two concave pairs drawn
 here), the area-weighted mean and the maximum conformal and isometric
@@ -52,16 +53,27 @@ VARIANTS = [
 ]
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    import argparse
+    import dataclasses
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--method", default="fem", choices=("fem", "bem", "mfs"))
+    parser.add_argument("--pairs", default="", help="only pairs whose name starts with one of these (comma-separated)")
+    args = parser.parse_args(argv)
+    wanted = [w for w in args.pairs.split(",") if w]
     rows = []
     for name, src, dst, size in pairs():
+        if wanted and not any(name.startswith(w) for w in wanted):
+            continue
         img = np.zeros((size[1], size[0], 1), dtype=np.float32)
         for label, opts in VARIANTS:
+            opts = dataclasses.replace(opts, method=args.method)
             t0 = time.perf_counter()
             res = warp_image(img, src, dst, map=opts)
             seconds = time.perf_counter() - t0
             rep = build_report(res)
-            rows.append((name, label, rep["conformal"]["mean"], rep["conformal"]["max"], rep["isometric"]["mean"], rep["isometric"]["max"], seconds, rep["flipped_triangles"]))
+            rows.append((f"{name} ({args.method})" if args.method != "fem" else name, label, rep["conformal"]["mean"], rep["conformal"]["max"], rep["isometric"]["mean"], rep["isometric"]["max"], seconds, rep["flipped_triangles"]))
             print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
     print("| pair | Theta / boundary | conformal mean | conformal max | isometric mean | isometric max | seconds | flipped |")
     print("|---|---|---:|---:|---:|---:|---:|---:|")

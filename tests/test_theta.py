@@ -83,12 +83,16 @@ def test_a_mirrored_user_theta_gives_the_same_map(tmp_path, flip):
     np.testing.assert_allclose(f.forward(p), g.forward(p), atol=1e-9)
 
 
-@pytest.mark.parametrize("name", sorted(CONCAVE))
-@pytest.mark.parametrize("theta", ["regular", "cyclic"])
-def test_quadratic_boundaries_keep_edges_on_edges_and_never_fold(name, theta):
+QUADRATIC_CASES = [(name, theta, "fem") for name in sorted(CONCAVE) for theta in ("regular", "cyclic")] + [
+    (name, "regular", method) for name in ("L", "star") for method in ("bem", "mfs")
+]
+
+
+@pytest.mark.parametrize("name, theta, method", QUADRATIC_CASES)
+def test_quadratic_boundaries_keep_edges_on_edges_and_never_fold(name, theta, method):
     src = CONCAVE[name]
     dst = regular(len(src), r=55.0, phase=0.2)
-    f = BijectiveMap.between(Polygon(src), Polygon(dst), MapOptions(theta=theta, dst_boundary="quadratic"))
+    f = BijectiveMap.between(Polygon(src), Polygon(dst), MapOptions(method=method, theta=theta, dst_boundary="quadratic"))
     assert all(c.ok for c in f.certificates())
     n = len(src)
     t = np.linspace(0.0, 1.0, 11)
@@ -106,6 +110,33 @@ def test_quadratic_boundaries_keep_edges_on_edges_and_never_fold(name, theta):
         assert off_line.max() < 1e-7
         np.testing.assert_allclose(image, on_dst, atol=0.25)  # ~ h^2 / (8 u), h the node spacing
         np.testing.assert_allclose(f.inverse_boundary(np.full(len(t), i), np.sqrt(t)), on_src, atol=1e-9)
+
+
+@pytest.mark.parametrize("method", ["bem", "mfs"])
+@pytest.mark.parametrize("behaviour", ["linear", "quadratic"])
+def test_meshless_maps_solve_for_the_boundary_behaviour_not_only_return_it(method, behaviour):
+    """On the boundary a map returns its data exactly; just inside, the closed form must agree
+    with it, and with FEM's map, for the behaviour asked (so the fit used that behaviour)."""
+    from warpcli.maps.registry import METHODS
+    from warpcli.maps.theta import regular as regular_theta
+
+    poly = Polygon(l_shape())
+    opts = MapOptions(method=method, src_boundary=behaviour)
+    theta = regular_theta(poly, poly, opts)
+    phi = METHODS[method].load().build(poly, theta, opts, "source")
+    fem = METHODS["fem"].load().build(poly, theta, MapOptions(src_boundary=behaviour, max_area=0.5), "source")
+    n, p = poly.n, poly.points
+    t = np.linspace(0.15, 0.85, 8)
+    for i in range(n):
+        a, e = p[i], p[(i + 1) % n] - p[i]
+        inward = np.array([-e[1], e[0]]) / np.hypot(*e) * np.sign(poly.signed_area)
+        near = a + t[:, None] * e + 1e-4 * inward
+        data = phi.boundary_to_theta(np.full(len(t), i), t)
+        got = phi.evaluate(near).points
+        assert np.abs(got - data).max() < 2e-3, (i, np.abs(got - data).max())
+    inner = p.mean(axis=0) + np.random.default_rng(5).uniform(-8, 8, (200, 2))
+    inner = inner[np.isfinite(fem.evaluate(inner).points[:, 0])]
+    assert np.abs(phi.evaluate(inner).points - fem.evaluate(inner).points).max() < 2e-3
 
 
 def test_save_theta_round_trips_through_the_cli(tmp_path):
@@ -152,16 +183,50 @@ def test_the_report_gives_the_optimized_energies(tmp_path):
     assert "theta" not in plain
 
 
-def test_mixed_conditions_map_a_rectangle_affinely_and_refuse_other_counts():
+@pytest.mark.parametrize("method", ["fem", "bem", "mfs"])
+@pytest.mark.parametrize("clockwise", [False, True])
+def test_mixed_conditions_map_a_rectangle_affinely_and_refuse_other_counts(method, clockwise):
     """Natural conditions: a rectangle onto a rectangle is the affine map (x = X / w solves them)."""
-    src = Polygon([[10.0, 20.0], [110.0, 20.0], [110.0, 70.0], [10.0, 70.0]])
-    dst = Polygon([[5.0, 5.0], [65.0, 5.0], [65.0, 125.0], [5.0, 125.0]])
-    f = BijectiveMap.between(src, dst, MapOptions(conditions="mixed"))
+    src = np.array([[10.0, 20.0], [110.0, 20.0], [110.0, 70.0], [10.0, 70.0]])
+    dst = np.array([[5.0, 5.0], [65.0, 5.0], [65.0, 125.0], [5.0, 125.0]])
+    if clockwise:  # both reversed: the same correspondence of edges, walked the other way
+        src, dst = src[::-1], dst[::-1]
+    f = BijectiveMap.between(Polygon(src), Polygon(dst), MapOptions(method=method, conditions="mixed"))
     p = np.random.default_rng(3).uniform([12, 22], [108, 68], (500, 2))
     expected = (p - [10.0, 20.0]) * [0.6, 2.4] + [5.0, 5.0]
     np.testing.assert_allclose(f.forward(p), expected, atol=1e-6)
     with pytest.raises(InputError, match="quadrilaterals"):
-        BijectiveMap.between(Polygon(star()), Polygon(star(phase=0.2)), MapOptions(conditions="mixed"))
+        BijectiveMap.between(Polygon(star()), Polygon(star(phase=0.2)), MapOptions(method=method, conditions="mixed"))
+
+
+@pytest.mark.parametrize("method", ["bem", "mfs"])
+@pytest.mark.parametrize("clockwise", [False, True])
+def test_mixed_conditions_agree_across_methods(method, clockwise):
+    """A dart (a reflex vertex between a free and a prescribed edge) and a skew quad: the
+    smooth methods solve the same natural conditions as fine FEM, also on clockwise input."""
+    from warpcli.grid import inside_polygon
+
+    for quad in ([[10, 10], [120, 20], [60, 50], [20, 110]], [[5, 5], [120, 5], [120, 40], [5, 120]]):
+        src = np.array(quad, dtype=float)
+        dst = np.array([[8.0, 8.0], [120.0, 8.0], [120.0, 120.0], [8.0, 120.0]])
+        if clockwise:
+            src, dst = src[::-1], dst[::-1]
+        f = BijectiveMap.between(Polygon(src), Polygon(dst), MapOptions(method=method, conditions="mixed"))
+        ref = BijectiveMap.between(Polygon(src), Polygon(dst), MapOptions(conditions="mixed", max_area=0.25))
+        p = np.random.default_rng(4).uniform(src.min(axis=0), src.max(axis=0), (3000, 2))
+        p = p[inside_polygon(p, src)]
+        # px, on a 112 px square. Measured: the skew quad agrees to 0.012 px
+        # (BEM) and 0.2 px (MFS). On the dart, BEM and MFS agree with each
+        # other to 0.11 px but differ from FEM by up to 0.48 px (mean 0.055)
+        # within 2 px of the reflex vertex where a free edge meets a
+        # prescribed one (an r^0.43 singularity), although FEM moves by less
+        # than 0.03 px from area 1 to 0.008 and BEM by 0.008 px from m = 512
+        # to 1024: an open question of the experimental conditions.
+        d = np.hypot(*(f.forward(p) - ref.forward(p)).T)
+        assert np.isfinite(d).all() and d.max() < 0.6 and d.mean() < 0.08, (d.max(), d.mean())
+        for i in range(4):  # the slide along each edge agrees too
+            t = np.linspace(0.05, 0.95, 7)
+            np.testing.assert_allclose(f.phi0.to_theta_parameter(i, t), ref.phi0.to_theta_parameter(i, t), atol=1e-2)
 
 
 @pytest.mark.parametrize(
@@ -172,10 +237,11 @@ def test_mixed_conditions_map_a_rectangle_affinely_and_refuse_other_counts():
         [[5, 5], [120, 5], [120, 40], [5, 120]],
     ],
 )
-def test_mixed_conditions_are_certified_and_keep_edges_on_edges(quad):
+@pytest.mark.parametrize("method", ["fem", "bem", "mfs"])
+def test_mixed_conditions_are_certified_and_keep_edges_on_edges(quad, method):
     src = Polygon(np.array(quad, dtype=float))
     dst = Polygon([[8.0, 8.0], [120.0, 8.0], [120.0, 120.0], [8.0, 120.0]])
-    f = BijectiveMap.between(src, dst, MapOptions(conditions="mixed"))
+    f = BijectiveMap.between(src, dst, MapOptions(method=method, conditions="mixed"))
     assert all(c.ok for c in f.certificates())  # else FoldOverError would have been raised
     for i in range(4):
         a, b = src.points[i], src.points[(i + 1) % 4]
@@ -187,3 +253,20 @@ def test_mixed_conditions_are_certified_and_keep_edges_on_edges(quad):
         assert np.nanmax(off) < 1e-6  # onto the edge (sliding along it)
         along = (img - c) @ e / (e @ e)
         assert np.all(np.diff(along) > 0)  # in order: no fold along the edge
+
+
+def test_optimized_theta_serves_the_smooth_methods():
+    """Optimized on coarse FEM maps, applied by MFS at full accuracy: MFS's own measured
+    energy (from its analytic Jacobians) falls too."""
+    from warpcli import build_report, warp_image
+
+    img = np.zeros((128, 128, 1), dtype=np.float32)
+    u = [[10, 10], [45, 10], [45, 85], [80, 85], [80, 10], [115, 10], [115, 115], [10, 115]]
+    octagon = [[6, 60], [14, 20], [60, 8], [100, 14], [120, 48], [118, 72], [98, 118], [24, 112]]
+    rep = {
+        theta: build_report(warp_image(img, np.array(u, float), np.array(octagon, float), method="mfs", theta=theta))
+        for theta in ("regular", "optimized")
+    }
+    before = rep["regular"]["conformal"]["mean"]
+    after = rep["optimized"]["conformal"]["mean"]
+    assert after < 0.97 * before, (before, after)

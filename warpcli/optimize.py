@@ -5,9 +5,12 @@ cyclic) polygon, each vertex of Theta in turn moves along a finite-difference
 gradient of the chosen energy (the area-weighted mean conformal or isometric
 distortion of f, the report's number), the step halved until Theta stays
 strictly convex and the energy goes down. The energy is measured on coarse
-maps at fixed sample points of the target (for FEM each evaluation re-solves
-two factorized systems: only the boundary data changes); the result is then
-used at full accuracy. Deterministic: no randomness, a fixed visiting order.
+FEM maps at fixed sample points of the target, whatever the method: each
+evaluation re-solves two factorized systems (only the boundary data
+changes), where BEM and MFS would fit anew. The energy is a property of the
+harmonic maps, which every method approximates; the optimized Theta is then
+used by the chosen method at full accuracy. Deterministic: no randomness, a
+fixed visiting order.
 """
 
 from __future__ import annotations
@@ -64,8 +67,10 @@ def optimized(src: Polygon, dst: Polygon, options) -> Theta:
     Schneider & Hormann, CAGD 2015, §5.1 and Table 2.
     """
     start = (cyclic if options.theta_start == "cyclic" else regular)(src, dst, options)
-    method = METHODS[options.method].load()
-    coarse = dataclasses.replace(options, theta="regular", max_area=_coarse_areas(src, dst, options), check=False)
+    method = METHODS["fem"].load()
+    coarse = dataclasses.replace(
+        options, method="fem", theta="regular", max_area=_coarse_areas(src, dst, options), check=False
+    )
     phi0 = method.build(src, start, coarse, "source")
     phi1 = method.build(dst, start, coarse, "target")
     samples = _samples(dst)
@@ -128,11 +133,10 @@ def _onto(phi: ThetaMap, theta: Theta, method, polygon: Polygon, options, role: 
 
 
 def _coarse_areas(src: Polygon, dst: Polygon, options):
-    if options.method != "fem":
-        return options.max_area
+    """FEM triangle areas COARSENING times the automatic ones (or the user's, for FEM)."""
     from .maps.fem.mesh import auto_max_area
 
-    areas = options.areas()
+    areas = options.areas() if options.method == "fem" else (None, None)
     return tuple(
         COARSENING * (auto_max_area(p) if a is None else a) for p, a in zip((src, dst), areas)
     )

@@ -114,8 +114,6 @@ class MapOptions:
         if self.nodes is not None and not (isinstance(self.nodes, int) and 3 <= self.nodes <= 100_000):
             raise InputError(f"nodes must be a whole number from 3 to 100000, got {self.nodes!r}")
         _choice("boundary conditions", self.conditions, CONDITIONS)
-        if self.conditions == "mixed" and self.method != "fem":
-            raise InputError("mixed boundary conditions are implemented for --method fem only")
         _choice("start of the Theta optimization", self.theta_start, ("regular", "cyclic"))
         _choice("source boundary", self.src_boundary, BOUNDARIES)
         _choice("target boundary", self.dst_boundary, BOUNDARIES)

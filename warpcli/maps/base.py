@@ -243,3 +243,76 @@ def inv2(m: NDArray[np.float64]) -> NDArray[np.float64]:
             [np.stack([m[..., 1, 1], -m[..., 0, 1]], axis=-1), np.stack([-m[..., 1, 0], m[..., 0, 0]], axis=-1)],
             axis=-2,
         ) / det[..., None, None]
+
+
+#: Natural boundary conditions (§5.2): per edge, the polygon's parameters t and Theta's s, both increasing.
+EdgeTables = list[tuple[NDArray[np.float64], NDArray[np.float64]]]
+
+
+def sliding_tables(theta: NDArray[np.float64], edge: ArrayLike, t: ArrayLike, images: ArrayLike) -> EdgeTables:
+    """The boundary correspondence of a map whose boundary slides along Theta's edges.
+
+    Natural (Neumann) conditions leave the parameter along each edge to the
+    solution: given boundary samples (polygon edge i, parameter t) and their
+    images in Theta, each edge gets a table from t to the parameter s of the
+    image's projection onto Theta's edge i, clipped to [0, 1], made
+    non-decreasing (the exact map is monotone along edges; rounding and
+    approximation may not be) and pinned at both vertices.
+
+    Parameters
+    ----------
+    theta : (n, 2) ndarray of float
+        Theta's vertices.
+    edge : (K,) array_like of int
+        Polygon edge of each sample.
+    t : (K,) array_like of float
+        Parameter along that edge, in [0, 1].
+    images : (K, 2) array_like of float
+        The map's value at each sample.
+
+    Returns
+    -------
+    list of (t, s) pairs of 1-D arrays
+        One per edge, for `slide`.
+    """
+    edge = np.asarray(edge, dtype=np.intp)
+    t = np.asarray(t, dtype=np.float64)
+    images = np.asarray(images, dtype=np.float64)
+    n = len(theta)
+    tables = []
+    for i in range(n):  # loop over edges
+        on = (edge == i) & (t > 0.0) & (t < 1.0)
+        a, d = theta[i], theta[(i + 1) % n] - theta[i]
+        s = np.clip((images[on] - a) @ d / (d @ d), 0.0, 1.0)
+        order = np.argsort(t[on], kind="stable")
+        tt = np.concatenate([[0.0], t[on][order], [1.0]])
+        ss = np.concatenate([[0.0], np.maximum.accumulate(s[order]) if s.size else s, [1.0]])
+        tables.append((tt, ss))
+    return tables
+
+
+def slide(tables: EdgeTables, edge: ArrayLike, u: ArrayLike, *, forward: bool) -> NDArray[np.float64]:
+    """Parameters along Theta's edges of polygon parameters (forward), or the reverse, by `sliding_tables`.
+
+    Parameters
+    ----------
+    tables : list of (t, s) pairs
+    edge : array_like of int
+        Edge of each parameter.
+    u : array_like of float
+        Parameters along the polygon's edges (forward) or Theta's (not forward).
+    forward : bool
+
+    Returns
+    -------
+    ndarray of float
+        The other side's parameters, linear between table entries.
+    """
+    e = np.broadcast_to(np.asarray(edge, dtype=np.intp), np.shape(u))
+    u = np.asarray(u, dtype=np.float64)
+    out = np.empty(u.shape)
+    for i, (t_nodes, s_nodes) in enumerate(tables):  # loop over edges
+        on = e == i
+        if on.any():
+            out[on] = np.interp(u[on], t_nodes, s_nodes) if forward else np.interp(u[on], s_nodes, t_nodes)
+    return out

@@ -58,6 +58,7 @@ from numba import njit, types
 from numba.extending import intrinsic
 from numpy.typing import ArrayLike, NDArray
 
+from ..boundary import to_theta_parameter
 from ..grid import inside_polygon as points_in_polygon  # noqa: E402  (the one even-odd test)
 
 __all__ = ["BEMSolution", "fit_bem", "interior_angles", "points_in_polygon"]
@@ -106,12 +107,16 @@ class _Frame:
     tscale : float
         Largest absolute deviation of a target coordinate from ``tcentre``
         (1 if all targets coincide).
+    flipped : bool
+        The polygon was clockwise and its vertices were reversed: local edge j
+        is the caller's edge n - 2 - j (mod n), traversed backwards.
     """
 
     centre: NDArray[np.float64]
     scale: float
     tcentre: NDArray[np.float64]
     tscale: float
+    flipped: bool = False
 
     def to_local(self, points: ArrayLike) -> NDArray[np.float64]:
         """Local coordinates of points.
@@ -186,7 +191,7 @@ def _prepare_polygon(
     if area2 < 0:  # clockwise: reverse, keeping each vertex with its target
         V = V[::-1].copy()
         T = T[::-1].copy()
-    frame = _Frame(centre=centre, scale=scale, tcentre=tcentre, tscale=tscale)
+    frame = _Frame(centre=centre, scale=scale, tcentre=tcentre, tscale=tscale, flipped=bool(area2 < 0))
     return frame, np.ascontiguousarray(V), np.ascontiguousarray(T)
 
 
@@ -326,6 +331,41 @@ def _on_edges(V: NDArray[np.float64], edge: NDArray[np.int64], t: NDArray[np.flo
     a = V[edge]
     b = V[(edge + 1) % len(V)]
     return a + t[:, None] * (b - a)
+
+
+def _node_data(
+    T: NDArray[np.float64], edge: NDArray[np.int64], t: NDArray[np.float64], boundary: str, flipped: bool
+) -> NDArray[np.float64]:
+    """Boundary data at nodes (local edge, parameter): Theta's points at the boundary behaviour's parameter.
+
+    The behaviour (`warpcli.boundary.to_theta_parameter`: linear, or the
+    paper's quadratic of §5.2) is defined along the caller's edges; a reversed
+    polygon (``flipped``) runs along them backwards, so there s(t) becomes
+    1 - s(1 - t).
+    """
+    if boundary == "linear":
+        s = t
+    elif flipped:
+        s = 1.0 - to_theta_parameter(1.0 - t, boundary)
+    else:
+        s = to_theta_parameter(t, boundary)
+    n = len(T)
+    return (1.0 - s)[:, None] * T[edge] + s[:, None] * T[(edge + 1) % n]
+
+
+def _local_edges(edges: tuple[int, ...], n: int, flipped: bool) -> NDArray[np.int64]:
+    """Local indices of the caller's edges (see `_Frame.flipped`)."""
+    e = np.asarray(edges, dtype=np.int64) % n
+    return (n - 2 - e) % n if flipped else e
+
+
+def _caller_parameters(
+    edge: NDArray[np.int64], t: NDArray[np.float64], n: int, flipped: bool
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """The caller's (edge, parameter) of local ones (see `_Frame.flipped`)."""
+    if not flipped:
+        return edge, t
+    return (n - 2 - edge) % n, 1.0 - t
 
 
 def _morton_order(p: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -1007,6 +1047,10 @@ class BEMSolution:
         e+1); differs on both sides of a vertex.
     data : (m, 2, 2) ndarray of float
         The same for the (local) boundary data.
+    trace : (edge, t, values) or None
+        With natural boundary conditions: the boundary nodes as (caller's
+        edge, parameter) and the map's solved values there (caller's
+        coordinates).
     """
 
     m: int
@@ -1015,6 +1059,7 @@ class BEMSolution:
     flux: NDArray[np.float64]
     data: NDArray[np.float64]
     _sources: tuple = ()
+    trace: tuple | None = None
 
     # -- evaluation ---------------------------------------------------------
 
@@ -1134,6 +1179,8 @@ def fit_bem(
     flux: str = "double",
     grading: float = 2.0 / 3.0,
     offset: float = 0.25,
+    boundary: str = "linear",
+    free: tuple[tuple[int, ...], tuple[int, ...]] = ((), ()),
 ) -> BEMSolution:
     """Fit the BEM approximation of the harmonic map with piecewise-linear boundary data.
 
@@ -1168,10 +1215,21 @@ def fit_bem(
     offset : float, optional
         Where, as a fraction of the element length from the vertex, the two
         collocation points next to a vertex lie ("double" only).
+    boundary : {"linear", "quadratic"}, optional
+        The boundary behaviour along each edge (§5.2,
+        `warpcli.boundary.to_theta_parameter`); the data stay linear between
+        nodes.
+    free : pair of tuples of int, optional
+        Natural boundary conditions (§5.2, experimental): component a of the
+        map has zero normal derivative on the edges ``free[a]`` (the caller's
+        indices; edge i runs from vertex i to i + 1), where its boundary
+        values become unknowns of the system, and is prescribed elsewhere
+        (the vertices stay prescribed). Needs the "double" flux.
 
     Returns
     -------
     BEMSolution
+        With natural conditions, ``trace`` holds the solved boundary values.
     """
     frame, V, T = _prepare_polygon(vertices, targets)
     n = len(V)
@@ -1186,6 +1244,9 @@ def fit_bem(
         raise ValueError("grading must be in [0, 1)")
     if not 0.0 < offset < 0.5:
         raise ValueError("offset must be in (0, 1/2)")
+    natural = any(len(f) for f in free)
+    if natural and flux != "double":
+        raise ValueError("natural boundary conditions need the 'double' flux")
 
     angles = interior_angles(V)
     # grade towards reflex vertices (singular flux) and, half as strongly,
@@ -1194,7 +1255,7 @@ def fit_bem(
     edge, t = _boundary_nodes(V, m, gamma)
     nodes = _on_edges(V, edge, t)
     is_vertex = t == 0.0
-    data_nodes = (1.0 - t)[:, None] * T[edge] + t[:, None] * T[(edge + 1) % n]
+    data_nodes = _node_data(T, edge, t, boundary, frame.flipped)
 
     nxt = np.roll(np.arange(m), -1)
     a = nodes
@@ -1202,7 +1263,8 @@ def fit_bem(
     cdata = np.stack([data_nodes, data_nodes[nxt]], axis=1)  # (m, 2 ends, 2 comps)
 
     # Collocation points, their weight omega, data value, and incidence.
-    cpts, omega, cval, inc_e, inc_t = [], [], [], [], []
+    # The data at a collocation point is (1 - w) c[node] + w c[nxt[node]] (``cat``).
+    cpts, omega, cval, inc_e, inc_t, cat = [], [], [], [], [], []
     for k in range(m):  # loop over boundary nodes (setup only)
         prev = (k - 1) % m
         if is_vertex[k] and flux == "double":
@@ -1212,6 +1274,7 @@ def fit_bem(
                 cval.append((1 - tt) * cdata[e_, 0] + tt * cdata[e_, 1])
                 inc_e.append((e_, -1))
                 inc_t.append((tt, -1.0))
+                cat.append((e_, tt))
         else:
             cpts.append(a[k])
             # omega = interior angle / (2 pi) at a vertex, 1/2 on an edge
@@ -1219,6 +1282,7 @@ def fit_bem(
             cval.append(data_nodes[k])
             inc_e.append((prev, k))
             inc_t.append((1.0, 0.0))
+            cat.append((k, 0.0))
     # Collocate at every element's midpoint too, and solve in the least-squares
     # sense: measured on L, C, star and convex shapes, this gives ~10x smaller
     # interior errors and ~2x smaller boundary deviations than the square
@@ -1229,6 +1293,7 @@ def fit_bem(
         cval.append(0.5 * (cdata[e_, 0] + cdata[e_, 1]))
         inc_e.append((e_, -1))
         inc_t.append((0.5, -1.0))
+        cat.append((e_, 0.5))
     cpts = np.array(cpts)
     omega = np.array(omega)
     cval = np.array(cval)
@@ -1254,15 +1319,67 @@ def fit_bem(
     A = np.zeros((len(cpts), nunk))
     for s in range(2):  # scatter-add the two hat halves of each element
         np.add.at(A.T, uidx[:, s], S[:, :, s].T)
-    # (6) at x_p: sum S q = omega c(x_p) - sum D c   (D = -int c dG/dn, PV)
-    rhs = omega[:, None] * cval - np.einsum("pes,esa->pa", D, cdata)
-    sol = scipy.linalg.lstsq(A, rhs, lapack_driver="gelsd")[0]
-    qflux = np.ascontiguousarray(sol[uidx])  # (m, 2, 2)
+    trace = None
+    if natural:
+        cat_node = np.array([c[0] for c in cat], dtype=np.int64)
+        cat_w = np.array([c[1] for c in cat])
+        qflux, cdata = _solve_natural(
+            A, S, D, omega, cat_node, cat_w, uidx, nxt, edge, is_vertex, data_nodes,
+            tuple(_local_edges(f, n, frame.flipped) for f in free),
+        )  # fmt: skip
+        ce, ct = _caller_parameters(edge, t, n, frame.flipped)
+        trace = (ce, ct, frame.tcentre + frame.tscale * cdata[:, 0, :])
+    else:
+        # (6) at x_p: sum S q = omega c(x_p) - sum D c   (D = -int c dG/dn, PV)
+        rhs = omega[:, None] * cval - np.einsum("pes,esa->pa", D, cdata)
+        sol = scipy.linalg.lstsq(A, rhs, lapack_driver="gelsd")[0]
+        qflux = np.ascontiguousarray(sol[uidx])  # (m, 2, 2)
 
     sources = _gauss_sources(a, a[nxt], qflux, cdata)
     return BEMSolution(
-        m=m, frame=frame, nodes=nodes, flux=qflux, data=np.ascontiguousarray(cdata), _sources=sources
-    )
+        m=m, frame=frame, nodes=nodes, flux=qflux, data=np.ascontiguousarray(cdata), _sources=sources,
+        trace=trace,
+    )  # fmt: skip
+
+
+def _solve_natural(A, S, D, omega, cat_node, cat_w, uidx, nxt, edge, is_vertex, data_nodes, free):
+    """The collocated system (6) with natural conditions on some edges, one component at a time.
+
+    (6) reads S q = (omega P - Dn) c, with P interpolating the nodes' data at
+    the collocation points and Dn the double-layer integrals gathered per
+    node. For component a, q is zero on the elements of the edges
+    ``free[a]`` and unknown elsewhere; c is unknown at the nodes inside those
+    edges and known elsewhere (vertices included). The unknowns of both kinds
+    go to the left, and the least-squares system is solved with unit-norm
+    columns (flux and data unknowns differ in scale).
+    """
+    p, m = len(omega), len(edge)
+    M = np.zeros((p, m))
+    rows = np.arange(p)
+    np.add.at(M, (rows, cat_node), omega * (1.0 - cat_w))
+    np.add.at(M, (rows, nxt[cat_node]), omega * cat_w)
+    np.add.at(M.T, np.arange(m), -D[:, :, 0].T)
+    np.add.at(M.T, nxt, -D[:, :, 1].T)
+    qflux = np.zeros((m, 2, 2))
+    cdata = np.zeros((m, 2, 2))
+    for comp in range(2):  # the two components have different conditions
+        on_free = np.isin(edge, free[comp])
+        unknown_c = np.flatnonzero(on_free & ~is_vertex)
+        known_c = np.flatnonzero(~(on_free & ~is_vertex))
+        unknown_q = np.unique(uidx[~on_free].ravel())
+        lhs = np.concatenate([A[:, unknown_q], -M[:, unknown_c]], axis=1)
+        rhs = M[:, known_c] @ data_nodes[known_c, comp]
+        scale = np.linalg.norm(lhs, axis=0)
+        scale[scale == 0] = 1.0
+        sol = scipy.linalg.lstsq(lhs / scale, rhs, lapack_driver="gelsd")[0] / scale
+        q = np.zeros(A.shape[1])
+        q[unknown_q] = sol[: len(unknown_q)]
+        c = data_nodes[:, comp].copy()
+        c[unknown_c] = sol[len(unknown_q) :]
+        qflux[:, :, comp] = q[uidx]
+        cdata[:, 0, comp] = c
+        cdata[:, 1, comp] = c[nxt]
+    return np.ascontiguousarray(qflux), np.ascontiguousarray(cdata)
 
 
 def _gauss_sources(

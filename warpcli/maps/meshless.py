@@ -3,9 +3,11 @@
 `bem` and `mfs` compute closed-form approximations of the harmonic map with
 analytic derivatives; this module makes them `ThetaMap`s:
 
-- evaluate: the closed form inside the polygon; on its boundary the exact
-  boundary data (the Dirichlet data is known there; BEM's integrals are
-  singular at boundary nodes and both methods only approximate it);
+- evaluate: the closed form inside the polygon, moved onto Theta where the
+  approximation lands just outside it (the exact map cannot); on its
+  boundary the exact boundary data (the Dirichlet data is known there; BEM's
+  integrals are singular at boundary nodes and both methods only
+  approximate it);
 - inverse (§3.2): a piecewise-linear first guess from a triangulation of
   the polygon mapped into Theta, then damped Newton steps on
   ||x - phi(y)||^2 with the analytic Jacobian, constrained to the polygon
@@ -31,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..boundary import nearest_edge, on_boundary
 from ..grid import inside_polygon
 from ..polygon import Polygon
-from .base import Certificate, Mapped, ThetaMap, as_points, inv2
+from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, slide, sliding_tables
 from .theta import Theta
 
 #: Points closer than this (times the polygon's size) to its boundary take the exact boundary data.
@@ -67,6 +69,7 @@ class SmoothMap(ThetaMap):
 
     solution: Any = field(repr=False, default=None)
     name: str = "bem"
+    conditions: str = "dirichlet"
 
     @property
     def method(self) -> str:  # type: ignore[override]
@@ -89,6 +92,7 @@ class SmoothMap(ThetaMap):
             k = finite[inside]
             if k.size:
                 v, j = self.solution.value_and_jacobian(p[k])
+                self.theta.clamp(v)
                 out[k] = v
                 if jac is not None:
                     jac[k] = j
@@ -166,6 +170,21 @@ class SmoothMap(ThetaMap):
     def describe(self) -> dict:
         return {"nodes": {"m": int(self.solution.m)}}
 
+    def to_theta_parameter(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
+        if self.solution.trace is None:
+            return super().to_theta_parameter(edge, t)
+        return slide(self._edge_tables, edge, t, forward=True)
+
+    def from_theta_parameter(self, edge: ArrayLike, s: ArrayLike) -> NDArray[np.float64]:
+        if self.solution.trace is None:
+            return super().from_theta_parameter(edge, s)
+        return slide(self._edge_tables, edge, s, forward=False)
+
+    @cached_property
+    def _edge_tables(self) -> EdgeTables:
+        """Natural conditions let the boundary slide along Theta's edges: the solution's correspondence."""
+        return sliding_tables(self.theta.points, *self.solution.trace)
+
 
 def _nearest_triangles(mesh, points: NDArray[np.float64]) -> NDArray[np.intp]:
     """The mesh triangle whose centroid is nearest each point (few points)."""
@@ -181,14 +200,14 @@ class _Method:
 
     def build(self, polygon: Polygon, theta: Theta, options, role: str = "source", region=None) -> SmoothMap:
         boundary = options.src_boundary if role == "source" else options.dst_boundary
-        if boundary != "linear" or getattr(options, "conditions", "dirichlet") != "dirichlet":
-            from ..errors import InputError
-
-            raise InputError(f"--method {self.name} supports linear Dirichlet boundaries only (for now)")
+        # Mixed conditions (§5.2; Theta the unit square): x slides along the
+        # edges where y is prescribed (0 and 2), y along the others, as for FEM.
+        free = ((0, 2), (1, 3)) if options.conditions == "mixed" else ((), ())
         t0 = time.perf_counter()
         m = options.nodes
         while True:
-            phi = SmoothMap(polygon, theta, self._fit(polygon, theta, m), self.name)
+            fit = self._fit(polygon, theta, m, boundary, free)
+            phi = SmoothMap(polygon, theta, fit, self.name, options.conditions, boundary=boundary)
             # Repair what can be repaired: with the default m, a map whose
             # certificate fails (MFS oscillates near reflex corners, the
             # paper's Fig. 5) is fitted again with twice the nodes.
@@ -201,14 +220,14 @@ class _Method:
         phi.timings["solve"] = time.perf_counter() - t0
         return phi
 
-    def _fit(self, polygon: Polygon, theta: Theta, m: int | None):
+    def _fit(self, polygon: Polygon, theta: Theta, m: int | None, boundary: str, free):
         if self.name == "bem":
             from .bem import fit_bem
 
-            return fit_bem(polygon.points, theta.points, m)
+            return fit_bem(polygon.points, theta.points, m, boundary=boundary, free=free)
         from .mfs import fit_mfs
 
-        return fit_mfs(polygon.points, theta.points, m)
+        return fit_mfs(polygon.points, theta.points, m, boundary=boundary, free=free)
 
     def prepare(self) -> None:
         """Nothing to warm up beyond what the first fit compiles."""

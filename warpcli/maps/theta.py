@@ -64,6 +64,36 @@ class Theta:
         """+1 or -1: the sign of the shoelace area."""
         return float(np.sign(signed_area(self.points)))
 
+    def clamp(self, points: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Move points outside Theta onto its nearest boundary point, in place.
+
+        The exact harmonic map takes the polygon into Theta (its values are
+        convex combinations of the boundary data); an approximation can land
+        just outside near the boundary, where its error is largest.
+
+        Parameters
+        ----------
+        points : (K, 2) ndarray of float
+            Changed in place.
+
+        Returns
+        -------
+        (K,) ndarray of bool
+            Which points were moved.
+        """
+        from ..boundary import edge_points, nearest_edge
+
+        w = self.points
+        d = np.roll(w, -1, axis=0) - w
+        outside = np.zeros(len(points), dtype=bool)
+        for i in range(len(w)):  # convex: outside iff on the wrong side of some edge
+            cross = d[i, 0] * (points[:, 1] - w[i, 1]) - d[i, 1] * (points[:, 0] - w[i, 0])
+            outside |= cross * self.orientation < 0.0
+        if outside.any():
+            edge, t, _ = nearest_edge(points[outside], w)
+            points[outside] = edge_points(w, edge, t)
+        return outside
+
     def same_as(self, other: Theta) -> bool:
         """Whether two Thetas are the same polygon, vertex for vertex."""
         return self.points.shape == other.points.shape and bool(np.array_equal(self.points, other.points))
