@@ -176,3 +176,25 @@ def test_deterministic_and_validated():
         fit_mfs(P, T[:-1])
     assert a.value(np.zeros((0, 2))).shape == (0, 2)
     assert a.hessian(np.array([0.5, 0.5])).shape == (1, 2, 2, 2)
+
+
+def test_the_map_interface_gives_the_hessian_inside_and_nan_elsewhere():
+    """SmoothMap.hessian: the closed form's second derivatives, equal to finite differences of
+    the Jacobian that `evaluate` returns; NaN outside the polygon and on its boundary."""
+    from warpcli import MapOptions, Polygon
+    from warpcli.maps.registry import METHODS
+    from warpcli.maps.theta import regular
+
+    poly = Polygon(np.array([[0, 0], [100, 0], [100, 40], [40, 40], [40, 100], [0, 100]], float))
+    opts = MapOptions(method="mfs")
+    phi = METHODS["mfs"].load().build(poly, regular(poly, poly, opts), opts, "source")
+    q = np.array([[20.0, 20.0], [70.0, 20.0], [20.0, 70.0]])
+    H = phi.hessian(q)
+    h = 1e-3
+    for b in range(2):
+        step = np.zeros(2)
+        step[b] = h
+        fd = (phi.evaluate(q + step, jacobian=True).jacobian - phi.evaluate(q - step, jacobian=True).jacobian) / (2 * h)
+        np.testing.assert_allclose(H[:, :, :, b], fd, atol=1e-6 * np.abs(H).max() + 1e-9)
+    np.testing.assert_allclose(np.trace(H, axis1=2, axis2=3), 0.0, atol=1e-9 * np.abs(H).max())  # harmonic
+    assert np.isnan(phi.hessian([[70.0, 70.0], [50.0, 0.0], [np.nan, 1.0]])).all()

@@ -99,6 +99,31 @@ class SmoothMap(ThetaMap):
             out[finite[near]] = self.boundary_to_theta(edge, t)
         return Mapped(out, jac)
 
+    def hessian(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Second derivatives of phi at points inside the polygon (the closed form's, exact for it).
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+
+        Returns
+        -------
+        (K, 2, 2, 2) ndarray of float
+            ``H[k, a, b, c]`` = d^2 phi_a / dx_b dx_c; NaN outside the polygon
+            and on its boundary.
+        """
+        p = as_points(points)
+        out = np.full((len(p), 2, 2, 2), np.nan)
+        finite = np.flatnonzero(np.isfinite(p).all(axis=1))
+        if finite.size:
+            near, _, _ = on_boundary(p[finite], self.polygon.points, ON_BOUNDARY * self._size)
+            inside = inside_polygon(p[finite], self.polygon.points)
+            inside[near] = False
+            k = finite[inside]
+            if k.size:
+                out[k] = self.solution.hessian(p[k])
+        return out
+
     def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
         from .fem.locate import TriangleLocator, barycentric_combine
         from .newton import invert
