@@ -1,0 +1,94 @@
+"""Tests of warpcli.composite: polygon coverage by scanlines, and pasting a warp over its input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from helpers import comb, l_shape, simple_polygons, spiral, star
+from warpcli.composite import paste_over, polygon_coverage
+from warpcli.grid import inside_polygon, pixel_centres
+
+
+@given(st.integers(3, 30).flatmap(simple_polygons), st.floats(0.3, 1.2), st.floats(-40, 40), st.floats(-40, 40))
+def test_scanline_coverage_agrees_with_the_point_test_and_sums_to_the_area(poly, scale, dx, dy):
+    v = np.asarray(poly) * scale + [dx, dy]
+    w, h = 150, 110
+    cov = polygon_coverage(v, w, h)
+    centres_in = inside_polygon(pixel_centres(w, h), v).reshape(h, w)
+    # away from the boundary the coverage is the point test's answer
+    edge = (cov > 0) & (cov < 1)
+    np.testing.assert_array_equal(cov[~edge] == 1, centres_in[~edge])
+    if v.min() > 2 and v[:, 0].max() < w - 2 and v[:, 1].max() < h - 2:  # wholly inside the grid
+        area = 0.5 * abs(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
+        perimeter = np.hypot(*(np.roll(v, -1, axis=0) - v).T).sum()
+        assert abs(cov.sum() - area) < 0.1 * perimeter + 2 * len(v)  # corner effects only
+
+
+@pytest.mark.parametrize("shape", [star(), l_shape(), comb(), spiral()])
+def test_scanline_coverage_of_named_shapes(shape):
+    cov = polygon_coverage(shape, 128, 128)
+    inside = inside_polygon(pixel_centres(128, 128), shape).reshape(128, 128)
+    edge = (cov > 0) & (cov < 1)
+    np.testing.assert_array_equal(cov[~edge] == 1, inside[~edge])
+
+
+def test_coverage_of_an_axis_aligned_rectangle_is_exact_and_far_polygons_cost_nothing():
+    cov = polygon_coverage([[2, 3], [10, 3], [10, 7], [2, 7]], 12, 9)
+    want = np.zeros((9, 12))
+    want[3:7, 2:10] = 1
+    np.testing.assert_array_equal(cov, want)
+    assert not polygon_coverage([[1e9, 1e9], [2e9, 1e9], [2e9, 2e9]], 12, 9).any()
+    huge = polygon_coverage([[-1e9, -1e9], [1e9, -1e9], [1e9, 1e9], [-1e9, 1e9]], 12, 9)
+    assert (huge == 1).all()
+
+
+def _image(alpha: bool, dtype=np.uint8):
+    rng = np.random.default_rng(7)
+    img = rng.integers(0, 256, (40, 50, 4 if alpha else 3)).astype(dtype)
+    return img
+
+
+@pytest.mark.parametrize("alpha", [False, True])
+def test_a_transparent_warp_leaves_the_input_or_fills_the_vacated_source(alpha):
+    img = _image(alpha)
+    src = np.array([[5.0, 5.0], [30.0, 5.0], [30.0, 25.0], [5.0, 25.0]])
+    nothing = lambda pixels, ai: np.zeros_like(pixels)  # noqa: E731
+    kw = dict(src=src, background=[9, 8, 7, 255][: img.shape[2]], alpha_channel=3 if alpha else None, associated_alpha=False)
+    kept = paste_over(img, nothing, vacated="keep", **kw)
+    np.testing.assert_array_equal(kept, img)
+    filled = paste_over(img, nothing, vacated="background", **kw)
+    inside = np.zeros((40, 50), bool)
+    inside[5:25, 5:30] = True
+    np.testing.assert_array_equal(filled[~inside], img[~inside])
+    assert (filled[inside] == np.array([9, 8, 7, 255][: img.shape[2]])).all()
+
+
+@pytest.mark.parametrize("vacated", ["keep", "background"])
+def test_an_opaque_warp_replaces_everything_it_covers(vacated):
+    img = _image(False)
+    rng = np.random.default_rng(3)
+    other = rng.uniform(0, 255, (40, 50, 3)).astype(np.float32)
+    cover = np.zeros((40, 50, 1), np.float32)
+    cover[10:30, 10:40] = 1.0
+    cover[10:30, 40] = 0.25  # an antialiased edge column
+
+    def warp(pixels, ai):
+        assert ai == 3 and pixels.shape == (40, 50, 4)
+        out = np.concatenate([other * 255.0 / 255.0, np.full((40, 50, 1), 255.0, np.float32)], axis=2)
+        return out * cover  # premultiplied: colour and alpha scaled by the coverage
+
+    got = paste_over(img, warp, src=np.array([[0.0, 36.0], [4.0, 36.0], [0.0, 39.0]]), background=0, alpha_channel=None, associated_alpha=False, vacated=vacated)
+    np.testing.assert_array_equal(got[10:30, 10:40], np.round(other[10:30, 10:40]).astype(np.uint8))
+    blend = 0.25 * other[10:30, 40] + 0.75 * img[10:30, 40]
+    np.testing.assert_array_equal(got[10:30, 40], np.round(blend).astype(np.uint8))
+    np.testing.assert_array_equal(got[:10], img[:10])
+
+
+def test_an_unknown_vacated_mode_is_refused():
+    from warpcli import InputError
+
+    with pytest.raises(InputError, match="vacated"):
+        paste_over(_image(False), lambda p, a: p, src=np.zeros((3, 2)), background=0, alpha_channel=None, associated_alpha=False, vacated="x")
