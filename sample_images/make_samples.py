@@ -108,6 +108,22 @@ def readme_figure() -> None:
     write_png("before_after.png", np.concatenate(rows, axis=0)[:-8])
 
 
+def retouch_figure() -> None:
+    """retouch.png: a small polygon around Chelsea's left eye, its inner side pulled towards the
+    nose, pasted over the photograph (``--outside input``): before | after."""
+    import tempfile
+
+    from warpcli.raster.imageio import read_image
+    from warpcli.report.figures import display_rgb, side_by_side
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "out.png")
+        _warp("chelsea.png", "chelsea_eye.json", "chelsea_eye_wide.json", out, "--outside", "input")
+        before = display_rgb(read_image(os.path.join(HERE, "chelsea.png")).pixels, None)
+        after = display_rgb(read_image(out).pixels, None)
+        write_png("retouch.png", side_by_side(before, after))
+
+
 def map_pictures() -> None:
     """<sample>_grid.png and <sample>_heatmap.png: warp's own --grid and --heatmap output."""
     import tempfile
@@ -146,7 +162,16 @@ def main() -> None:
     # Chelsea (451x300): a 12-gon around the cat goes onto a 6-pointed star.
     write_json("chelsea_ring.json", ring(12, 225.5, 150, 215, 145, -math.pi / 2), "ellipse-like 12-gon in chelsea.png (451x300)")
     write_json("chelsea_star.json", star(6, 225.5, 150, 70, 148, -math.pi / 2), "6-pointed star (12 vertices)")
+    # A retouch: an octagon around the left eye; the three vertices on the nose's side move
+    # towards it, the other five stay put, and the warp is pasted over the photograph.
+    eye = ring(8, 172, 116, 64, 50, 0.0)
+    wide = [list(p) for p in eye]
+    for k, dx in ((0, 24.0), (1, 12.0), (7, 12.0)):
+        wide[k][0] = round(wide[k][0] + dx, 2)
+    write_json("chelsea_eye.json", eye, "octagon around the left eye in chelsea.png (451x300)")
+    write_json("chelsea_eye_wide.json", wide, "the same octagon, its three vertices nearest the nose moved right")
     readme_figure()
+    retouch_figure()
     map_pictures()
 
 

@@ -92,3 +92,72 @@ def test_an_unknown_vacated_mode_is_refused():
 
     with pytest.raises(InputError, match="vacated"):
         paste_over(_image(False), lambda p, a: p, src=np.zeros((3, 2)), background=0, alpha_channel=None, associated_alpha=False, vacated="x")
+
+
+def _cli(args):
+    import contextlib
+    import io
+
+    from warpcli.cli import main
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main([str(a) for a in args])
+    return code, err.getvalue()
+
+
+@pytest.mark.parametrize("alpha", [False, True])
+def test_outside_input_with_identical_polygons_gives_the_input_back(tmp_path, alpha):
+    from helpers import write_png, write_polygon
+
+    rng = np.random.default_rng(11)
+    px = rng.integers(0, 256, (96, 128, 4 if alpha else 3), dtype=np.uint8)
+    if alpha:
+        px[..., 3] = np.maximum(px[..., 3], 1)  # no fully transparent pixel: its colour is undefined
+    img = write_png(tmp_path / "in.png", px)
+    poly = write_polygon(tmp_path / "p.json", star(cx=60, cy=50, r_in=15, r_out=40))
+    code, err = _cli([img, tmp_path / "out.png", "--src", poly, "--dst", poly, "--outside", "input"])
+    assert code == 0, err
+    from warpcli.raster.imageio import read_image
+
+    px = read_image(img).pixels.astype(int)  # as warpcli reads it (straight alpha)
+    got = read_image(tmp_path / "out.png").pixels.astype(int)
+    cov = polygon_coverage(star(cx=60, cy=50, r_in=15, r_out=40), 128, 96)
+    assert (got[cov == 0] == px[cov == 0]).all()  # untouched, bit for bit
+    assert np.abs(got - px)[cov == 1].max() <= 1  # the identity warp, to rounding
+    # (edge pixels blend the input with the colour at the nearest boundary point, by coverage)
+
+
+def test_outside_input_composites_the_warp_and_fills_the_vacated_source(tmp_path):
+    from helpers import read_pixels, write_png, write_polygon
+
+    px = np.full((100, 120, 3), 200, dtype=np.uint8)
+    px[:, ::7] = 40  # stripes to move
+    img = write_png(tmp_path / "in.png", px)
+    src = np.array([[20.0, 20.0], [60.0, 20.0], [60.0, 80.0], [20.0, 80.0]])
+    dst = src + [40.0, 0.0]  # moved right: the left 40 px of SRC are vacated
+    s, d = write_polygon(tmp_path / "s.json", src), write_polygon(tmp_path / "d.json", dst)
+    plain = tmp_path / "plain.png"
+    assert _cli([img, plain, "--src", s, "--dst", d])[0] == 0
+    for vacated in ("keep", "background"):
+        out = tmp_path / f"{vacated}.png"
+        code, err = _cli([img, out, "--src", s, "--dst", d, "--outside", "input", "--vacated", vacated, "--background", "0,0,1"])
+        assert code == 0, err
+        got = read_pixels(out)
+        inside_dst = polygon_coverage(dst, 120, 100) == 1
+        np.testing.assert_array_equal(got[inside_dst], read_pixels(plain)[inside_dst])  # the warp itself
+        outside_both = (polygon_coverage(dst, 120, 100) == 0) & (polygon_coverage(src, 120, 100) == 0)
+        np.testing.assert_array_equal(got[outside_both], px[outside_both])  # the input
+        vac = (polygon_coverage(src, 120, 100) == 1) & (polygon_coverage(dst, 120, 100) == 0)
+        want = px[vac] if vacated == "keep" else np.array([0, 0, 255], np.uint8)
+        assert (got[vac] == want).all()
+
+
+def test_outside_input_needs_the_input_size_and_leaves_nothing_behind(tmp_path):
+    from helpers import write_png, write_polygon
+
+    img = write_png(tmp_path / "in.png", np.zeros((64, 64, 3), dtype=np.uint8))
+    poly = write_polygon(tmp_path / "p.json", star(cx=32, cy=32, r_in=8, r_out=20))
+    code, err = _cli([img, tmp_path / "out.png", "--src", poly, "--dst", poly, "--outside", "input", "--size", "32x32"])
+    assert code == 2 and "must have its size 64x64" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.png", "p.json"]

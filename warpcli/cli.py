@@ -185,6 +185,20 @@ class DefaultGroup(click.Group):
     help="Smooth the target polygon's edge and, with linear, average each pixel over its footprint where the map shrinks.",
 )
 @click.option(
+    "--outside",
+    type=click.Choice(("background", "input")),
+    default="background",
+    show_default=True,
+    help="Outside DST: the background, or the input with the warped region pasted over it (the output keeps INPUT's size).",
+)
+@click.option(
+    "--vacated",
+    type=click.Choice(("keep", "background")),
+    default="keep",
+    show_default=True,
+    help="With --outside input: the part of SRC that DST leaves uncovered keeps the input, or shows the background.",
+)
+@click.option(
     "--weights",
     type=click.Choice(WEIGHTS),
     default="cotan",
@@ -215,8 +229,8 @@ class DefaultGroup(click.Group):
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
     paths, src_path, dst_path, src_label, dst_label, out_dir, out_name, interp, size, dtype, background, method, theta,
-    boundary, src_boundary, dst_boundary, save_theta, energy, theta_start, nodes, conditions, max_area, antialias, weights, report_path, grid_path,
-    heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t, verbose, quiet,
+    boundary, src_boundary, dst_boundary, save_theta, energy, theta_start, nodes, conditions, max_area, antialias, outside, vacated, weights, report_path,
+    grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t, verbose, quiet,
 ):  # fmt: skip
     """Warp INPUT so that polygon SRC goes onto polygon DST; write OUTPUT.
 
@@ -244,6 +258,7 @@ def warp(
             dst_boundary=dst_boundary, energy=energy, theta_start=theta_start, conditions=conditions, nodes=nodes,
         ),
         interp=interp, background=tuple(background), antialias=antialias, size=size, dtype=dtype,
+        outside=outside, vacated=vacated,
     )  # fmt: skip
     if out_dir is not None:
         single_only = {

@@ -1,9 +1,11 @@
 """Pasting a warped region back over its image (``--outside input``), as GIMP's cage transform does.
 
-The warp of the target polygon is made with an extra alpha channel, in
-premultiplied colour, against a transparent background: alpha is 1 inside the
-target, its antialiased coverage along the target's edge, and 0 outside. It
-then goes *over* a base image:
+The warp of the target polygon is made in premultiplied colour with one extra
+channel of 1s, against a background of 0s: that channel comes out as the
+target's coverage (1 inside, the antialiased share along its edge, 0
+outside), and the output is ``warp + (1 - coverage) * base`` (the image's own
+alpha blends like a colour, so an identity warp gives the input back), with
+the base:
 
 - ``--vacated keep``: the base is the input itself, so the part of the source
   polygon the target no longer covers keeps the original pixels;
@@ -24,9 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import InputError
 from .grid import window
-
-#: What a pasted warp does with the part of the source polygon the target leaves uncovered.
-VACATED = ("keep", "background")
+from .options import VACATED
 
 
 def polygon_coverage(vertices: ArrayLike, width: int, height: int) -> NDArray[np.float32]:
@@ -105,18 +105,18 @@ def paste_over(
     image : (H, W, C) ndarray
         The input pixels; the output has the same size.
     warp : callable
-        ``warp(pixels, alpha)`` resamples a (H, W, C') float image of
-        premultiplied colour with alpha in channel ``alpha``, against a
-        transparent background, the target's edge coverage applied to every
-        channel (``resample(..., alpha_channel=alpha, associated_alpha=True,
-        background=0)``), into the (H, W, C') output.
+        ``warp(pixels, carrier)`` resamples a (H, W, C + 1) float image (the
+        input in premultiplied colour, then a channel of 1s, ``carrier`` = C)
+        against a background of 0, the target's edge coverage applied to
+        every channel (``resample(..., alpha_channel=carrier,
+        associated_alpha=True, background=0)``), into the (H, W, C + 1)
+        output. The carrier comes out as the target's coverage.
     src : (n, 2) array_like of float
         The source polygon (for ``vacated="background"``).
     background : float or (C,) array_like of float
         The fill of the vacated area, in the image's units.
     alpha_channel : int or None
-        The input's alpha channel, if it has one (else one is added, and
-        dropped again at the end).
+        The input's alpha channel, if it has one.
     associated_alpha : bool
         Whether the input's colour is premultiplied.
     vacated : {"keep", "background"}
@@ -139,44 +139,39 @@ def paste_over(
     h, w, nc = image.shape
     scale = float(unit(image.dtype))
     work = np.float64 if image.dtype == np.float64 else np.float32
-    ai = nc if alpha_channel is None else alpha_channel
-    base = _premultiplied(image.astype(work), alpha_channel, associated_alpha, scale)
-    warped = warp(base, ai)
-    bg = np.broadcast_to(np.asarray(background, dtype=np.float64), (nc,)).astype(work)
-    bg_p = _premultiplied(bg[None, None, :], alpha_channel, associated_alpha, scale)[0, 0]
-    untouched = warped[:, :, ai] == 0
+    straight = alpha_channel is not None and not associated_alpha
+    base = image.astype(work)
+    if straight:
+        _multiply_colour(base, base[:, :, alpha_channel] / scale, alpha_channel)
+    # One more channel, constant 1, that only the target's coverage changes.
+    carrier = np.concatenate([base, np.full((h, w, 1), scale, dtype=work)], axis=2)
+    warped = warp(carrier, nc)
+    del carrier
+    cov = warped[:, :, nc:] / scale
+    untouched = cov[:, :, 0] == 0
     if vacated == "background":
+        bg = np.broadcast_to(np.asarray(background, dtype=np.float64), (nc,)).astype(work)[None, None, :].copy()
+        if straight:
+            _multiply_colour(bg, bg[:, :, alpha_channel] / scale, alpha_channel)
         s = polygon_coverage(src, w, h)
         untouched &= s == 0
         s = s[:, :, None]
         base *= 1 - s
-        base += bg_p * s
-    out = warped
-    out += base * (1 - warped[:, :, ai : ai + 1] / scale)
-    if alpha_channel is None:
-        out = out[:, :, :nc]
-    elif not associated_alpha:
+        base += bg * s
+    out = warped[:, :, :nc]
+    out += base * (1 - cov)
+    if straight:
         alpha = out[:, :, alpha_channel] / scale
         with np.errstate(divide="ignore", invalid="ignore"):
-            inv = np.where(alpha > 0, 1.0 / alpha, 0.0).astype(work)
-        for c in range(nc):
-            if c != alpha_channel:
-                out[:, :, c] *= inv
+            _multiply_colour(out, np.where(alpha > 0, 1.0 / alpha, 0.0).astype(work), alpha_channel)
     out = _to_dtype(np.ascontiguousarray(out), image.dtype)
-    # Pixels neither warped onto nor vacated are the input's, bit for bit
-    # (premultiplying loses the colour of transparent pixels).
+    # Pixels neither warped onto nor vacated are the input's, bit for bit.
     out[untouched] = image[untouched]
     return out
 
 
-def _premultiplied(pixels: NDArray, alpha_channel: int | None, associated: bool, scale: float) -> NDArray:
-    """Colour premultiplied by alpha; without an alpha channel, one of 1 (``scale``) appended last."""
-    if alpha_channel is None:
-        return np.concatenate([pixels, np.full(pixels.shape[:2] + (1,), scale, dtype=pixels.dtype)], axis=2)
-    out = pixels.copy()
-    if not associated:
-        a = out[:, :, alpha_channel] / scale
-        for c in range(out.shape[2]):
-            if c != alpha_channel:
-                out[:, :, c] *= a
-    return out
+def _multiply_colour(pixels: NDArray, factor: NDArray, alpha_channel: int) -> None:
+    """Every channel but alpha times ``factor`` (H, W), in place."""
+    for c in range(pixels.shape[2]):
+        if c != alpha_channel:
+            pixels[:, :, c] *= factor

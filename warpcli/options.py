@@ -23,6 +23,10 @@ WEIGHTS = ("cotan", "positive")
 HEATMAP_MEASURES = ("conformal", "isometric", "det")
 #: Which way an STMap's t coordinate runs.
 STMAP_T = ("down", "up")
+#: What the output holds outside the target polygon.
+OUTSIDE = ("background", "input")
+#: With OUTSIDE "input": what the part of the source the target leaves uncovered shows.
+VACATED = ("keep", "background")
 #: Boundary conditions: Dirichlet everywhere, or the experimental mixed conditions of §5.2.
 CONDITIONS = ("dirichlet", "mixed")
 #: Energies the Theta optimization can lower.
@@ -154,6 +158,14 @@ class WarpOptions:
         Output size in pixels (width first); the input's by default.
     dtype : {"uint8", "uint16", "half", "float"} or None
         Output pixel type; the input's by default.
+    outside : {"background", "input"}
+        What the output holds outside the target polygon: the background, or
+        the input image with the warped region composited over it (then the
+        output has the input's size; see `warpcli.composite`).
+    vacated : {"keep", "background"}
+        With ``outside="input"``: the part of the source polygon the target
+        no longer covers keeps the input's pixels, or is filled with the
+        background.
 
     Raises
     ------
@@ -172,11 +184,15 @@ class WarpOptions:
     antialias: bool = True
     size: tuple[int, int] | None = None
     dtype: str | None = None
+    outside: str = "background"
+    vacated: str = "keep"
 
     def __post_init__(self) -> None:
         if not isinstance(self.map, MapOptions):
             raise InputError(f"map must be MapOptions, got {type(self.map).__name__}")
         _choice("interpolation", self.interp, INTERPOLATIONS)
+        _choice("outside", self.outside, OUTSIDE)
+        _choice("vacated", self.vacated, VACATED)
         if self.dtype is not None:
             _choice("dtype", self.dtype, DTYPES)
         bg = self.background

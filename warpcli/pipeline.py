@@ -184,6 +184,7 @@ def warp_image(
     dst = dst if isinstance(dst, Polygon) else Polygon(dst, name="dst")
     check_pair(src, dst)
     width, height = opts.size if opts.size is not None else (img.shape[1], img.shape[0])
+    _check_paste(opts, (width, height), (img.shape[1], img.shape[0]), "the input")
     # The output in the working type, and per pixel of the window the source
     # point and the Jacobian (2 + 4 float64): refuse what cannot fit at once.
     check_fits(width, height, img.shape[2] + 12, 4, f"an output of {width}x{height}")
@@ -204,7 +205,7 @@ def warp_image(
     plan = _sampling(fmap, width, height, opts, keep_jacobian=True)
     t1 = clock()
     stage("resampling")
-    out = _resample_with(plan, img, opts, bg, alpha_channel, associated_alpha)
+    out = _resample_with(plan, img, opts, bg, alpha_channel, associated_alpha, fmap.src)
     timings["compose"] = t1 - t0
     timings["resample"] = clock() - t1
     return WarpResult(out, fmap, plan.pull, timings)
@@ -237,10 +238,43 @@ def _sampling(fmap: BijectiveMap, width: int, height: int, opts: WarpOptions, *,
     return _Sampling(pull, coverage, jacobians)
 
 
+def _check_paste(opts: WarpOptions, size: tuple[int, int], input_size: tuple[int, int], name: str) -> None:
+    """``outside="input"`` pastes the warp over its input: the sizes must agree."""
+    if opts.outside == "input" and tuple(size) != tuple(input_size):
+        raise InputError(
+            f"--outside input pastes the warp over {name}, so the output must have its size "
+            f"{input_size[0]}x{input_size[1]}, not {size[0]}x{size[1]}"
+        )
+
+
 def _resample_with(
+    plan: _Sampling,
+    img: NDArray,
+    opts: WarpOptions,
+    bg: NDArray,
+    alpha_channel: int | None,
+    associated_alpha: bool,
+    src: Polygon,
+) -> NDArray:
+    """The whole output: the window around the target resampled, the background (or, with
+    ``outside="input"``, the input: `warpcli.composite`) elsewhere."""
+    if opts.outside == "input":
+        from .composite import paste_over
+
+        def warp(pixels: NDArray, alpha: int) -> NDArray:
+            return _resample_window(plan, pixels, opts, np.zeros(pixels.shape[2]), alpha, True)
+
+        return paste_over(
+            img, warp, src=src.points, background=bg, alpha_channel=alpha_channel,
+            associated_alpha=associated_alpha, vacated=opts.vacated,
+        )  # fmt: skip
+    return _resample_window(plan, img, opts, bg, alpha_channel, associated_alpha)
+
+
+def _resample_window(
     plan: _Sampling, img: NDArray, opts: WarpOptions, bg: NDArray, alpha_channel: int | None, associated_alpha: bool
 ) -> NDArray:
-    """The whole output: the window around the target resampled, background elsewhere."""
+    """The window around the target resampled, ``bg`` elsewhere."""
 
     def sample(points, jacobian=None, coverage=None):
         return resample(
@@ -556,8 +590,9 @@ def warp_batch(
             shape = opts.size if opts.size is not None else (image.width, image.height)
             if shape not in plans:
                 plans[shape] = _sampling(fmap, shape[0], shape[1], opts, keep_jacobian=False)
+            _check_paste(opts, shape, (image.width, image.height), os.fspath(inp))
             bg = _background(opts.background, image.pixels)
-            px = _resample_with(plans[shape], image.pixels, opts, bg, image.alpha_channel, image.associated_alpha)
+            px = _resample_with(plans[shape], image.pixels, opts, bg, image.alpha_channel, image.associated_alpha, src)
             _write_like(out, image, px, opts.dtype)
             item = BatchItem(os.fspath(inp), out)
         except WarpError as err:
