@@ -129,6 +129,7 @@ class DefaultGroup(click.Group):
 @click.option("--dst", "dst_path", required=True, type=click.Path(), help="Target polygon file (JSON, labelme or GeoJSON), in OUTPUT's pixel coordinates.")
 @click.option("--src-label", help="Which polygon of a labelme or GeoJSON --src file holding several: its label, or #N for the N-th (from 0).")
 @click.option("--dst-label", help="Which polygon of a labelme or GeoJSON --dst file holding several: its label, or #N for the N-th (from 0).")
+@click.option("--inverse", is_flag=True, help="Undo the warp from SRC to DST: map DST onto SRC (the same polygon files, swapped).")
 @click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
 @click.option("--out-name", default="{name}", show_default=True, help="Batch output file name: {name}, {stem}, {ext} of the input (the extension picks the format).")
 @interp_option
@@ -228,7 +229,7 @@ class DefaultGroup(click.Group):
 @quiet_option
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
-    paths, src_path, dst_path, src_label, dst_label, out_dir, out_name, interp, size, dtype, background, method, theta,
+    paths, src_path, dst_path, src_label, dst_label, inverse, out_dir, out_name, interp, size, dtype, background, method, theta,
     boundary, src_boundary, dst_boundary, save_theta, energy, theta_start, nodes, conditions, max_area, antialias, outside, vacated, weights, report_path,
     grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t, verbose, quiet,
 ):  # fmt: skip
@@ -250,6 +251,8 @@ def warp(
     _configure_logging(verbose, quiet)
     from .options import MapOptions, WarpOptions
 
+    if inverse:  # §6: moving the vertices back restores the image (to the map's accuracy)
+        src_path, dst_path, src_label, dst_label = dst_path, src_path, dst_label, src_label
     if boundary is not None:
         dst_boundary = boundary
     options = WarpOptions(
