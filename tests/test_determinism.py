@@ -34,6 +34,23 @@ def test_output_bytes_do_not_depend_on_the_thread_count(tmp_path):
     assert outs[0] == outs[1] == outs[2]
 
 
+def test_smooth_methods_give_the_same_bytes_whatever_the_blas_threads(tmp_path):
+    """BEM and MFS fit dense least-squares systems; multithreaded BLAS sums them in an order
+    that depends on the thread count (it did: OPENBLAS_NUM_THREADS=1 against 2)."""
+    px = np.random.default_rng(5).integers(0, 256, (90, 100, 3), dtype=np.uint8)
+    inp = write_png(tmp_path / "in.png", px)
+    src = write_polygon(tmp_path / "s.json", star(5, 50, 45, 18, 40))
+    dst = write_polygon(tmp_path / "d.json", star(5, 50, 45, 14, 42, 0.3))
+    for method in ("bem", "mfs"):
+        outs = []
+        for k, threads in enumerate(("1", "2", "4")):
+            out = tmp_path / f"{method}{k}.png"
+            env = {"OPENBLAS_NUM_THREADS": threads, "OMP_NUM_THREADS": threads}
+            _run([inp, str(out), "--src", src, "--dst", dst, "--method", method, "--nodes", "512", "-q"], env)
+            outs.append(out.read_bytes())
+        assert outs[0] == outs[1] == outs[2], method
+
+
 def test_images_wider_than_32767_pixels_warp(tmp_path):
     # OpenCV's remap stops at 32767 px; warpcli has no limit below memory.
     w, h = 33000, 24

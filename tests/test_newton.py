@@ -101,3 +101,23 @@ def test_starting_outside_fails_and_exact_guesses_return_at_once():
     assert calls == [1]  # one evaluation, at the one inside start
     y, ok = invert(bulge, bulge_jac, np.zeros((0, 2)), np.zeros((0, 2)))
     assert y.shape == (0, 2) and ok.shape == (0,)
+
+
+def test_a_point_stuck_at_the_noise_floor_converges_within_the_floor_only():
+    """A map evaluated with rounding noise above tol (a sum of large terms) cannot meet tol;
+    with ``floor`` above the noise the stuck points converge, and only those within it."""
+    from warpcli.maps.newton import invert
+
+    rng = np.random.default_rng(0)
+    A = np.array([[2.0, 0.3], [-0.4, 1.5]])
+
+    def noisy(y):
+        return y @ A.T + rng.uniform(-1e-10, 1e-10, y.shape)  # seeded noise, 100x tol
+
+    x = rng.uniform(-1, 1, (200, 2))
+    guess = x @ np.linalg.inv(A).T + 0.01
+    _, ok = invert(noisy, lambda y: np.broadcast_to(A, (len(y), 2, 2)), x, guess, tol=1e-12)
+    assert not ok.all()
+    y, ok = invert(noisy, lambda y: np.broadcast_to(A, (len(y), 2, 2)), x, guess, tol=1e-12, floor=1e-9)
+    assert ok.all()
+    np.testing.assert_allclose(y, x @ np.linalg.inv(A).T, atol=1e-9)

@@ -333,6 +333,22 @@ def _on_edges(V: NDArray[np.float64], edge: NDArray[np.int64], t: NDArray[np.flo
     return a + t[:, None] * (b - a)
 
 
+def lstsq(A: NDArray[np.float64], b: NDArray[np.float64], cond: float | None = None) -> NDArray[np.float64]:
+    """Least squares by LAPACK gelsd, with BLAS on one thread.
+
+    Multithreaded BLAS splits the sums differently for different thread
+    counts, which changed BEM and MFS fits in the last bits (measured:
+    OPENBLAS_NUM_THREADS=1 against 2), and with the two maps fitted
+    concurrently it oversubscribes the cores (a fit took 6-17 s under load
+    instead of 0.7 s). One thread: the same bytes on any machine's thread
+    settings, and no oversubscription.
+    """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return scipy.linalg.lstsq(A, b, cond=cond, lapack_driver="gelsd")[0]
+
+
 def _node_data(
     T: NDArray[np.float64], edge: NDArray[np.int64], t: NDArray[np.float64], boundary: str, flipped: bool
 ) -> NDArray[np.float64]:
@@ -1332,7 +1348,7 @@ def fit_bem(
     else:
         # (6) at x_p: sum S q = omega c(x_p) - sum D c   (D = -int c dG/dn, PV)
         rhs = omega[:, None] * cval - np.einsum("pes,esa->pa", D, cdata)
-        sol = scipy.linalg.lstsq(A, rhs, lapack_driver="gelsd")[0]
+        sol = lstsq(A, rhs)
         qflux = np.ascontiguousarray(sol[uidx])  # (m, 2, 2)
 
     sources = _gauss_sources(a, a[nxt], qflux, cdata)
@@ -1371,7 +1387,7 @@ def _solve_natural(A, S, D, omega, cat_node, cat_w, uidx, nxt, edge, is_vertex, 
         rhs = M[:, known_c] @ data_nodes[known_c, comp]
         scale = np.linalg.norm(lhs, axis=0)
         scale[scale == 0] = 1.0
-        sol = scipy.linalg.lstsq(lhs / scale, rhs, lapack_driver="gelsd")[0] / scale
+        sol = lstsq(lhs / scale, rhs) / scale
         q = np.zeros(A.shape[1])
         q[unknown_q] = sol[: len(unknown_q)]
         c = data_nodes[:, comp].copy()

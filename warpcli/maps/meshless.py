@@ -42,6 +42,8 @@ ON_BOUNDARY = 1e-9
 CERTIFY_SAMPLES = 40_000
 #: Triangles of the first-guess triangulation (§3.2).
 GUESS_TRIANGLES = 4000
+#: Residual (relative to Theta) within which Newton accepts a point it cannot improve further.
+NEWTON_FLOOR = 1e-9
 #: With the default m, a map that folds is fitted again with twice the nodes, up to this many.
 MAX_AUTO_NODES = 4096
 
@@ -156,9 +158,12 @@ class SmoothMap(ThetaMap):
                 # Theta, scaled by how far the polygon sits from the origin
                 # compared with its size (coordinates near 1e6 round at 1e-10).
                 far = float(np.abs(self.polygon.points).max()) / self._size
+                # Sums of many large terms (MFS weights grow with m: 1e5 at
+                # m = 1024) round at ~1e-11; Newton accepts a point stuck
+                # there (NEWTON_FLOOR: 1e-9 of Theta, ~1e-6 px).
                 y, ok = invert(
                     self.solution.value, self.solution.jacobian, q[k], guess, tol=1e-12 * max(1.0, 4.0 * far),
-                    inside=lambda pts: inside_polygon(pts, self.polygon.points),
+                    inside=lambda pts: inside_polygon(pts, self.polygon.points), floor=NEWTON_FLOOR,
                 )  # fmt: skip
                 y[~ok] = np.nan
                 out[k] = y
@@ -187,6 +192,9 @@ class SmoothMap(ThetaMap):
         ys = np.arange(ymin + step / 2, ymax, step)
         pts = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
         pts = pts[inside_polygon(pts, self.polygon.points)]
+        # a sample on an edge (to rounding) has no closed form there (BEM's is singular)
+        near, _, _ = on_boundary(pts, self.polygon.points, ON_BOUNDARY * self._size)
+        pts = np.delete(pts, near, axis=0)
         j = self.solution.jacobian(pts)
         det = j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0]
         bad = ~(det * self.theta.orientation * np.sign(self.polygon.signed_area) > 0)

@@ -46,7 +46,6 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
@@ -61,6 +60,7 @@ from .bem import (
     _on_edges,
     _prepare_polygon,
     interior_angles,
+    lstsq,
     points_in_polygon,
 )
 
@@ -497,7 +497,7 @@ def fit_mfs(
     cscale = np.linalg.norm(A, axis=0)
     # truncated-SVD least squares (LAPACK gelsd): minimum-norm solution of the
     # column-scaled problem, singular values below rcond * largest dropped
-    coef = scipy.linalg.lstsq(A / cscale, bdata, cond=rcond, lapack_driver="gelsd")[0] / cscale[:, None]
+    coef = lstsq(A / cscale, bdata, cond=rcond) / cscale[:, None]
     residual = float(np.max(np.abs(A @ coef - bdata))) * frame.tscale
     return _solution(S, X, coef, residual, frame)
 
@@ -541,7 +541,7 @@ def _fit_natural(A, X, S, bdata, x_edge, x_t, V, free, rcond, frame):
         M = np.where(neumann[:, None], dn, A)
         rhs = np.where(neumann, 0.0, bdata[:, comp])
         cscale = np.linalg.norm(M, axis=0)
-        coef[:, comp] = scipy.linalg.lstsq(M / cscale, rhs, cond=rcond, lapack_driver="gelsd")[0] / cscale
+        coef[:, comp] = lstsq(M / cscale, rhs, cond=rcond) / cscale
         dirichlet = ~neumann
         if dirichlet.any():
             residual = max(residual, float(np.max(np.abs(A[dirichlet] @ coef[:, comp] - rhs[dirichlet]))))

@@ -33,6 +33,7 @@ def invert(
     tol: float = 1e-12,
     max_iter: int = 20,
     inside: Callable[[NDArray[np.float64]], NDArray[np.bool_]] | None = None,
+    floor: float | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Solve fun(y) = x for y, for every row x of ``targets_xy``, by damped Newton.
 
@@ -56,6 +57,11 @@ def invert(
         ``inside(points)`` with points (k, 2) returns a (k,) bool mask, True
         where fun is defined.  Trial points outside get their step halved;
         a starting point outside fails at once.
+    floor : float, optional
+        The rounding noise of ``fun``, relative like ``tol``: a point whose
+        line search can make no more progress (or that runs out of
+        iterations) has converged if its residual is within it. A map summed
+        from large terms (MFS with many sites) cannot get below ``tol``.
 
     Returns
     -------
@@ -73,6 +79,7 @@ def invert(
     if K == 0:
         return y, converged
     thresh = tol * max(1.0, float(np.max(np.abs(x))))
+    noise = max(thresh, (floor or 0.0) * max(1.0, float(np.max(np.abs(x)))))
 
     active = np.arange(K)
     if inside is not None:
@@ -128,9 +135,13 @@ def invert(
             accepted[pending[good]] = True
             pending = pending[~good]
             step[pending] *= 0.5
-        # points whose line search failed cannot make progress: drop them
+        # points whose line search failed cannot make progress: converged
+        # if within the rounding noise, dropped otherwise
+        stuck = active[~accepted]
+        converged[stuck[np.sqrt(f[stuck]) <= noise]] = True
         active = active[accepted]
         ok = np.sqrt(f[active]) <= thresh
         converged[active[ok]] = True
         active = active[~ok]
+    converged[active[np.sqrt(f[active]) <= noise]] = True
     return y, converged
