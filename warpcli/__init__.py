@@ -42,6 +42,9 @@ _EXPORTS = {
     "warp_batch": "pipeline",
     "warp_file": "pipeline",
     "warp_image": "pipeline",
+    "warp_sequence": "pipeline",
+    "read_keyframes": "keyframes",
+    "parse_frames": "sequence",
     "write_image": "raster.imageio",
 }
 
@@ -62,7 +65,9 @@ if TYPE_CHECKING:
     from .maps.compose import BijectiveMap, PullBack, build_map
     from .maps.theta import Theta
     from .options import MapOptions, WarpOptions
-    from .pipeline import BatchItem, WarpResult, apply_map_file, warp_batch, warp_file, warp_image
+    from .keyframes import read_keyframes
+    from .pipeline import BatchItem, WarpResult, apply_map_file, warp_batch, warp_file, warp_image, warp_sequence
+    from .sequence import parse_frames
     from .polygon import Polygon, read_polygon
     from .raster.imageio import RasterImage, read_image, write_image
     from .raster.stmap import load_stmap, save_stmap

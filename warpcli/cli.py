@@ -129,6 +129,12 @@ class DefaultGroup(click.Group):
 @click.option("--dst", "dst_path", required=True, type=click.Path(), help="Target polygon file (JSON, labelme or GeoJSON), in OUTPUT's pixel coordinates.")
 @click.option("--src-label", help="Which polygon of a labelme or GeoJSON --src file holding several: its label, or #N for the N-th (from 0).")
 @click.option("--dst-label", help="Which polygon of a labelme or GeoJSON --dst file holding several: its label, or #N for the N-th (from 0).")
+@click.option(
+    "--frames",
+    metavar="SPEC",
+    help="Image sequences: INPUT and OUTPUT are patterns (shot.#.exr: # is 4 digits, @ one, or %04d) and SPEC "
+    "the frames: 1001-1100, 1-100x2, 1,5,10-12. Polygon files may hold keyframes; one map per distinct pair.",
+)
 @click.option("--inverse", is_flag=True, help="Undo the warp from SRC to DST: map DST onto SRC (the same polygon files, swapped).")
 @click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
 @click.option("--out-name", default="{name}", show_default=True, help="Batch output file name: {name}, {stem}, {ext} of the input (the extension picks the format).")
@@ -229,7 +235,7 @@ class DefaultGroup(click.Group):
 @quiet_option
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
-    paths, src_path, dst_path, src_label, dst_label, inverse, out_dir, out_name, interp, size, dtype, background, method, theta,
+    paths, src_path, dst_path, src_label, dst_label, frames, inverse, out_dir, out_name, interp, size, dtype, background, method, theta,
     boundary, src_boundary, dst_boundary, save_theta, energy, theta_start, nodes, conditions, max_area, antialias, outside, vacated, weights, report_path,
     grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t, verbose, quiet,
 ):  # fmt: skip
@@ -263,12 +269,23 @@ def warp(
         interp=interp, background=tuple(background), antialias=antialias, size=size, dtype=dtype,
         outside=outside, vacated=vacated,
     )  # fmt: skip
+    single_only = {
+        "--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path,
+        "--save-map": save_map, "--save-forward-map": save_forward_map, "--size": size, "--save-theta": save_theta,
+    }  # fmt: skip
+    used = [name for name, value in single_only.items() if value is not None]
+    from .sequence import is_pattern
+
+    if frames is not None or any(is_pattern(p) for p in paths):
+        if out_dir is not None:
+            raise click.UsageError("--frames takes an OUTPUT pattern, not --out-dir")
+        if len(paths) != 2:
+            raise click.UsageError(f"expected an INPUT and an OUTPUT pattern with --frames, got {len(paths)} path(s)")
+        if used:
+            raise click.UsageError(f"{', '.join(used)} applies to a single warp, not to a sequence")
+        _sequence(paths, frames, src_path, dst_path, src_label, dst_label, options)
+        return
     if out_dir is not None:
-        single_only = {
-            "--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path,
-            "--save-map": save_map, "--save-forward-map": save_forward_map, "--size": size, "--save-theta": save_theta,
-        }  # fmt: skip
-        used = [name for name, value in single_only.items() if value is not None]
         if used:
             raise click.UsageError(f"{', '.join(used)} applies to a single warp, not to --out-dir")
         if not paths:
@@ -308,25 +325,48 @@ def warp(
         log.debug("%s: %s", key.replace("_", " "), value)
 
 
+def _sequence(paths, frames, src_path, dst_path, src_label, dst_label, options):
+    """Warp the frames of a sequence; report failed frames one line each and go on."""
+    from .errors import InputError
+    from .pipeline import warp_sequence
+    from .sequence import is_pattern, missing_frames_error, parse_frames
+
+    if frames is None:
+        raise missing_frames_error(paths[0])
+    for path in paths:
+        if not is_pattern(path):
+            raise InputError(f"{path}: with --frames, INPUT and OUTPUT are sequence patterns (shot.#.exr, shot.%04d.exr)")
+    items = warp_sequence(
+        paths[0], paths[1], parse_frames(frames), src_path, dst_path, options, src_label=src_label,
+        dst_label=dst_label, on_item=_report_item,
+    )  # fmt: skip
+    _exit_for(items, "frames")
+
+
 def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, options):
     """Warp every input with one map; report failures one line each and go on."""
     from .pipeline import warp_batch
 
-    log = logging.getLogger("warpcli")
-
-    def report(item):
-        if item.error is None:
-            log.info("wrote %s", item.output_path)
-        else:
-            click.echo(f"warp: error: {item.error}", err=True)
-
     items = warp_batch(
         list(paths), out_dir, src_path, dst_path, options, pattern=out_name, src_label=src_label,
-        dst_label=dst_label, on_item=report,
+        dst_label=dst_label, on_item=_report_item,
     )  # fmt: skip
+    _exit_for(items, "inputs")
+
+
+def _report_item(item) -> None:
+    """One line per failed input (always), one per written output (with -v)."""
+    if item.error is None:
+        logging.getLogger("warpcli").info("wrote %s", item.output_path)
+    else:
+        click.echo(f"warp: error: {item.error}", err=True)
+
+
+def _exit_for(items, what: str) -> None:
+    """Batch exit status: the worst failure's, after every item was tried."""
     failed = [item for item in items if item.error is not None]
     if failed:
-        log.warning("%d of %d inputs failed", len(failed), len(items))
+        logging.getLogger("warpcli").warning("%d of %d %s failed", len(failed), len(items), what)
         raise click.exceptions.Exit(max(exit_code(item.error) for item in failed))
 
 

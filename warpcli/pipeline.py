@@ -603,6 +603,104 @@ def warp_batch(
     return items
 
 
+def warp_sequence(
+    input_pattern: str,
+    output_pattern: str,
+    frames: Sequence[int],
+    src_path: str | os.PathLike[str],
+    dst_path: str | os.PathLike[str],
+    options: WarpOptions | None = None,
+    *,
+    src_label: str | None = None,
+    dst_label: str | None = None,
+    on_item: Callable[[BatchItem], None] | None = None,
+    **changes: Any,
+) -> list[BatchItem]:
+    """Warp the frames of an image sequence; the polygon files may hold keyframes.
+
+    Frame paths follow oiiotool's conventions (`warpcli.sequence`: ``#`` is
+    4 digits, ``@`` one, ``%04d``). A polygon file with ``{"frames": {...}}``
+    gives each frame its polygon, linear between keyframes and held outside
+    them (`warpcli.keyframes`); a map is built only when a frame's pair
+    differs from the previous frame's, so still polygons cost one map for
+    the whole sequence (the paper's §6: with one Theta, the maps of
+    successive steps compose to the map of the whole step).
+
+    Parameters
+    ----------
+    input_pattern, output_pattern : str
+        Sequence patterns; the output's must differ from the input's.
+    frames : sequence of int
+        The frames, in order (`warpcli.sequence.parse_frames`).
+    src_path, dst_path : path-like
+        Polygon files, still or keyframed.
+    options : WarpOptions or None
+        As for `warp_image`; ``**changes`` change its fields.
+    src_label, dst_label : str or None
+        Which polygon of a file holding several (in every keyframe).
+    on_item : callable or None
+        Called with each `BatchItem` as it is done.
+
+    Returns
+    -------
+    list of BatchItem
+        In frame order.
+
+    Raises
+    ------
+    InputError
+        At once, before any work: bad patterns, polygons (at any frame) or
+        options, an output that is an input. A frame that fails later (a
+        missing or unreadable image, a write error) is reported through
+        ``on_item`` and in its item, and the rest go on.
+    """
+    from .keyframes import read_animated
+    from .sequence import expand, parse_pattern
+
+    opts = _options(options, changes)
+    if parse_pattern(os.fspath(output_pattern)) is None:
+        raise InputError(f"{output_pattern}: the output of a sequence must be a pattern too (#, @ or %04d)")
+    if parse_pattern(os.fspath(output_pattern)).pattern == parse_pattern(os.fspath(input_pattern)).pattern:
+        raise InputError(f"{output_pattern}: the output pattern is the input pattern; frames would be overwritten")
+    ins = expand(os.fspath(input_pattern), frames)
+    outs = expand(os.fspath(output_pattern), frames)
+    for (_, inp), (_, out) in zip(ins, outs):
+        check_output_path(out, inputs=(inp, src_path, dst_path))
+    src_keys = read_animated(src_path, src_label)
+    dst_keys = read_animated(dst_path, dst_label)
+    # Every frame's polygons first (interpolation can self-intersect): errors before any work.
+    pairs = {}
+    for f, _ in ins:
+        if f not in pairs:
+            pairs[f] = (src_keys.at(f), dst_keys.at(f))
+            check_pair(*pairs[f])
+    items: list[BatchItem] = []
+    built: tuple[bytes, bytes] | None = None
+    fmap: BijectiveMap | None = None
+    plans: dict[tuple[int, int], _Sampling] = {}
+    for (f, inp), (_, out) in zip(ins, outs):
+        try:
+            src, dst = pairs[f]
+            key = (src.points.tobytes(), dst.points.tobytes())
+            if key != built:
+                fmap, plans, built = BijectiveMap.between(src, dst, opts.map), {}, key
+            image = read_image(inp)
+            shape = opts.size if opts.size is not None else (image.width, image.height)
+            _check_paste(opts, shape, (image.width, image.height), inp)
+            if shape not in plans:
+                plans[shape] = _sampling(fmap, shape[0], shape[1], opts, keep_jacobian=False)
+            bg = _background(opts.background, image.pixels)
+            px = _resample_with(plans[shape], image.pixels, opts, bg, image.alpha_channel, image.associated_alpha, src)
+            _write_like(out, image, px, opts.dtype)
+            item = BatchItem(inp, out)
+        except WarpError as err:
+            item = BatchItem(inp, out, err)
+        items.append(item)
+        if on_item is not None:
+            on_item(item)
+    return items
+
+
 def apply_map_file(
     map_path: str | os.PathLike[str],
     input_path: str | os.PathLike[str],
