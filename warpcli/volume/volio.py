@@ -1,0 +1,220 @@
+"""Volume I/O: NIfTI through nibabel (keeping the affine, header and data type) and multi-page TIFF through tifffile."""
+
+from __future__ import annotations
+
+import gzip
+import io
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import ImageInputError, ImageIOError
+from ..outputs import write_checked
+from ..raster.imageio import atomic_path, check_output_path, max_image_bytes
+from .compose import VoxelGrid
+
+#: Extensions by format.
+NIFTI_EXTENSIONS = (".nii", ".nii.gz")
+TIFF_EXTENSIONS = (".tif", ".tiff")
+
+
+@dataclass(frozen=True, eq=False)
+class Volume:
+    """Voxels with the grid they sit on and what their file says about them.
+
+    Attributes
+    ----------
+    data : (nz, ny, nx, C) ndarray
+        In the file's own data type (for NIfTI, the stored values before
+        the header's scaling, which is written back unchanged). Voxel
+        (i, j, k) is ``data[k, j, i]``.
+    grid : VoxelGrid
+        Voxel index to world coordinates: NIfTI's affine (mm); for TIFF, voxel
+        (i, j, k) has its centre at (i + 0.5, j + 0.5, k + 0.5).
+    format : {"nifti", "tiff"}
+    header : object
+        The NIfTI image the volume came from (its header is written back), or
+        None.
+    """
+
+    data: NDArray
+    grid: VoxelGrid
+    format: str = "tiff"
+    header: object = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.data.ndim != 4:
+            raise ValueError(f"data must be (nz, ny, nx, C), got shape {self.data.shape}")
+        nz, ny, nx, _ = self.data.shape
+        if tuple(self.grid.shape) != (nx, ny, nz):
+            raise ValueError(f"grid shape {self.grid.shape} does not match data {self.data.shape}")
+
+
+def volume_format(path: str | os.PathLike[str]) -> str:
+    """``"nifti"`` or ``"tiff"`` from a file name, or `ImageInputError`."""
+    name = os.fspath(path).lower()
+    if name.endswith(NIFTI_EXTENSIONS):
+        return "nifti"
+    if name.endswith(TIFF_EXTENSIONS):
+        return "tiff"
+    raise ImageInputError(
+        f"{os.fspath(path)}: unknown volume format; use NIfTI (.nii, .nii.gz) or a multi-page TIFF (.tif, .tiff)"
+    )
+
+
+def tiff_grid(shape: tuple[int, int, int]) -> VoxelGrid:
+    """The grid of a TIFF stack: voxel (i, j, k) centred at (i + 0.5, j + 0.5, k + 0.5)."""
+    a = np.eye(4)
+    a[:3, 3] = 0.5
+    return VoxelGrid(tuple(int(s) for s in shape), a)  # type: ignore[arg-type]
+
+
+def read_volume(path: str | os.PathLike[str]) -> Volume:
+    """Read a NIfTI volume or a multi-page TIFF stack.
+
+    Raises
+    ------
+    ImageInputError
+        If the file is missing, unreadable, not a 3D volume (NIfTI with
+        more than 4 dimensions, a single-page TIFF), or too large for memory.
+    """
+    name = os.fspath(path)
+    kind = volume_format(name)
+    if not os.path.isfile(name):
+        raise ImageInputError(f"{name}: no such file" if not os.path.exists(name) else f"{name}: not a regular file")
+    if kind == "nifti":
+        return _read_nifti(name)
+    return _read_tiff(name)
+
+
+def _check_memory(name: str, nbytes: int) -> None:
+    limit = max_image_bytes()
+    if nbytes > limit:
+        raise ImageInputError(
+            f"{name}: the volume needs {nbytes / 2**20:.0f} MiB of memory, more than the {limit / 2**20:.0f} MiB "
+            "warpcli may use (WARPCLI_MAX_IMAGE_BYTES)"
+        )
+
+
+def _read_nifti(name: str) -> Volume:
+    try:
+        import nibabel as nib
+    except ImportError:
+        raise ImageInputError(f"{name}: reading NIfTI needs nibabel (pip install 'warpcli[volume]')") from None
+    try:
+        img = nib.load(name)
+        shape = img.shape
+        dtype = img.get_data_dtype()
+    except Exception as err:  # nibabel raises many kinds (ImageFileError, EOFError, zlib.error)
+        raise ImageInputError(f"{name}: cannot read NIfTI: {err}") from None
+    if len(shape) not in (3, 4):
+        raise ImageInputError(f"{name}: a volume needs 3 dimensions (or 4, the last one channels), got shape {shape}")
+    _check_memory(name, int(np.prod(shape)) * dtype.itemsize)
+    try:
+        proxy = img.dataobj
+        raw = proxy.get_unscaled() if hasattr(proxy, "get_unscaled") else np.asanyarray(proxy)
+    except Exception as err:
+        raise ImageInputError(f"{name}: cannot read NIfTI data: {err}") from None
+    raw = np.asarray(raw)
+    if raw.ndim == 3:
+        raw = raw[..., None]
+    data = np.ascontiguousarray(np.transpose(raw, (2, 1, 0, 3)))  # (i, j, k, c) -> (k, j, i, c)
+    affine = np.asarray(img.affine, dtype=np.float64)
+    return Volume(data, VoxelGrid(tuple(int(s) for s in shape[:3]), affine), "nifti", img)  # type: ignore[arg-type]
+
+
+def _read_tiff(name: str) -> Volume:
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(name) as tif:
+            series = tif.series[0]
+            axes = series.axes
+            shape = series.shape
+            _check_memory(name, int(np.prod(shape)) * np.dtype(series.dtype).itemsize)
+            data = series.asarray()
+    except (tifffile.TiffFileError, OSError, ValueError) as err:
+        raise ImageInputError(f"{name}: cannot read TIFF: {err}") from None
+    if data.ndim == 3 and axes[-1] != "S":
+        data = data[..., None]
+    elif not (data.ndim == 4 and axes[-1] == "S"):
+        raise ImageInputError(
+            f"{name}: a volume needs several pages of one size (axes like ZYX or ZYXS), got axes {axes} shape {shape}"
+        )
+    nz, ny, nx, _ = data.shape
+    return Volume(np.ascontiguousarray(data), tiff_grid((nx, ny, nz)), "tiff", None)
+
+
+def check_volume_output(path: str | os.PathLike[str], inputs: tuple = ()) -> None:
+    """Check before any work that a volume can be written at ``path`` (format known, not an input)."""
+    volume_format(path)
+    check_output_path(path, inputs, image=False)
+
+
+def encode_volume(volume: Volume, path: str | os.PathLike[str]) -> bytes:
+    """The bytes of ``volume`` in the format ``path``'s extension names (deterministic: no time stamps)."""
+    kind = volume_format(path)
+    if kind == "nifti":
+        return _encode_nifti(volume, os.fspath(path).lower().endswith(".gz"))
+    return _encode_tiff(volume)
+
+
+def write_volume(path: str | os.PathLike[str], volume: Volume) -> None:
+    """Write a volume atomically (a temporary file beside ``path``, renamed over it when complete).
+
+    Raises
+    ------
+    ImageInputError
+        If ``path`` cannot be written.
+    ImageIOError
+        If writing fails.
+    """
+    name = os.fspath(path)
+    data = encode_volume(volume, name)
+    check_volume_output(name)
+    with atomic_path(name) as tmp:
+        write_checked(tmp, data, name)
+
+
+def _encode_nifti(volume: Volume, compressed: bool) -> bytes:
+    import nibabel as nib
+
+    raw = np.transpose(volume.data, (2, 1, 0, 3))
+    if raw.shape[3] == 1:
+        raw = raw[..., 0]
+    like = volume.header
+    if like is not None:
+        header = like.header.copy()
+        header.set_data_dtype(volume.data.dtype)
+        img = type(like)(np.asfortranarray(raw), volume.grid.affine, header=header)
+        # Keep the input's scaling: the data are its stored values.
+        slope, inter = like.header.get_slope_inter()
+        if slope is not None:
+            img.header.set_slope_inter(slope, inter)
+    else:
+        img = nib.Nifti1Image(np.asfortranarray(raw), volume.grid.affine)
+        img.header.set_data_dtype(volume.data.dtype)
+    try:
+        body = img.to_bytes()
+    except Exception as err:
+        raise ImageIOError(f"cannot encode NIfTI: {err}") from err
+    if not compressed:
+        return body
+    buf = io.BytesIO()
+    with gzip.GzipFile(fileobj=buf, mode="wb", mtime=0, compresslevel=6) as gz:
+        gz.write(body)
+    return buf.getvalue()
+
+
+def _encode_tiff(volume: Volume) -> bytes:
+    import tifffile
+
+    data = volume.data
+    buf = io.BytesIO()
+    if data.shape[3] in (3, 4):
+        tifffile.imwrite(buf, data, photometric="rgb", extrasamples=("unassalpha",) if data.shape[3] == 4 else None)
+    else:
+        tifffile.imwrite(buf, data[..., 0] if data.shape[3] == 1 else data, photometric="minisblack")
+    return buf.getvalue()
