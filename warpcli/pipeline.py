@@ -528,12 +528,16 @@ def warp_batch(
     src_label: str | None = None,
     dst_label: str | None = None,
     on_item: Callable[[BatchItem], None] | None = None,
+    jobs: int = 1,
     **changes: Any,
 ) -> list[BatchItem]:
     """Warp many images with one map: ``out_dir/<pattern>`` for each input.
 
     The map is computed once, and its pull-back onto each output size once
-    (inputs of one size share it).
+    (inputs of one size share it). With ``jobs`` > 1 the images are read,
+    resampled and written by that many threads (the compiled kernels and
+    OpenImageIO release the GIL); every output's bytes are those of
+    ``jobs=1``.
 
     Parameters
     ----------
@@ -550,7 +554,9 @@ def warp_batch(
     src_label, dst_label : str or None
         Which polygon to take from a polygon file holding several.
     on_item : callable or None
-        Called with each `BatchItem` as it is done.
+        Called with each `BatchItem` as it is done, in input order.
+    jobs : int
+        Threads warping images at once.
 
     Returns
     -------
@@ -582,24 +588,64 @@ def warp_batch(
     dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
     fmap = BijectiveMap.between(src, dst, opts.map)
-    plans: dict[tuple[int, int], _Sampling] = {}
-    items = []
-    for inp, out in zip(input_paths, outputs):
-        try:
-            image = read_image(inp)
-            shape = opts.size if opts.size is not None else (image.width, image.height)
-            if shape not in plans:
-                plans[shape] = _sampling(fmap, shape[0], shape[1], opts, keep_jacobian=False)
-            _check_paste(opts, shape, (image.width, image.height), os.fspath(inp))
-            bg = _background(opts.background, image.pixels)
-            px = _resample_with(plans[shape], image.pixels, opts, bg, image.alpha_channel, image.associated_alpha, src)
-            _write_like(out, image, px, opts.dtype)
-            item = BatchItem(os.fspath(inp), out)
-        except WarpError as err:
-            item = BatchItem(os.fspath(inp), out, err)
-        items.append(item)
-        if on_item is not None:
-            on_item(item)
+    plans = _Plans(fmap, opts)
+    tasks = [(os.fspath(inp), out) for inp, out in zip(input_paths, outputs)]
+    return _each(lambda task: _warp_one(task[0], task[1], plans, opts, src), tasks, jobs, on_item)
+
+
+class _Plans:
+    """A map's pull-back per output size, made once and shared by threads."""
+
+    def __init__(self, fmap: BijectiveMap, opts: WarpOptions) -> None:
+        import threading
+
+        self.fmap, self.opts = fmap, opts
+        self._plans: dict[tuple[int, int], _Sampling] = {}
+        self._lock = threading.Lock()
+
+    def get(self, shape: tuple[int, int]) -> _Sampling:
+        with self._lock:
+            if shape not in self._plans:
+                self._plans[shape] = _sampling(self.fmap, shape[0], shape[1], self.opts, keep_jacobian=False)
+            return self._plans[shape]
+
+
+def _warp_one(inp: str, out: str, plans: _Plans, opts: WarpOptions, src: Polygon) -> BatchItem:
+    """One image of a batch or sequence: read, resample, write; its error in the item."""
+    try:
+        image = read_image(inp)
+        shape = opts.size if opts.size is not None else (image.width, image.height)
+        _check_paste(opts, shape, (image.width, image.height), inp)
+        plan = plans.get(shape)
+        bg = _background(opts.background, image.pixels)
+        px = _resample_with(plan, image.pixels, opts, bg, image.alpha_channel, image.associated_alpha, src)
+        _write_like(out, image, px, opts.dtype)
+        return BatchItem(inp, out)
+    except WarpError as err:
+        return BatchItem(inp, out, err)
+
+
+def _each(work: Callable, tasks: list, jobs: int, on_item: Callable[[BatchItem], None] | None) -> list[BatchItem]:
+    """``work`` over ``tasks`` on ``jobs`` threads; items (and ``on_item`` calls) in task order."""
+    if not (isinstance(jobs, int) and jobs >= 1):
+        raise InputError(f"jobs must be a whole number of at least 1, got {jobs!r}")
+    items: list[BatchItem] = []
+    if jobs == 1 or len(tasks) <= 1:
+        results = map(work, tasks)
+        pool = None
+    else:
+        from concurrent.futures import ThreadPoolExecutor
+
+        pool = ThreadPoolExecutor(max_workers=jobs, thread_name_prefix="warp-job")
+        results = pool.map(work, tasks)
+    try:
+        for item in results:
+            items.append(item)
+            if on_item is not None:
+                on_item(item)
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
     return items
 
 
@@ -614,6 +660,7 @@ def warp_sequence(
     src_label: str | None = None,
     dst_label: str | None = None,
     on_item: Callable[[BatchItem], None] | None = None,
+    jobs: int = 1,
     **changes: Any,
 ) -> list[BatchItem]:
     """Warp the frames of an image sequence; the polygon files may hold keyframes.
@@ -639,7 +686,9 @@ def warp_sequence(
     src_label, dst_label : str or None
         Which polygon of a file holding several (in every keyframe).
     on_item : callable or None
-        Called with each `BatchItem` as it is done.
+        Called with each `BatchItem` as it is done, in frame order.
+    jobs : int
+        Threads warping frames at once (as in `warp_batch`).
 
     Returns
     -------
@@ -674,30 +723,27 @@ def warp_sequence(
         if f not in pairs:
             pairs[f] = (src_keys.at(f), dst_keys.at(f))
             check_pair(*pairs[f])
-    items: list[BatchItem] = []
-    built: tuple[bytes, bytes] | None = None
-    fmap: BijectiveMap | None = None
-    plans: dict[tuple[int, int], _Sampling] = {}
+    # Runs of frames with the same pair share one map; the frames of a run go to the threads.
+    runs: list[tuple[tuple[bytes, bytes], list[tuple[str, str]]]] = []
     for (f, inp), (_, out) in zip(ins, outs):
+        src, dst = pairs[f]
+        key = (src.points.tobytes(), dst.points.tobytes())
+        if not runs or runs[-1][0] != key:
+            runs.append((key, []))
+        runs[-1][1].append((inp, out, f))
+    items: list[BatchItem] = []
+    for _, tasks in runs:
+        src, dst = pairs[tasks[0][2]]
         try:
-            src, dst = pairs[f]
-            key = (src.points.tobytes(), dst.points.tobytes())
-            if key != built:
-                fmap, plans, built = BijectiveMap.between(src, dst, opts.map), {}, key
-            image = read_image(inp)
-            shape = opts.size if opts.size is not None else (image.width, image.height)
-            _check_paste(opts, shape, (image.width, image.height), inp)
-            if shape not in plans:
-                plans[shape] = _sampling(fmap, shape[0], shape[1], opts, keep_jacobian=False)
-            bg = _background(opts.background, image.pixels)
-            px = _resample_with(plans[shape], image.pixels, opts, bg, image.alpha_channel, image.associated_alpha, src)
-            _write_like(out, image, px, opts.dtype)
-            item = BatchItem(inp, out)
-        except WarpError as err:
-            item = BatchItem(inp, out, err)
-        items.append(item)
-        if on_item is not None:
-            on_item(item)
+            plans = _Plans(BijectiveMap.between(src, dst, opts.map), opts)
+        except WarpError as err:  # a map that cannot be built fails its frames, not the others
+            done = [BatchItem(inp, out, err) for inp, out, _ in tasks]
+            for item in done:
+                if on_item is not None:
+                    on_item(item)
+            items += done
+            continue
+        items += _each(lambda task: _warp_one(task[0], task[1], plans, opts, src), tasks, jobs, on_item)
     return items
 
 

@@ -1,0 +1,96 @@
+"""Batch speed-up with --jobs: N frames of about 2 MP through one map, jobs 1 against 2 (and more).
+
+    python bench/jobs.py                      # 50 frames of 1600x1250 PNG, 3 rounds: ~3 minutes
+    python bench/jobs.py --frames 20 --format exr --jobs 1,2,4
+
+Each round runs `warp --out-dir` as a subprocess once per jobs value, in alternating order, on
+the same generated frames (a colour ramp and a checker, different per frame; a 12-vertex star
+onto a rotated one). Prints the median wall time per jobs value, the speed-up against jobs 1
+measured in the same rounds, and whether every output file is byte-identical to jobs 1's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import math
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def write_frames(directory: str, count: int, w: int, h: int, ext: str) -> list[str]:
+    import OpenImageIO as oiio
+
+    y, x = np.mgrid[0:h, 0:w]
+    paths = []
+    for k in range(count):
+        px = np.stack([(x * 255 // w + 3 * k) % 256, (y * 255 // h) % 256, ((x // 16 + y // 16 + k) % 2) * 200], axis=2).astype(np.uint8)
+        path = os.path.join(directory, f"frame{k:03d}.{ext}")
+        out = oiio.ImageOutput.create(path)
+        out.open(path, oiio.ImageSpec(w, h, 3, "uint8"))
+        out.write_image(px)
+        out.close()
+        paths.append(path)
+    return paths
+
+
+def star(cx, cy, r_in, r_out, phase=0.0, n=6):
+    k = np.arange(2 * n)
+    r = np.where(k % 2 == 0, r_out, r_in)
+    a = phase + math.pi * k / n
+    return np.stack([cx + r * np.cos(a), cy + r * np.sin(a)], axis=1).tolist()
+
+
+def digest(directory: str) -> dict[str, str]:
+    return {name: hashlib.sha256(open(os.path.join(directory, name), "rb").read()).hexdigest() for name in sorted(os.listdir(directory))}
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=50)
+    parser.add_argument("--size", default="1600x1250")
+    parser.add_argument("--format", default="png")
+    parser.add_argument("--jobs", default="1,2")
+    parser.add_argument("--rounds", type=int, default=3)
+    args = parser.parse_args(argv)
+    w, h = (int(v) for v in args.size.split("x"))
+    jobs = [int(j) for j in args.jobs.split(",")]
+    warp = os.path.join(os.path.dirname(sys.executable), "warp")
+    with tempfile.TemporaryDirectory() as tmp:
+        frames = write_frames(tmp, args.frames, w, h, args.format)
+        s = min(w, h)
+        for name, pts in (("src.json", star(w / 2, h / 2, 0.2 * s, 0.45 * s)), ("dst.json", star(w / 2, h / 2, 0.15 * s, 0.47 * s, 0.3))):
+            with open(os.path.join(tmp, name), "w") as fh:
+                json.dump(pts, fh)
+        times: dict[int, list[float]] = {j: [] for j in jobs}
+        hashes: dict[int, dict[str, str]] = {}
+        for r in range(args.rounds):
+            for j in (jobs if r % 2 == 0 else jobs[::-1]):
+                out = os.path.join(tmp, f"out{j}")
+                os.makedirs(out, exist_ok=True)
+                cmd = [warp, *frames, "--src", os.path.join(tmp, "src.json"), "--dst", os.path.join(tmp, "dst.json"), "--out-dir", out, "--jobs", str(j), "-q"]
+                t0 = time.perf_counter()
+                subprocess.run(cmd, check=True)
+                times[j].append(time.perf_counter() - t0)
+                hashes[j] = digest(out)
+                print(f"round {r + 1} jobs {j}: {times[j][-1]:.2f} s", file=sys.stderr, flush=True)
+    base = statistics.median(times[jobs[0]])
+    print(f"{args.frames} frames of {w}x{h} {args.format.upper()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}; median of {args.rounds}")
+    print("| jobs | seconds (median) | per frame | speed-up vs jobs %d | outputs identical to jobs %d |" % (jobs[0], jobs[0]))
+    print("|---:|---:|---:|---:|---|")
+    for j in jobs:
+        m = statistics.median(times[j])
+        print(f"| {j} | {m:.2f} | {m / args.frames:.3f} | {base / m:.2f} | {'yes' if hashes[j] == hashes[jobs[0]] else 'NO'} |")
+
+
+if __name__ == "__main__":
+    main()
