@@ -137,6 +137,7 @@ class DefaultGroup(click.Group):
 )
 @click.option("--inverse", is_flag=True, help="Undo the warp from SRC to DST: map DST onto SRC (the same polygon files, swapped).")
 @click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
+@click.option("--scheduler", metavar="ADDRESS|local", help="Batch: run on a Dask cluster (tcp://host:8786), or 'local' for a LocalCluster of --jobs processes; the map is built here once and shipped. Needs warpcli[dask].")
 @click.option("--jobs", type=click.IntRange(1, 256), default=1, show_default=True, help="Batch and sequences: images warped at once, by threads sharing the map (output bytes as with 1).")
 @click.option("--out-name", default="{name}", show_default=True, help="Batch output file name: {name}, {stem}, {ext} of the input (the extension picks the format).")
 @interp_option
@@ -236,7 +237,7 @@ class DefaultGroup(click.Group):
 @quiet_option
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
-    paths, src_path, dst_path, src_label, dst_label, frames, inverse, out_dir, jobs, out_name, interp, size, dtype, background, method, theta,
+    paths, src_path, dst_path, src_label, dst_label, frames, inverse, out_dir, scheduler, jobs, out_name, interp, size, dtype, background, method, theta,
     boundary, src_boundary, dst_boundary, save_theta, energy, theta_start, nodes, conditions, max_area, antialias, outside, vacated, weights, report_path,
     grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t, verbose, quiet,
 ):  # fmt: skip
@@ -278,8 +279,8 @@ def warp(
     from .sequence import is_pattern
 
     if frames is not None or any(is_pattern(p) for p in paths):
-        if out_dir is not None:
-            raise click.UsageError("--frames takes an OUTPUT pattern, not --out-dir")
+        if out_dir is not None or scheduler is not None:
+            raise click.UsageError("--frames takes an OUTPUT pattern, not --out-dir or --scheduler")
         if len(paths) != 2:
             raise click.UsageError(f"expected an INPUT and an OUTPUT pattern with --frames, got {len(paths)} path(s)")
         if used:
@@ -291,8 +292,10 @@ def warp(
             raise click.UsageError(f"{', '.join(used)} applies to a single warp, not to --out-dir")
         if not paths:
             raise click.UsageError("no INPUT given")
-        _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, options, jobs)
+        _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, options, jobs, scheduler)
         return
+    if scheduler is not None:
+        raise click.UsageError("--scheduler runs a batch: give --out-dir DIR")
     if len(paths) != 2:
         raise click.UsageError(f"expected INPUT and OUTPUT (or INPUTs with --out-dir DIR), got {len(paths)} path(s)")
     input_path, output_path = paths
@@ -344,8 +347,17 @@ def _sequence(paths, frames, src_path, dst_path, src_label, dst_label, options, 
     _exit_for(items, "frames")
 
 
-def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, options, jobs=1):
+def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, options, jobs=1, scheduler=None):
     """Warp every input with one map; report failures one line each and go on."""
+    if scheduler is not None:
+        from .distributed import warp_batch_dask
+
+        items = warp_batch_dask(
+            list(paths), out_dir, src_path, dst_path, options, scheduler=scheduler, pattern=out_name,
+            src_label=src_label, dst_label=dst_label, on_item=_report_item, workers=jobs,
+        )  # fmt: skip
+        _exit_for(items, "inputs")
+        return
     from .pipeline import warp_batch
 
     items = warp_batch(

@@ -573,6 +573,14 @@ def warp_batch(
         ``on_item`` and in its item, and the rest still go through.
     """
     opts = _options(options, changes)
+    tasks, src, dst = _batch_setup(input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label)
+    fmap = BijectiveMap.between(src, dst, opts.map)
+    plans = _Plans(fmap, opts)
+    return _each(lambda task: _warp_one(task[0], task[1], plans, opts, src), tasks, jobs, on_item)
+
+
+def _batch_setup(input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label):
+    """A batch's checks before any work: (input, output) pairs, and the two polygons."""
     directory = os.fspath(out_dir)
     if not os.path.isdir(directory):
         raise InputError(f"{directory}: output directory does not exist")
@@ -587,10 +595,7 @@ def warp_batch(
     src = read_polygon(src_path, src_label)
     dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
-    fmap = BijectiveMap.between(src, dst, opts.map)
-    plans = _Plans(fmap, opts)
-    tasks = [(os.fspath(inp), out) for inp, out in zip(input_paths, outputs)]
-    return _each(lambda task: _warp_one(task[0], task[1], plans, opts, src), tasks, jobs, on_item)
+    return [(os.fspath(inp), out) for inp, out in zip(input_paths, outputs)], src, dst
 
 
 class _Plans:
