@@ -156,3 +156,16 @@ def simple_polygons(n: int):
         st.lists(unit, min_size=n, max_size=n),
         st.booleans(),
     )
+
+
+def run_cli(args):
+    """Run the ``warp`` command in-process: (exit status, what it wrote on stderr)."""
+    import contextlib
+    import io
+
+    from warpcli.cli import main
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main([str(a) for a in args])
+    return code, err.getvalue()

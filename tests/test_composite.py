@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from helpers import comb, l_shape, simple_polygons, spiral, star
+from helpers import comb, l_shape, simple_polygons, spiral, star, run_cli
 from warpcli.composite import paste_over, polygon_coverage
 from warpcli.grid import inside_polygon, pixel_centres
 
@@ -94,17 +94,6 @@ def test_an_unknown_vacated_mode_is_refused():
         paste_over(_image(False), lambda p, a: p, src=np.zeros((3, 2)), background=0, alpha_channel=None, associated_alpha=False, vacated="x")
 
 
-def _cli(args):
-    import contextlib
-    import io
-
-    from warpcli.cli import main
-
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err):
-        code = main([str(a) for a in args])
-    return code, err.getvalue()
-
 
 @pytest.mark.parametrize("alpha", [False, True])
 def test_outside_input_with_identical_polygons_gives_the_input_back(tmp_path, alpha):
@@ -116,7 +105,7 @@ def test_outside_input_with_identical_polygons_gives_the_input_back(tmp_path, al
         px[..., 3] = np.maximum(px[..., 3], 1)  # no fully transparent pixel: its colour is undefined
     img = write_png(tmp_path / "in.png", px)
     poly = write_polygon(tmp_path / "p.json", star(cx=60, cy=50, r_in=15, r_out=40))
-    code, err = _cli([img, tmp_path / "out.png", "--src", poly, "--dst", poly, "--outside", "input"])
+    code, err = run_cli([img, tmp_path / "out.png", "--src", poly, "--dst", poly, "--outside", "input"])
     assert code == 0, err
     from warpcli.raster.imageio import read_image
 
@@ -138,10 +127,10 @@ def test_outside_input_composites_the_warp_and_fills_the_vacated_source(tmp_path
     dst = src + [40.0, 0.0]  # moved right: the left 40 px of SRC are vacated
     s, d = write_polygon(tmp_path / "s.json", src), write_polygon(tmp_path / "d.json", dst)
     plain = tmp_path / "plain.png"
-    assert _cli([img, plain, "--src", s, "--dst", d])[0] == 0
+    assert run_cli([img, plain, "--src", s, "--dst", d])[0] == 0
     for vacated in ("keep", "background"):
         out = tmp_path / f"{vacated}.png"
-        code, err = _cli([img, out, "--src", s, "--dst", d, "--outside", "input", "--vacated", vacated, "--background", "0,0,1"])
+        code, err = run_cli([img, out, "--src", s, "--dst", d, "--outside", "input", "--vacated", vacated, "--background", "0,0,1"])
         assert code == 0, err
         got = read_pixels(out)
         inside_dst = polygon_coverage(dst, 120, 100) == 1
@@ -158,6 +147,6 @@ def test_outside_input_needs_the_input_size_and_leaves_nothing_behind(tmp_path):
 
     img = write_png(tmp_path / "in.png", np.zeros((64, 64, 3), dtype=np.uint8))
     poly = write_polygon(tmp_path / "p.json", star(cx=32, cy=32, r_in=8, r_out=20))
-    code, err = _cli([img, tmp_path / "out.png", "--src", poly, "--dst", poly, "--outside", "input", "--size", "32x32"])
+    code, err = run_cli([img, tmp_path / "out.png", "--src", poly, "--dst", poly, "--outside", "input", "--size", "32x32"])
     assert code == 2 and "must have its size 64x64" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.png", "p.json"]

@@ -2,20 +2,11 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 
 import numpy as np
 
-from helpers import star, write_png, write_polygon
-from warpcli.cli import main
+from helpers import star, write_png, write_polygon, run_cli
 
-
-def _cli(args):
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err):
-        code = main([str(a) for a in args])
-    return code, err.getvalue()
 
 
 def test_batch_and_sequence_bytes_and_messages_do_not_depend_on_jobs(tmp_path):
@@ -31,8 +22,8 @@ def test_batch_and_sequence_bytes_and_messages_do_not_depend_on_jobs(tmp_path):
     runs = {}
     for jobs in (1, 3):
         (tmp_path / f"b{jobs}").mkdir()
-        batch = _cli([*inputs, "--src", src, "--dst", dst, "--out-dir", tmp_path / f"b{jobs}", "--jobs", jobs])
-        seq = _cli([tmp_path / "in" / "f.#.png", tmp_path / f"s{jobs}.#.png", "--src", src, "--dst", dst, "--frames", "1-8", "--jobs", jobs])
+        batch = run_cli([*inputs, "--src", src, "--dst", dst, "--out-dir", tmp_path / f"b{jobs}", "--jobs", jobs])
+        seq = run_cli([tmp_path / "in" / "f.#.png", tmp_path / f"s{jobs}.#.png", "--src", src, "--dst", dst, "--frames", "1-8", "--jobs", jobs])
         files = {p.name: p.read_bytes() for p in sorted(tmp_path.glob(f"b{jobs}/*"))}
         files.update({p.name.replace(f"s{jobs}", "s"): p.read_bytes() for p in sorted(tmp_path.glob(f"s{jobs}.*"))})
         runs[jobs] = (batch, seq, files)

@@ -2,22 +2,13 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 
 import numpy as np
 import pytest
 
-from helpers import read_pixels, star, write_png, write_polygon
-from warpcli.cli import main
+from helpers import read_pixels, star, write_png, write_polygon, run_cli
 
-
-def _cli(args):
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err):
-        code = main([str(a) for a in args])
-    return code, err.getvalue()
 
 
 def _frames(tmp_path, numbers, pattern="shot.{:04d}.png"):
@@ -46,7 +37,7 @@ def test_a_still_pair_warps_every_frame_with_one_map_and_a_missing_frame_is_one_
     built = []
     original = BijectiveMap.between.__func__
     monkeypatch.setattr(BijectiveMap, "between", classmethod(lambda cls, *a, **k: built.append(1) or original(cls, *a, **k)))
-    code, err = _cli([tmp_path / "in" / f"shot.{wild}.png", tmp_path / f"out.{wild}.png", "--src", src, "--dst", dst, "--frames", "1001-1004"])
+    code, err = run_cli([tmp_path / "in" / f"shot.{wild}.png", tmp_path / f"out.{wild}.png", "--src", src, "--dst", dst, "--frames", "1001-1004"])
     assert code == 2
     lines = err.splitlines()
     assert [line for line in lines if line.startswith("warp: error:")] == [f"warp: error: {tmp_path / 'in' / 'shot.1003.png'}: no such file"]
@@ -54,7 +45,7 @@ def test_a_still_pair_warps_every_frame_with_one_map_and_a_missing_frame_is_one_
     assert len(built) == 1
     # each frame is the single warp of that frame
     single = tmp_path / "single.png"
-    assert _cli([tmp_path / "in" / "shot.1002.png", single, "--src", src, "--dst", dst])[0] == 0
+    assert run_cli([tmp_path / "in" / "shot.1002.png", single, "--src", src, "--dst", dst])[0] == 0
     assert (tmp_path / "out.1002.png").read_bytes() == single.read_bytes()
 
 
@@ -68,14 +59,14 @@ def test_keyframed_polygons_give_each_frame_its_interpolated_warp_and_maps_only_
     built = []
     original = BijectiveMap.between.__func__
     monkeypatch.setattr(BijectiveMap, "between", classmethod(lambda cls, *a, **k: built.append(1) or original(cls, *a, **k)))
-    code, err = _cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", "1-6"])
+    code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", "1-6"])
     assert code == 0, err
     # frames 1-2 share keyframe a, 3 is between, 4-6 share b: three maps
     assert len(built) == 3
     for frame, points in ((1, a), (3, 0.5 * (a + b)), (6, b)):
         d = write_polygon(tmp_path / f"d{frame}.json", points)
         single = tmp_path / f"single{frame}.png"
-        assert _cli([tmp_path / "in" / f"shot.{frame:04d}.png", single, "--src", src, "--dst", d])[0] == 0
+        assert run_cli([tmp_path / "in" / f"shot.{frame:04d}.png", single, "--src", src, "--dst", d])[0] == 0
         np.testing.assert_array_equal(read_pixels(tmp_path / f"out.{frame:04d}.png"), read_pixels(single))
 
 
@@ -86,7 +77,7 @@ def test_keyframes_that_self_intersect_between_frames_are_refused_before_any_wor
     twisted[0], twisted[1] = [100.0, 20.0], [20.0, 20.0]  # a bow-tie halfway: an edge collapses
     src = write_polygon(tmp_path / "s.json", sq)
     dst = _keyframes(tmp_path, {1: sq, 3: sq[[1, 0, 3, 2]][::-1]})
-    code, err = _cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", "1-3"])
+    code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", "1-3"])
     assert code == 2 and err.count("\n") == 1 and "anim.json" in err
     assert not list(tmp_path.glob("out.*"))
 
@@ -105,7 +96,7 @@ def test_bad_sequences_are_one_line_and_exit_2(tmp_path, args, message, monkeypa
     monkeypatch.chdir(tmp_path)
     _frames(tmp_path, [1])
     src = write_polygon(tmp_path / "s.json", SRC)
-    code, err = _cli([*args, "--src", src, "--dst", src])
+    code, err = run_cli([*args, "--src", src, "--dst", src])
     assert code == 2, err
     assert err.count("\n") == 1 and message in err, err
     assert not list(tmp_path.glob("out*"))

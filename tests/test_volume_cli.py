@@ -2,24 +2,16 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 
 import numpy as np
 import pytest
 
 from test_volume_surface import write_obj
-from warpcli.cli import main
+from helpers import run_cli
 from warpcli.volume.examples import box
 
 tifffile = pytest.importorskip("tifffile")
 
-
-def _cli(args):
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err):
-        code = main([str(a) for a in args])
-    return code, err.getvalue()
 
 
 def test_warp_volume_identity_and_a_shear(tmp_path):
@@ -30,10 +22,10 @@ def test_warp_volume_identity_and_a_shear(tmp_path):
     w = v.copy()
     w[:, 0] = 4.0 + (w[:, 0] - 4.0) * (1.0 + 0.01 * (w[:, 2] - 4.0))
     write_obj(tmp_path / "sheared.obj", w, f)
-    code, err = _cli(["volume", tmp_path / "in.tif", tmp_path / "same.tif", "--src", tmp_path / "cube.obj", "--dst", tmp_path / "cube.obj", "--interp", "nearest"])
+    code, err = run_cli(["volume", tmp_path / "in.tif", tmp_path / "same.tif", "--src", tmp_path / "cube.obj", "--dst", tmp_path / "cube.obj", "--interp", "nearest"])
     assert code == 0, err
     assert np.array_equal(tifffile.imread(tmp_path / "same.tif")[4:28, 4:28, 4:28], data[4:28, 4:28, 4:28])
-    code, err = _cli(["volume", tmp_path / "in.tif", tmp_path / "out.tif", "--src", tmp_path / "cube.obj", "--dst", tmp_path / "sheared.obj", "--report", tmp_path / "r.json"])
+    code, err = run_cli(["volume", tmp_path / "in.tif", tmp_path / "out.tif", "--src", tmp_path / "cube.obj", "--dst", tmp_path / "sheared.obj", "--report", tmp_path / "r.json"])
     assert code == 0, err
     assert (tmp_path / "r.json").exists() and tifffile.imread(tmp_path / "out.tif").dtype == np.uint8
 
@@ -43,6 +35,6 @@ def test_warp_volume_bad_cage_is_one_line_and_exit_2(tmp_path):
     v, f = box(1, (1, 1, 1), (7, 7, 7))
     write_obj(tmp_path / "a.obj", v, f)
     write_obj(tmp_path / "open.obj", v, f[1:])
-    code, err = _cli(["volume", tmp_path / "in.tif", tmp_path / "out.tif", "--src", tmp_path / "a.obj", "--dst", tmp_path / "open.obj"])
+    code, err = run_cli(["volume", tmp_path / "in.tif", tmp_path / "out.tif", "--src", tmp_path / "a.obj", "--dst", tmp_path / "open.obj"])
     assert code == 2 and err.count("\n") == 1 and "open.obj: is not closed" in err, err
     assert not (tmp_path / "out.tif").exists()

@@ -82,23 +82,27 @@ class SmoothMap(ThetaMap):
         xmin, ymin, xmax, ymax = self.polygon.bounds
         return max(xmax - xmin, ymax - ymin)
 
+    def _split(self, p: NDArray[np.float64]):
+        """Indices of the points strictly inside (the closed form's domain), and of those on the
+        boundary (to ON_BOUNDARY) with their edge and parameter."""
+        finite = np.flatnonzero(np.isfinite(p).all(axis=1))
+        near, edge, t = on_boundary(p[finite], self.polygon.points, ON_BOUNDARY * self._size)
+        inside = inside_polygon(p[finite], self.polygon.points)
+        inside[near] = False
+        return finite[inside], finite[near], edge, t
+
     def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
         p = as_points(points)
         out = np.full(p.shape, np.nan)
         jac = np.full((len(p), 2, 2), np.nan) if jacobian else None
-        finite = np.flatnonzero(np.isfinite(p).all(axis=1))
-        if finite.size:
-            near, edge, t = on_boundary(p[finite], self.polygon.points, ON_BOUNDARY * self._size)
-            inside = inside_polygon(p[finite], self.polygon.points)
-            inside[near] = False
-            k = finite[inside]
-            if k.size:
-                v, j = self.solution.value_and_jacobian(p[k])
-                self.theta.clamp(v)
-                out[k] = v
-                if jac is not None:
-                    jac[k] = j
-            out[finite[near]] = self.boundary_to_theta(edge, t)
+        k, on, edge, t = self._split(p)
+        if k.size:
+            v, j = self.solution.value_and_jacobian(p[k])
+            self.theta.clamp(v)
+            out[k] = v
+            if jac is not None:
+                jac[k] = j
+        out[on] = self.boundary_to_theta(edge, t)
         return Mapped(out, jac)
 
     def hessian(self, points: ArrayLike) -> NDArray[np.float64]:
@@ -116,14 +120,9 @@ class SmoothMap(ThetaMap):
         """
         p = as_points(points)
         out = np.full((len(p), 2, 2, 2), np.nan)
-        finite = np.flatnonzero(np.isfinite(p).all(axis=1))
-        if finite.size:
-            near, _, _ = on_boundary(p[finite], self.polygon.points, ON_BOUNDARY * self._size)
-            inside = inside_polygon(p[finite], self.polygon.points)
-            inside[near] = False
-            k = finite[inside]
-            if k.size:
-                out[k] = self.solution.hessian(p[k])
+        k = self._split(p)[0]
+        if k.size:
+            out[k] = self.solution.hessian(p[k])
         return out
 
     def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
