@@ -38,3 +38,29 @@ def test_warp_volume_bad_cage_is_one_line_and_exit_2(tmp_path):
     code, err = run_cli(["volume", tmp_path / "in.tif", tmp_path / "out.tif", "--src", tmp_path / "a.obj", "--dst", tmp_path / "open.obj"])
     assert code == 2 and err.count("\n") == 1 and "open.obj: is not closed" in err, err
     assert not (tmp_path / "out.tif").exists()
+
+
+def test_warp_volume_bytes_do_not_depend_on_the_thread_count(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    data = np.random.default_rng(6).integers(0, 255, (24, 24, 24), dtype=np.uint8)
+    tifffile.imwrite(tmp_path / "in.tif", data, photometric="minisblack")
+    v, f = box(2, (3.0, 3.0, 3.0), (21.0, 21.0, 21.0))
+    write_obj(tmp_path / "cube.obj", v, f)
+    w = v.copy()
+    w[:, 0] = 3.0 + (w[:, 0] - 3.0) * (1.0 + 0.015 * (w[:, 2] - 3.0))
+    write_obj(tmp_path / "sheared.obj", w, f)
+    outs = []
+    for k, threads in enumerate(("1", "2", "4")):
+        env = {key: val for key, val in os.environ.items() if not key.endswith("_NUM_THREADS")}
+        env.update({"OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads, "NUMBA_NUM_THREADS": threads})
+        out = tmp_path / f"out{k}.tif"
+        done = subprocess.run(
+            [sys.executable, "-m", "warpcli", "volume", str(tmp_path / "in.tif"), str(out), "--src", str(tmp_path / "cube.obj"), "--dst", str(tmp_path / "sheared.obj"), "--edge", "0.8"],
+            env=env, capture_output=True, text=True,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1] == outs[2]
