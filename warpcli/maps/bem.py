@@ -1043,8 +1043,89 @@ def _gauss01(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     return 0.5 * (x + 1.0), 0.5 * w
 
 
+class ClosedForm:
+    """A map given in closed form in a `_Frame`'s local coordinates (BEM and MFS solutions).
+
+    Subclasses have a ``frame`` and implement ``_local(p, want_val,
+    want_jac, want_hess)`` on local points, returning the local value (K, 2),
+    Jacobian (K, 2, 2) and Hessian (K, 2, 2, 2) (empty where not wanted);
+    this class turns them into the caller's coordinates.
+    """
+
+    frame: _Frame
+
+    def _local(self, p: NDArray[np.float64], want_val: bool, want_jac: bool, want_hess: bool):
+        raise NotImplementedError
+
+    def _eval(self, points: ArrayLike, want_val: bool, want_jac: bool, want_hess: bool):
+        f = self.frame
+        val, jac, hess = self._local(f.to_local(points), want_val, want_jac, want_hess)
+        return f.tcentre + f.tscale * val, jac * (f.tscale / f.scale), hess * (f.tscale / f.scale**2)
+
+    def value(self, points: ArrayLike) -> NDArray[np.float64]:
+        """The map at points inside the polygon.
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+            Points inside the polygon, where the closed form approximates phi
+            (BEM's representation formula is ~0 outside and undefined on the
+            boundary; MFS's is defined everywhere but at its sites).
+
+        Returns
+        -------
+        (K, 2) ndarray of float
+            phi(points).
+        """
+        return self._eval(points, True, False, False)[0]
+
+    def jacobian(self, points: ArrayLike) -> NDArray[np.float64]:
+        """The Jacobian of the map at points inside the polygon.
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+
+        Returns
+        -------
+        (K, 2, 2) ndarray of float
+            ``J[k, a, b]`` = d phi_a / d x_b.
+        """
+        return self._eval(points, False, True, False)[1]
+
+    def value_and_jacobian(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Value and Jacobian in one pass (cheaper than two calls).
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+
+        Returns
+        -------
+        value : (K, 2) ndarray of float
+        jacobian : (K, 2, 2) ndarray of float
+        """
+        val, jac, _ = self._eval(points, True, True, False)
+        return val, jac
+
+    def hessian(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Second derivatives of the map at points inside the polygon.
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+
+        Returns
+        -------
+        (K, 2, 2, 2) ndarray of float
+            ``H[k, a, b, c]`` = d^2 phi_a / dx_b dx_c (symmetric in b, c;
+            trace-free in b, c since phi is harmonic).
+        """
+        return self._eval(points, False, False, True)[2]
+
+
 @dataclass(frozen=True, eq=False)
-class BEMSolution:
+class BEMSolution(ClosedForm):
     """A fitted BEM approximation of the harmonic map phi of a polygon (paper §3.1.2).
 
     Create with `fit_bem`.  All arrays are in the local frame of ``frame``.
@@ -1079,8 +1160,7 @@ class BEMSolution:
 
     # -- evaluation ---------------------------------------------------------
 
-    def _eval(self, points: ArrayLike, want_val: bool, want_jac: bool, want_hess: bool):
-        p = self.frame.to_local(points)
+    def _local(self, p: NDArray[np.float64], want_val: bool, want_jac: bool, want_hess: bool):
         K = len(p)
         val = np.zeros((K if want_val else 0, 2))
         jac = np.zeros((K if want_jac else 0, 2, 2))
@@ -1105,70 +1185,6 @@ class BEMSolution:
         inv = np.empty_like(order)
         inv[order] = np.arange(K)
         return val[inv] if want_val else val, jac[inv] if want_jac else jac, hess[inv] if want_hess else hess
-
-    def value(self, points: ArrayLike) -> NDArray[np.float64]:
-        """The map at interior points.
-
-        Parameters
-        ----------
-        points : (K, 2) array_like of float
-            Points strictly inside the polygon (elsewhere the representation
-            formula is evaluated as is: ~0 outside, undefined on the boundary).
-
-        Returns
-        -------
-        (K, 2) ndarray of float
-            phi(points).
-        """
-        val, _, _ = self._eval(points, True, False, False)
-        return self.frame.tcentre + self.frame.tscale * val
-
-    def jacobian(self, points: ArrayLike) -> NDArray[np.float64]:
-        """The Jacobian of the map at interior points.
-
-        Parameters
-        ----------
-        points : (K, 2) array_like of float
-
-        Returns
-        -------
-        (K, 2, 2) ndarray of float
-            ``J[k, a, b]`` = d phi_a / d x_b.
-        """
-        _, jac, _ = self._eval(points, False, True, False)
-        return jac * (self.frame.tscale / self.frame.scale)
-
-    def value_and_jacobian(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Value and Jacobian in one pass (cheaper than two calls).
-
-        Parameters
-        ----------
-        points : (K, 2) array_like of float
-
-        Returns
-        -------
-        value : (K, 2) ndarray of float
-        jacobian : (K, 2, 2) ndarray of float
-        """
-        val, jac, _ = self._eval(points, True, True, False)
-        f = self.frame
-        return f.tcentre + f.tscale * val, jac * (f.tscale / f.scale)
-
-    def hessian(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Second derivatives of the map at interior points.
-
-        Parameters
-        ----------
-        points : (K, 2) array_like of float
-
-        Returns
-        -------
-        (K, 2, 2, 2) ndarray of float
-            ``H[k, a, b, c]`` = d^2 phi_a / dx_b dx_c (symmetric in b, c;
-            trace-free in b, c since phi is harmonic).
-        """
-        _, _, hess = self._eval(points, False, False, True)
-        return hess * (self.frame.tscale / self.frame.scale**2)
 
 
 def default_bem_nodes(n_vertices: int) -> int:

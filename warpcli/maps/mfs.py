@@ -50,6 +50,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from .bem import (
+    ClosedForm,
     _boundary_nodes,
     _caller_parameters,
     _distance_to_boundary,
@@ -182,7 +183,7 @@ def _evaluate(px, py, sx, sy, w0, w1, want_val, want_jac, want_hess, val, jac, h
 
 
 @dataclass(frozen=True, eq=False)
-class MFSSolution:
+class MFSSolution(ClosedForm):
     """A fitted MFS approximation of the harmonic map phi of a polygon (paper §3.1.3).
 
     Create with `fit_mfs`.  Arrays are in the local frame of ``frame``.
@@ -218,8 +219,7 @@ class MFSSolution:
     residual: float
     trace: tuple | None = None
 
-    def _eval(self, points: ArrayLike, want_val: bool, want_jac: bool, want_hess: bool):
-        p = self.frame.to_local(points)
+    def _local(self, p: NDArray[np.float64], want_val: bool, want_jac: bool, want_hess: bool):
         K = len(p)
         val = np.zeros((K if want_val else 0, 2))
         jac = np.zeros((K if want_jac else 0, 2, 2))
@@ -235,66 +235,7 @@ class MFSSolution:
             val += self.affine[0] + p @ self.affine[1:]
         if want_jac:
             jac += self.affine[1:].T
-        f = self.frame
-        return f.tcentre + f.tscale * val, jac * (f.tscale / f.scale), hess * (f.tscale / f.scale**2)
-
-    def value(self, points: ArrayLike) -> NDArray[np.float64]:
-        """The map at points.
-
-        Parameters
-        ----------
-        points : (K, 2) array_like of float
-            Points inside the polygon (the formula is defined everywhere but
-            at the sites; it only approximates phi inside).
-
-        Returns
-        -------
-        (K, 2) ndarray of float
-        """
-        return self._eval(points, True, False, False)[0]
-
-    def jacobian(self, points: ArrayLike) -> NDArray[np.float64]:
-        """The Jacobian of the map.
-
-        Parameters
-        ----------
-        points : (K, 2) array_like of float
-
-        Returns
-        -------
-        (K, 2, 2) ndarray of float
-            ``J[k, a, b]`` = d phi_a / d x_b.
-        """
-        return self._eval(points, False, True, False)[1]
-
-    def value_and_jacobian(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Value and Jacobian in one call.
-
-        Parameters
-        ----------
-        points : (K, 2) array_like of float
-
-        Returns
-        -------
-        value : (K, 2) ndarray of float
-        jacobian : (K, 2, 2) ndarray of float
-        """
-        val, jac, _ = self._eval(points, True, True, False)
-        return val, jac
-
-    def hessian(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Second derivatives of the map.
-
-        Parameters
-        ----------
-        points : (K, 2) array_like of float
-
-        Returns
-        -------
-        (K, 2, 2, 2) ndarray of float
-            ``H[k, a, b, c]`` = d^2 phi_a / dx_b dx_c.
-        """
-        return self._eval(points, False, False, True)[2]
+        return val, jac, hess
 
 
 def default_mfs_sites(n_vertices: int) -> int:
