@@ -13,7 +13,10 @@ What is measured (see bench/README.md):
 * two peers, each a whole subprocess on the same files: scikit-image's
   PiecewiseAffineTransform estimated from the polygon vertices, and an affine
   ``skimage.transform.warp`` (the cost of reading, resampling and writing alone);
-* the map's error in pixels against a map built on a 4x finer mesh.
+* the map's error in pixels against a map built on a 4x finer mesh;
+* the start-up table of bench/startup.py: ``warp --help``, a bad-input error,
+  the fixed cost (``warp`` on a 1 x 1 image) and the floor (numpy and
+  OpenImageIO reading, resampling with a precomputed map and writing 1 MP).
 
 Peak RSS of a child is taken from GNU ``/usr/bin/time -f %M`` when it works,
 else from ``os.wait4`` in a small launcher process. It is *not* taken from
@@ -40,6 +43,8 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+
+import startup  # bench/startup.py, beside this file
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STAGES = ("read", "mesh", "solve", "compose", "resample", "write")
@@ -120,8 +125,9 @@ out = warp(img, tform, order=1)  # float64 in [0, 1]
 write(outp, np.clip(np.rint(out * 255.0), 0, 255).astype(np.uint8))
 '''.replace("ROTATION", repr(AFFINE_ROTATION))
 
-#: What the warp command and the peers import before any work (the start-up floors).
-WARP_IMPORTS = "import warpcli.cli, warpcli.pipeline, OpenImageIO, triangle, scipy.sparse.linalg, scipy.ndimage"
+#: What the warp command and the peers import before any work (the start-up floors):
+#: the default warp loads its kernels with llvmlite and imports neither scipy nor numba.
+WARP_IMPORTS = "import warpcli.cli, warpcli.pipeline, OpenImageIO, triangle, llvmlite.binding"
 PEER_IMPORTS = "import numpy, OpenImageIO, skimage.transform"
 
 # ----------------------------------------------------------------------------
@@ -615,6 +621,7 @@ def parse_args(argv):
         "--accuracy-max-mp", type=float, default=4.0, help="measure accuracy only up to this size in MP [4]"
     )
     p.add_argument("--keep", metavar="DIR", help="keep the generated images, polygons and outputs in DIR")
+    p.add_argument("--no-startup", action="store_true", help="skip the start-up table (fixed cost, floor)")
     args = p.parse_args(argv)
     if args.quick and args.sizes is None:
         args.sizes = QUICK_SIZES
@@ -642,6 +649,9 @@ def main(argv=None) -> int:
     warp_exe = os.path.join(os.path.dirname(sys.executable), "warp")
     if not os.access(warp_exe, os.X_OK):
         sys.exit(f"bench: no warp executable next to {sys.executable} (pip install -e .)")
+    # warpcli's bytecode, as an installation has it: a shell with
+    # PYTHONDONTWRITEBYTECODE would otherwise make every warp compile its modules.
+    startup.compile_bytecode()
     from warpcli.pipeline import warp_file
 
     if args.keep:
@@ -674,8 +684,18 @@ def main(argv=None) -> int:
                 floor_text.append(f"{label} failed ({str(e).splitlines()[0]})")
         header.append("start-up: " + "; ".join(floor_text) + f" (subprocess, median of {args.repeat})")
         print(header[-1], flush=True)
+        # What warp pays before the first pixel, against the floor of any warp
+        # (bench/startup.py; its own untimed first run compiles any missing kernel).
+        startup_text = ""
+        if not args.no_startup:
+            progress("measuring the fixed cost and the floor (bench/startup.py)")
+            try:
+                startup_text = startup.run(repeat=args.repeat, megapixels=1.0, progress=progress)
+            except RuntimeError as e:
+                startup_text = f"start-up table failed: {e}\n"
+            print("\n" + startup_text, flush=True)
         # Warm up in-process: the lazy imports inside warp_file (OpenImageIO, triangle,
-        # scipy.sparse.linalg, scipy.ndimage) and first-call costs stay out of the stage timings.
+        # llvmlite and the kernels) and first-call costs stay out of the stage timings.
         progress("warming up warp_file() in-process")
         ww, wh = image_dims(0.01)
         write_png(os.path.join(work, "warmup.png"), make_image(ww, wh))
@@ -770,9 +790,13 @@ def main(argv=None) -> int:
         text = tables(rows, args, md=False)
         print()
         print(text)
+        if startup_text:
+            print(startup_text)
         print("\n".join("note: " + n for n in notes))
         if args.out:
             md = ["# warp benchmark", "", "```", *header, "```", "", tables(rows, args, md=True), ""]
+            if startup_text:
+                md += ["```", startup_text.rstrip(), "```", ""]
             md += ["- " + n for n in notes]
             os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
             with open(args.out, "w") as fh:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
+import functools
 import json
 import logging
 import os
@@ -173,6 +175,21 @@ def warp_image(
     (8, 8, 1)
     """
     opts = _options(options, changes)
+    return _warp(image, src, dst, opts, alpha_channel, associated_alpha, warp_map, progress)
+
+
+def _warp(
+    image: ArrayLike,
+    src: Polygon | ArrayLike,
+    dst: Polygon | ArrayLike,
+    opts: WarpOptions,
+    alpha_channel: int | None,
+    associated_alpha: bool,
+    warp_map: BijectiveMap | None,
+    progress: Callable[[str], None] | None,
+    early: _EarlyMap | None = None,
+) -> WarpResult:
+    """`warp_image`, taking the map from ``early`` when it was built for this image's size."""
     img = np.asarray(image)
     if img.ndim == 2:
         img = img[:, :, None]
@@ -195,7 +212,10 @@ def warp_image(
     if fmap is None:
         stage("optimizing Theta and building the map" if opts.map.theta == "optimized" else "building the map")
         regions = ((0.0, 0.0, float(img.shape[1]), float(img.shape[0])), (0.0, 0.0, float(width), float(height)))
-        fmap = BijectiveMap.between(src, dst, opts.map, regions=regions)
+        if early is not None and early.regions == regions:
+            fmap = early.take()
+        else:
+            fmap = BijectiveMap.between(src, dst, opts.map, regions=regions)
         timings.update(fmap.timings)
     elif not (_same_polygon(fmap.src, src) and _same_polygon(fmap.dst, dst)):
         raise InputError("warp_map was built between other polygons than src and dst")
@@ -303,6 +323,68 @@ def _write_like(path: str | os.PathLike[str], image: RasterImage, pixels: NDArra
     write_image(path, RasterImage(px, image.channel_names, image.alpha_channel, image.attributes, image.associated_alpha))
 
 
+#: Log records held back by the thread building an `_EarlyMap` (and the threads it
+#: starts, which inherit the context): None everywhere else.
+_HELD_RECORDS: contextvars.ContextVar[list | None] = contextvars.ContextVar("warpcli_held_records", default=None)
+
+
+def _hold_back(record: logging.LogRecord) -> bool:
+    held = _HELD_RECORDS.get()
+    if held is None:
+        return True
+    held.append(record)
+    return False
+
+
+class _EarlyMap:
+    """The map of `warp_file`, built on a thread from the image's size while its pixels are read.
+
+    Started only when `warp_image`'s checks of that size will pass, so it
+    refuses what it always did, before any map. Its log records (a repair's
+    warning, an optimization's progress) are held back and given out when
+    the map is taken, where building it logged them before; if the map is
+    never taken (the image cannot be read), they are dropped with it.
+    """
+
+    def __init__(self, src: Polygon, dst: Polygon, opts: WarpOptions, regions: tuple) -> None:
+        from .maps.compose import Task
+
+        self.regions = regions
+        self._records: list[logging.LogRecord] = []
+        log.addFilter(_hold_back)  # once: the same function
+        context = contextvars.copy_context()
+        context.run(_HELD_RECORDS.set, self._records)
+        build = functools.partial(BijectiveMap.between, src, dst, opts.map, regions=regions)
+        self._task = context.run(Task, build, name="warp-map")
+
+    def take(self) -> BijectiveMap:
+        """The map once built (or its error), after its held-back log records."""
+        try:
+            return self._task.result()
+        finally:
+            for record in self._records:
+                log.handle(record)
+
+    @classmethod
+    def start(cls, input_path, src: Polygon, dst: Polygon, opts: WarpOptions) -> _EarlyMap | None:
+        """Start building the map for the image at ``input_path``, if its header can tell the size."""
+        from .raster.imageio import image_size
+
+        header = image_size(input_path)
+        if header is None:
+            return None
+        w, h, channels = header
+        width, height = opts.size if opts.size is not None else (w, h)
+        try:
+            _check_paste(opts, (width, height), (w, h), "the input")
+            check_fits(width, height, channels + 12, 4, f"an output of {width}x{height}")
+            _background(opts.background, np.zeros((1, 1, channels)))
+        except WarpError:
+            return None  # warp_image refuses it later, in its own order
+        regions = ((0.0, 0.0, float(w), float(h)), (0.0, 0.0, float(width), float(height)))
+        return cls(src, dst, opts, regions)
+
+
 def warp_file(
     input_path: str | os.PathLike[str],
     output_path: str | os.PathLike[str],
@@ -396,6 +478,9 @@ def warp_file(
     src = read_polygon(src_path, src_label)
     dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
+    # The map needs the image's size, not its pixels: it is built on other
+    # threads while the pixels are decoded (the decoder releases the GIL).
+    early = _EarlyMap.start(input_path, src, dst, opts)
     t0 = clock()
     stage("reading")
     image = read_image(input_path)
@@ -410,10 +495,7 @@ def warp_file(
             src.name,
             dst.name,
         )
-    result = warp_image(
-        image.pixels, src, dst, opts, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha,
-        progress=progress,
-    )  # fmt: skip
+    result = _warp(image.pixels, src, dst, opts, image.alpha_channel, image.associated_alpha, None, progress, early)
     # Every output is written under a pending name and renamed into place
     # only when all are written: a run's outputs succeed or fail together.
     with PendingOutputs() as pending:

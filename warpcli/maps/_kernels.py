@@ -1,6 +1,6 @@
 """Compiled (numba) helpers of the composition, whatever the method.
 
-Cached on disk like every kernel of warpcli (``cache=True``).
+Called through `warpcli._native.Kernels` like every kernel of warpcli.
 """
 
 from __future__ import annotations

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+import contextvars
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._native import Kernels, parallel
 from ..errors import FoldOverError, InputError
 from ..grid import window
 from ..options import MapOptions
@@ -16,6 +19,9 @@ from ..polygon import Polygon, check_pair
 from .base import ThetaMap, as_points, matmul2
 from .registry import METHODS
 from .theta import theta_for
+
+#: The compiled helpers of the composition (`warpcli.maps._kernels`), loaded without numba.
+_compiled = Kernels("warpcli.maps._kernels")
 
 #: A rectangle ``(xmin, ymin, xmax, ymax)`` in a polygon's coordinates.
 Region = tuple[float, float, float, float]
@@ -293,12 +299,19 @@ def _through_theta(phi_grid: ThetaMap, phi_other: ThetaMap, width: int, height: 
     """phi_other^-1 o phi_grid at the pixel centres of the grid phi_grid's polygon lives on."""
     r0, r1, c0, c1 = window(phi_grid.polygon.bounds, width, height)
     ww = c1 - c0
-    points = np.full(((r1 - r0) * ww, 2), np.nan)
-    jac = np.full(((r1 - r0) * ww, 2, 2), np.nan) if jacobian else None
+    points = np.empty(((r1 - r0) * ww, 2))
+    jac = np.empty(((r1 - r0) * ww, 2, 2)) if jacobian else None
     band = max(1, BAND_PIXELS // width)
-    for start in range(r0, r1, band):
-        rows = (start, min(start + band, r1))
-        g = phi_grid.evaluate_grid(width, height, rows, jacobian=jacobian)
+
+    def one_band(start: int) -> None:
+        # Bands are independent (each walk starts afresh) and write their own
+        # rows of the window, so they run on all cores with the same result.
+        stop = min(start + band, r1)
+        lo, hi = (start - r0) * ww, (stop - r0) * ww
+        points[lo:hi] = np.nan
+        if jac is not None:
+            jac[lo:hi] = np.nan
+        g = phi_grid.evaluate_grid(width, height, (start, stop), jacobian=jacobian)
         row, col = np.divmod(g.pixels, width)
         idx = (row - r0) * ww + (col - c0)
         # The window holds every centre in the polygon (its bounding box and
@@ -311,13 +324,44 @@ def _through_theta(phi_grid: ThetaMap, phi_other: ThetaMap, width: int, height: 
         m = phi_other.inverse(values, jacobian=jacobian, coherent=True)
         points[idx] = m.points
         if jac is not None:
-            from . import _kernels
+            _compiled.scatter_products(m.jacobian, jac_grid, idx, jac)
 
-            _kernels.scatter_products(m.jacobian, jac_grid, idx, jac)
+    parallel(one_band, range(r0, r1, band))
     shape = (r1 - r0, ww)
     return PullBack(
         points.reshape(*shape, 2), None if jac is None else jac.reshape(*shape, 2, 2), (r0, c0), (width, height)
     )
+
+
+class Task:
+    """``fn(*args)`` on a thread of its own; `result` waits for it and returns or raises what it did.
+
+    ``fn`` runs in a copy of the creator's context (`contextvars`), as if
+    called there. Its thread is marked ``warpcli_task``: work that nobody may
+    wait for any more (the map of a run stopped by bad input) and that the
+    ``warp`` command does not wait for before it exits; Python's own exit
+    does, as for any thread.
+    """
+
+    def __init__(self, fn: Callable[..., Any], *args: Any, name: str = "warp-task") -> None:
+        self._value: Any = None
+        self._error: BaseException | None = None
+        context = contextvars.copy_context()
+        self._thread = threading.Thread(target=context.run, args=(self._run, fn, args), name=name)
+        self._thread.warpcli_task = True  # type: ignore[attr-defined]
+        self._thread.start()
+
+    def _run(self, fn: Callable[..., Any], args: tuple) -> None:
+        try:
+            self._value = fn(*args)
+        except BaseException as err:  # handed to whoever asks for the result
+            self._error = err
+
+    def result(self) -> Any:
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._value
 
 
 def build_map(
@@ -360,15 +404,24 @@ def build_map(
     check_pair(src, dst)
     theta = theta_for(src, dst, opts)
     method = METHODS[opts.method].load()
+
+    def built(polygon: Polygon, role: str, region: Region | None, side: str) -> ThetaMap:
+        phi = method.build(polygon, theta, opts, role, region)
+        # Maps built for images (regions given) are pulled back next: the
+        # target evaluated on the output grid, the source inverted. A method
+        # that keeps lookup tables for that makes them here, on this thread.
+        if region is not None and hasattr(phi, "precompute"):
+            phi.precompute(side)
+        return phi
+
     # The target is built here while the source is built on a second thread,
-    # and the method's kernels load on a third: solvers (SuperLU) release the
-    # GIL. Each map is independent, so the results do not depend on the
-    # scheduling.
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        source = pool.submit(method.build, src, theta, opts, "source", regions[0])
-        pool.submit(method.prepare)
-        phi1 = method.build(dst, theta, opts, "target", regions[1])
-        phi0 = source.result()
+    # and the method's kernels load on a third: solving (SuperLU) releases the
+    # GIL (meshing, in triangle, does not). Each map is independent, so the
+    # results do not depend on the scheduling.
+    source = Task(built, src, "source", regions[0], "inverse")
+    Task(method.prepare)  # nobody waits: a kernel called before it is loaded waits for it
+    phi1 = built(dst, "target", regions[1], "grid")
+    phi0 = source.result()
     result = BijectiveMap(phi0, phi1)
     for phi in (phi0, phi1):
         for stage, seconds in phi.timings.items():

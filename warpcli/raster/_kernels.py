@@ -1,9 +1,9 @@
 """Compiled (numba) inner loops of the resample stage: samplers and the final rounding.
 
 Each kernel is the per-pixel loop that numpy could only express as many
-full-image passes. The kernels are cached on disk (``cache=True``: beside this
-file, or in numba's user-wide cache directory when that is not writable;
-``NUMBA_CACHE_DIR`` overrides both), so only the first run compiles.
+full-image passes. They are called through `warpcli._native.Kernels`, which
+compiles each once per argument types and then loads its machine code without
+importing numba; numba's own cache (``cache=True``) serves the compilations.
 
 Results never depend on the number of threads: every output pixel is
 computed independently.
@@ -63,7 +63,7 @@ def _bilinear(img, x, y, ch):
 
 
 @njit(cache=True, nogil=True)
-def sample_linear_aa(img, xy, jac, kmax, background, out):  # noqa: C901
+def sample_linear_aa(img, xy, jac, kmax, background, out, acc):  # noqa: C901
     """Bilinear samples averaged over each output pixel's footprint in the source.
 
     The footprint of output pixel n is the parallelogram ``J [-1/2, 1/2]^2``
@@ -74,10 +74,10 @@ def sample_linear_aa(img, xy, jac, kmax, background, out):  # noqa: C901
     ``kmax``; where the map magnifies, k = 1: plain bilinear. Points, and
     samples, outside the input's area take ``background``. A symmetric
     average of a linear function is its value at the centre: linear data is
-    still reproduced exactly.
+    still reproduced exactly. ``acc`` is float64 scratch space of one value
+    per channel (the kernels allocate nothing: see `warpcli._native`).
     """
     h, w, nc = img.shape
-    acc = np.zeros(nc)
     for n in range(xy.shape[0]):
         x = xy[n, 0]
         y = xy[n, 1]
@@ -139,16 +139,38 @@ def sample_nearest(img, xy, background, out):
 
 
 @njit(cache=True, nogil=True)
+def near_border(xy, w, h, out):
+    """Indices of the points ``xy`` (N, 2) within one unit of the border of [0, w] x [0, h].
+
+    Those where ``min(x, w - x, y, h - y) < 1``, NaN never (NumPy's ``minimum``
+    would carry it through), written to ``out`` in ascending order.
+
+    Returns
+    -------
+    int
+        How many were written.
+    """
+    count = 0
+    for n in range(xy.shape[0]):
+        x = xy[n, 0]
+        y = xy[n, 1]
+        if x != x or y != y:
+            continue
+        if x < 1.0 or w - x < 1.0 or y < 1.0 or h - y < 1.0:
+            out[count] = n
+            count += 1
+    return count
+
+
+@njit(cache=True, nogil=True)
 def store(values, out, lo, hi, integer):
-    """out = values, rounded half to even and clipped to [lo, hi] when ``integer``."""
-    flat_in = values.reshape(-1)
-    flat_out = out.reshape(-1)
-    for i in range(flat_in.shape[0]):
-        v = flat_in[i]
+    """out = values (both flat), rounded half to even and clipped to [lo, hi] when ``integer``."""
+    for i in range(values.shape[0]):
+        v = values[i]
         if integer:
             v = np.rint(v)
             if v < lo:
                 v = lo
             elif v > hi:
                 v = hi
-        flat_out[i] = v
+        out[i] = v

@@ -192,6 +192,38 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
 _TRUNCATED = re.compile(r"premature end|truncat|unexpected end", re.I)
 
 
+def image_size(path: str | os.PathLike[str]) -> tuple[int, int, int] | None:
+    """``(width, height, channels)`` of an image file as `read_image` will return it, from its header.
+
+    For starting work that needs only the size while the pixels are decoded.
+    Never raises and never prints: None if the header cannot be read (then
+    `read_image` reports why).
+    """
+    import OpenImageIO as oiio
+
+    name = os.fspath(path)
+    try:
+        if not stat.S_ISREG(os.stat(name).st_mode):
+            return None
+        with _c_stderr():
+            inp = oiio.ImageInput.open(name)
+            if inp is None:
+                oiio.geterror()
+                return None
+            try:
+                spec = inp.spec()
+                width, height = spec.width, spec.height
+                # EXIF orientations 5 to 8 turn the image a quarter (read_image applies them).
+                if spec.get_int_attribute("Orientation", 1) in (5, 6, 7, 8):
+                    width, height = height, width
+                return int(width), int(height), int(spec.nchannels)
+            finally:
+                inp.close()
+                inp.geterror()
+    except Exception:  # a header that cannot be read: read_image says why
+        return None
+
+
 def max_image_bytes() -> int:
     """The most bytes of pixels warpcli will hold for one image.
 

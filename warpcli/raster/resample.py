@@ -7,10 +7,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._native import Kernels, cores, parallel
 from ..errors import InputError
 from ..grid import clip_segments
 from ..options import INTERPOLATIONS
 from .pixels import unit
+
+#: The compiled samplers and rounding (`warpcli.raster._kernels`), loaded without numba.
+_compiled = Kernels("warpcli.raster._kernels")
 
 #: With antialiasing, a footprint is covered by at most this many samples per side.
 MAX_FOOTPRINT_SAMPLES = 16
@@ -82,8 +86,6 @@ def resample(
     """
     if interp not in INTERPOLATIONS:
         raise InputError(f"unknown interpolation {interp!r}; choose one of {', '.join(INTERPOLATIONS)}")
-    from . import _kernels
-
     img = np.asarray(image)
     if img.ndim == 2:
         img = img[:, :, None]
@@ -93,22 +95,36 @@ def resample(
         raise InputError(f"inverse_map must be (H, W, 2), got shape {coords.shape}")
     out_shape = coords.shape[:2]
     points = np.ascontiguousarray(coords.reshape(-1, 2))
+    # Some pixels take another source point than the map's (below). The
+    # caller's array is not copied for them (64 MB at 4 MP): they are sampled
+    # again on their own, ``patch`` (pixel indices, ascending) at ``patch_xy``.
+    # Every output pixel depends on its own point and Jacobian only, so the
+    # result is the same.
+    patch = np.zeros(0, dtype=np.int64)
+    patch_xy = np.zeros((0, 2))
     if coverage is not None:
         # Edge pixels whose centre lies outside the polygon take their colour
         # from the nearest point of its boundary.
         missing = ~np.isfinite(points[coverage.pixels, 0])
         if missing.any():
-            points = points.copy()
-            points[coverage.pixels[missing]] = coverage.source_points[missing]
+            patch, patch_xy = _merged(
+                patch, patch_xy, np.asarray(coverage.pixels[missing], dtype=np.int64),
+                np.asarray(coverage.source_points[missing], dtype=np.float64).reshape(-1, 2),
+            )  # fmt: skip
     border = None
+    jac = None
     if jacobian is not None and interp != "nearest":
-        border = _border_coverage(points, np.asarray(jacobian, dtype=np.float64).reshape(-1, 2, 2), w, h)
+        jac = np.ascontiguousarray(np.asarray(jacobian, dtype=np.float64).reshape(-1, 2, 2))
+        if len(jac) != len(points):
+            raise InputError(f"jacobian has {len(jac)} entries for {len(points)} output pixels")
+        border = _border_coverage(points, jac, w, h, patch, patch_xy)
         if border is not None:
             # Pixels just beyond the input's border take the colour at the
             # border, blended by how much of them the input covers.
-            points = points.copy() if coverage is None or not missing.any() else points
-            points[border[0], 0] = np.clip(points[border[0], 0], 0.0, w)
-            points[border[0], 1] = np.clip(points[border[0], 1], 0.0, h)
+            xy = _points_at(points, patch, patch_xy, border[0])
+            xy[:, 0] = np.clip(xy[:, 0], 0.0, w)
+            xy[:, 1] = np.clip(xy[:, 1], 0.0, h)
+            patch, patch_xy = _merged(patch, patch_xy, border[0], xy)
     bg = np.ascontiguousarray(np.broadcast_to(np.asarray(background, dtype=np.float64), (nc,)))
     work_dtype = np.float64 if img.dtype == np.float64 else np.float32
     if associated_alpha or interp == "nearest":
@@ -132,6 +148,9 @@ def resample(
     if interp == "cubic":
         from scipy.ndimage import map_coordinates
 
+        if patch.size:
+            points = points.copy()
+            points[patch] = patch_xy
         x = points[:, 0]
         y = points[:, 1]
         out[:] = bg.astype(work_dtype)
@@ -140,15 +159,29 @@ def resample(
         idx = np.stack([y[valid] - 0.5, x[valid] - 0.5])
         for c in range(nc):
             out[valid, c] = map_coordinates(src[:, :, c], idx, order=3, mode="nearest", prefilter=True)
-    elif interp == "nearest":
-        _kernels.sample_nearest(src, points, bg, out)
-    elif jacobian is None:
-        _kernels.sample_linear(src, points, bg, out)
     else:
-        jac = np.ascontiguousarray(np.asarray(jacobian, dtype=np.float64).reshape(-1, 2, 2))
-        if len(jac) != len(points):
-            raise InputError(f"jacobian has {len(jac)} entries for {len(points)} output pixels")
-        _kernels.sample_linear_aa(src, points, jac, MAX_FOOTPRINT_SAMPLES, bg, out)
+
+        def sample(xy, j, dest):
+            if interp == "nearest":
+                _compiled.sample_nearest(src, xy, bg, dest)
+            elif j is None:
+                _compiled.sample_linear(src, xy, bg, dest)
+            else:
+                _compiled.sample_linear_aa(src, xy, j, MAX_FOOTPRINT_SAMPLES, bg, dest, np.zeros(nc))
+
+        # Pixels are independent: runs of them are sampled on all cores.
+        n = len(points)
+        step = max(1 << 15, -(-n // (4 * cores())))
+
+        def run(lo: int) -> None:
+            hi = min(lo + step, n)
+            sample(points[lo:hi], None if jac is None else jac[lo:hi], out[lo:hi])
+
+        parallel(run, range(0, n, step))
+        if patch.size:
+            dest = np.empty((len(patch), nc), dtype=work_dtype)
+            sample(patch_xy, None if jac is None else jac[patch], dest)
+            out[patch] = dest
     if alpha_channel_blend is not None:
         a = out[:, alpha_channel_blend] / alpha_scale
         # Alpha below ALPHA_EPSILON (a cubic spline's ringing around 0, say)
@@ -177,7 +210,28 @@ def _blend(out, pixels, fraction, bg, alpha_channel, associated_alpha) -> None:
         out[pixels] = cov * out[pixels] + (1 - cov) * bg
 
 
-def _border_coverage(points, jacobian, w: int, h: int):
+def _points_at(points, patch, patch_xy, pixels):
+    """The source points of ``pixels`` (ascending), ``patch_xy`` where patched: (K, 2), a new array."""
+    xy = points[pixels]
+    if patch.size:
+        pos = np.minimum(np.searchsorted(patch, pixels), len(patch) - 1)
+        hit = patch[pos] == pixels
+        xy[hit] = patch_xy[pos[hit]]
+    return xy
+
+
+def _merged(patch, patch_xy, pixels, xy):
+    """The patch with ``pixels`` set to ``xy``: indices ascending and distinct; for an index
+    given more than once the last of ``xy`` wins, as in ``points[pixels] = xy``."""
+    idx = np.concatenate([patch, pixels])
+    pts = np.concatenate([patch_xy, xy])
+    order = np.argsort(idx, kind="stable")
+    idx, pts = idx[order], pts[order]
+    last = np.r_[idx[1:] != idx[:-1], True]
+    return idx[last], np.ascontiguousarray(pts[last])
+
+
+def _border_coverage(points, jacobian, w: int, h: int, patch=None, patch_xy=None):
     """Output pixels crossed by the pre-image of the input's border, and the share of each inside.
 
     Where the source polygon runs past the input image, the input's border
@@ -187,28 +241,38 @@ def _border_coverage(points, jacobian, w: int, h: int):
     (the distance in source pixels over ``|J^T n|``, n the border's normal).
     Only for pixels sampled once (columns of J at most 1.3 long, where the
     map does not shrink): where it shrinks, the footprint sampler already
-    averages over the border.
+    averages over the border. ``points`` with the pixels ``patch`` (ascending)
+    at ``patch_xy`` instead.
 
     Returns
     -------
     (pixels, fraction) or None
         Flat pixel indices and coverages in (0, 1); None if there are none.
     """
-    x = points[:, 0]
-    y = points[:, 1]
-    with np.errstate(invalid="ignore"):
-        dx = np.minimum(x, w - x)
-        dy = np.minimum(y, h - y)
-        near = np.flatnonzero(np.minimum(dx, dy) < 1.0)
+    if patch is None:
+        patch, patch_xy = np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+    # Pixels whose point lies within one pixel of the border: one compiled
+    # pass over the points (numpy would make five image-sized temporaries).
+    found = np.empty(len(points), dtype=np.int64)
+    near = found[: _compiled.near_border(points, float(w), float(h), found)]
+    if patch.size:
+        found = np.empty(len(patch), dtype=np.int64)
+        moved = patch[found[: _compiled.near_border(patch_xy, float(w), float(h), found)]]
+        near = np.union1d(near[~np.isin(near, patch)], moved)
     if near.size == 0:
         return None
+    xy = _points_at(points, patch, patch_xy, near)
+    x = xy[:, 0]
+    y = xy[:, 1]
+    dx = np.minimum(x, w - x)
+    dy = np.minimum(y, h - y)
     j = jacobian[near]
     single = (j[:, 0, 0] ** 2 + j[:, 1, 0] ** 2 <= 1.69) & (j[:, 0, 1] ** 2 + j[:, 1, 1] ** 2 <= 1.69)
-    near, j = near[single], j[single]
+    near, j, dx, dy = near[single], j[single], dx[single], dy[single]
     gx = np.hypot(j[:, 0, 0], j[:, 0, 1])  # |J^T e_x|: how fast x changes per output pixel
     gy = np.hypot(j[:, 1, 0], j[:, 1, 1])
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.minimum(dx[near] / gx, dy[near] / gy)
+        s = np.minimum(dx / gx, dy / gy)
     frac = np.clip(0.5 + s, 0.0, 1.0)
     keep = (frac > 0) & (frac < 1)
     if not keep.any():
@@ -326,12 +390,11 @@ def _to_dtype(values: NDArray, dtype: np.dtype) -> NDArray:
         return values
     if dtype == np.float16:
         return values.astype(dtype)
-    from . import _kernels
-
     out = np.empty(values.shape, dtype=dtype)
+    flat_in, flat_out = np.ascontiguousarray(values).reshape(-1), out.reshape(-1)
     if np.issubdtype(dtype, np.integer):
         info = np.iinfo(dtype)
-        _kernels.store(values, out, float(info.min), float(info.max), True)
+        _compiled.store(flat_in, flat_out, float(info.min), float(info.max), True)
     else:
-        _kernels.store(values, out, 0.0, 0.0, False)
+        _compiled.store(flat_in, flat_out, 0.0, 0.0, False)
     return out

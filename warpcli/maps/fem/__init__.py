@@ -2,6 +2,7 @@
 
 - `mesh`: graded quality meshes over `triangle`;
 - `solve`: cotangent / mean-value Laplacians and the Dirichlet solve;
+- `sparse`: the default Dirichlet system in numpy and SuperLU, without scipy.sparse;
 - `locate`: point location (bucket grid, triangle neighbours);
 - `_kernels`: compiled scan conversion and walks for pixel grids.
 """
@@ -16,16 +17,22 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..._native import Kernels
 from ...boundary import nearest_edge
 from ...options import MapOptions
 from ...polygon import Polygon
 from ..base import Certificate, GridSample, Mapped, ThetaMap, as_points, inv2
 from ..theta import Theta
+from . import sparse
 from .locate import TriangleLocator, affine_coefficients, barycentric_combine, triangle_neighbours
 from .mesh import TriMesh, auto_max_area, mesh_polygon
 from .solve import DirichletSolver, flipped_triangles, solve_dirichlet
 
 log = logging.getLogger("warpcli")
+
+#: The compiled scan conversion and walk (`_kernels`), loaded without numba;
+#: they freeze locate.BARY_TOL when compiled.
+_compiled = Kernels("warpcli.maps.fem._kernels", depends=("locate.py",))
 
 __all__ = ["FEMMap", "build", "prepare", "triangle_jacobians"]
 
@@ -94,7 +101,28 @@ class FEMMap(ThetaMap):
         A polygon oriented against Theta gives a mirror image, which is not
         counted as flipped.
         """
+        return self._flipped
+
+    @cached_property
+    def _flipped(self) -> NDArray[np.bool_]:
+        # Asked for by the repair and again by the certificate: computed once.
         return flipped_triangles(self.mesh, self.values, self.theta.points)
+
+    def precompute(self, side: str) -> None:
+        """Build now the lookup tables one side of the composition will need.
+
+        ``"grid"``: `evaluate_grid` (this map is evaluated on a pixel grid);
+        ``"inverse"``: the coherent `inverse` (this map is inverted), both
+        with Jacobians. `warpcli.maps.compose.build_map` calls this on the
+        thread that built the map, so the tables are made on both cores while
+        the other map is still solved, rather than one after the other later.
+        """
+        names = {
+            "grid": ("_triangles", "_domain_coefficients", "_coherent_order", "_jacobians"),
+            "inverse": ("_triangles", "_image_coefficients", "_neighbours", "_inverse_jacobians"),
+        }[side]
+        for name in names:
+            getattr(self, name)
 
     def certify(self) -> Certificate:
         """Exact for a piecewise-linear map: it is one-to-one iff no triangle flips."""
@@ -161,8 +189,6 @@ class FEMMap(ThetaMap):
         return Mapped(out, _gather(self._jacobians, tri) if jacobian else None)
 
     def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
-        from . import _kernels
-
         q = as_points(points)
         finite = np.isfinite(q).all(axis=1)
         out = np.full(q.shape, np.nan)
@@ -172,7 +198,7 @@ class FEMMap(ThetaMap):
             # predecessor; the few walks that give up go to the bucket search.
             where = np.empty(len(q), dtype=np.int32)
             max_steps = len(self._triangles) + 64  # a safety net: the walk ends on its own
-            _kernels.walk(
+            _compiled.walk(
                 np.ascontiguousarray(q), self._triangles, self._image_coefficients, self._neighbours,
                 self.mesh.vertices, max_steps, out, where,
             )  # fmt: skip
@@ -190,7 +216,10 @@ class FEMMap(ThetaMap):
 
     @cached_property
     def _neighbours(self) -> NDArray[np.int64]:
-        return triangle_neighbours(self._triangles)
+        try:  # from the edges the Laplacian found (the same table)
+            return sparse.neighbours(self.mesh.edges, self.mesh.n_triangles)
+        except sparse.Unsupported:
+            return triangle_neighbours(self._triangles)
 
     def _inverse_located(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """phi^-1 by bucket search in the image mesh.
@@ -211,14 +240,12 @@ class FEMMap(ThetaMap):
         self, width: int, height: int, rows: tuple[int, int] | None = None, *, jacobian: bool = False
     ) -> GridSample:
         """phi at pixel centres by one compiled scan conversion of the mesh (see `_kernels.scan_grid`)."""
-        from . import _kernels
-
         r0, r1 = rows if rows is not None else (0, height)
         size = (r1 - r0) * width
         pixels = np.empty(size, dtype=np.int64)
         values = np.empty((size, 2))
         where = np.empty(size, dtype=np.int32)
-        count = _kernels.scan_grid(
+        count = _compiled.scan_grid(
             self.mesh.vertices, self._triangles, self._domain_coefficients, self.values, self._coherent_order,
             width, height, r0, r1, np.zeros(size, dtype=np.uint8), pixels, values, where,
         )  # fmt: skip
@@ -339,7 +366,19 @@ def repaired(phi: FEMMap) -> FEMMap:
 
 
 def prepare() -> None:
-    """Load the compiled kernels (see `_kernels.warm_up`)."""
-    from . import _kernels
+    """Load the compiled kernels on tiny inputs, with the argument types of a warp.
 
-    _kernels.warm_up()
+    `warpcli.maps.compose.build_map` runs this on a thread of its own while
+    the maps are built, so the first real call finds the kernels loaded; the
+    first run on a machine compiles them here (see `warpcli._native`).
+    """
+    v = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]])
+    tri = np.array([[0, 1, 2]], dtype=np.int64)
+    coef = np.array([[0.0, 0.0, 0.5, 0.0, 0.0, 0.5]])
+    nbr = np.full((1, 3), -1, dtype=np.int64)
+    order = np.zeros(1, dtype=np.int64)
+    pixels = np.empty(4, dtype=np.int64)
+    values = np.empty((4, 2))
+    where = np.empty(4, dtype=np.int32)
+    n = _compiled.scan_grid(v, tri, coef, v, order, 2, 2, 0, 2, np.zeros(4, dtype=np.uint8), pixels, values, where)
+    _compiled.walk(values[:n], tri, coef, nbr, v, 8, np.empty((n, 2)), np.empty(n, dtype=np.int32))

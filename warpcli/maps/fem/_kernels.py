@@ -3,10 +3,9 @@
 `scan_grid` scan-converts a mesh onto a pixel grid (phi at every pixel centre);
 `walk` locates a coherent sequence of points of Theta in a map's image mesh
 (phi^-1). Together they are the fast path of the composed map: at 4 MP the
-pull-back takes about 0.2 s here against 3.1 s vectorized (bench/). The
-kernels are cached on disk (``cache=True``: beside this file, or in numba's
-user-wide cache directory when that is not writable; ``NUMBA_CACHE_DIR``
-overrides both), so only the first run compiles.
+pull-back takes about 0.2 s here against 3.1 s vectorized (bench/). They are
+called through `warpcli._native.Kernels`, which compiles each once per argument
+types and then loads its machine code without importing numba.
 
 Results never depend on the number of threads: both kernels are serial.
 """
@@ -138,21 +137,3 @@ def walk(points, tri, coef, nbr, v, max_steps, out, where):
         out[p, 0] = m0 * v[p0, 0] + m1 * v[p1, 0] + m2 * v[p2, 0]
         out[p, 1] = m0 * v[p0, 1] + m1 * v[p1, 1] + m2 * v[p2, 1]
 
-
-def warm_up() -> None:
-    """Load (or compile) both kernels on tiny inputs.
-
-    The first call of a numba function in a process costs ~0.3 s even from the
-    cache (numba loads its typing registries); `warpcli.maps.compose.build_map`
-    runs this while SuperLU, which releases the GIL, solves the two maps.
-    """
-    v = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]])
-    tri = np.array([[0, 1, 2]], dtype=np.int64)
-    coef = np.array([[0.0, 0.0, 0.5, 0.0, 0.0, 0.5]])
-    nbr = np.full((1, 3), -1, dtype=np.int64)
-    order = np.zeros(1, dtype=np.int64)
-    pixels = np.empty(4, dtype=np.int64)
-    values = np.empty((4, 2))
-    where = np.empty(4, dtype=np.int32)
-    n = scan_grid(v, tri, coef, v, order, 2, 2, 0, 2, np.zeros(4, dtype=np.uint8), pixels, values, where)
-    walk(values[:n], tri, coef, nbr, v, 8, np.empty((n, 2)), np.empty(n, dtype=np.int32))

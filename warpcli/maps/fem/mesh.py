@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -105,6 +106,20 @@ class TriMesh:
     @property
     def n_triangles(self) -> int:
         return len(self.triangles)
+
+    @cached_property
+    def edges(self):
+        """The mesh's edges and the half-edges on them (`warpcli.maps.fem.sparse.Edges`), found once
+        for the Laplacian and the triangles' neighbours.
+
+        Raises
+        ------
+        warpcli.maps.fem.sparse.Unsupported
+            For a mesh with an edge of more than two triangles (never made here).
+        """
+        from .sparse import mesh_edges
+
+        return mesh_edges(self.triangles, self.n_vertices)
 
 
 def triangle_areas(vertices: NDArray[np.float64], triangles: NDArray[np.integer]) -> NDArray[np.float64]:

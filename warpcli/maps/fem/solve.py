@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ...boundary import edge_points, to_theta_parameter
 from ...errors import InputError
 from ...options import WEIGHTS
 from ...polygon import signed_area
+from . import sparse
 from .mesh import TriMesh, triangle_areas
+from .sparse import cotan_terms
 
 
 def flipped_triangles(
@@ -26,7 +27,7 @@ def flipped_triangles(
     return img * np.sign(signed_area(theta)) <= 0
 
 
-def cotan_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.integer]) -> sp.csr_matrix:
+def cotan_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.integer]):
     """The P1 stiffness matrix (cotangent Laplacian) of a triangle mesh.
 
     ``K[i, j] = -(cot a_ij + cot b_ij) / 2`` for an edge ij with opposite angles
@@ -41,33 +42,20 @@ def cotan_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.integer
     Returns
     -------
     (N, N) scipy.sparse.csr_matrix
+        The Dirichlet solve itself builds the same matrix without scipy.sparse
+        (`warpcli.maps.fem.sparse.cotan_stiffness`).
     """
+    import scipy.sparse as sp
+
     n = len(vertices)
-    tri = np.asarray(triangles)
-    v = [vertices[tri[:, k]] for k in range(3)]
-    rows = []
-    cols = []
-    vals = []
-    double_area = np.abs(2.0 * triangle_areas(vertices, tri))
-    for k in range(3):
-        # The angle at corner k is opposite the edge (i, j).
-        i, j = (k + 1) % 3, (k + 2) % 3
-        u = v[i] - v[k]
-        w = v[j] - v[k]
-        cot = np.einsum("ij,ij->i", u, w) / double_area
-        rows += [tri[:, i], tri[:, j]]
-        cols += [tri[:, j], tri[:, i]]
-        vals += [-0.5 * cot, -0.5 * cot]
-    r = np.concatenate(rows)
-    c = np.concatenate(cols)
-    x = np.concatenate(vals)
+    r, c, x = cotan_terms(vertices, triangles)
     off = sp.coo_matrix((x, (r, c)), shape=(n, n)).tocsr()
     off.sum_duplicates()
     diag = -np.asarray(off.sum(axis=1)).ravel()
     return (off + sp.diags(diag)).tocsr()
 
 
-def mean_value_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.integer]) -> sp.csr_matrix:
+def mean_value_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.integer]):
     """Floater's mean-value weights as a Laplacian (the paper's Section 3.1.4).
 
     ``w_ij = (tan(a_ij / 2) + tan(b_ij / 2)) / |v_i - v_j|`` with a_ij and b_ij
@@ -78,6 +66,8 @@ def mean_value_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.in
     (still smooth-looking) interpolant. Rows: ``L[i, i] = sum_j w_ij``,
     ``L[i, j] = -w_ij``.
     """
+    import scipy.sparse as sp
+
     n = len(vertices)
     t = np.asarray(triangles)
     rows = []
@@ -170,6 +160,14 @@ class DirichletSolver:
             if unknown.size == 0:
                 parts.append((coords, unknown, known, None, None))
                 continue
+            if weights == "cotan" and not free:
+                # The default system, built in numpy and factorized by SuperLU
+                # without importing scipy.sparse (see `sparse`): the same bits.
+                try:
+                    parts.append((coords, unknown, known, *_cotan_system(mesh, unknown, known)))
+                    continue
+                except sparse.Unsupported:
+                    pass
             if k is None:
                 k = cotan_laplacian(mesh.vertices, mesh.triangles) if weights == "cotan" else mean_value_laplacian(
                     mesh.vertices, mesh.triangles
@@ -190,6 +188,18 @@ class DirichletSolver:
             rhs = -(k_uk @ (values[known] if len(c) == 2 else values[known][:, c]))
             values[np.ix_(unknown, c)] = lu.solve(np.ascontiguousarray(rhs)).reshape(len(unknown), len(c))
         return values
+
+
+def _cotan_system(mesh: TriMesh, unknown: NDArray[np.intp], known: NDArray[np.intp]):
+    """SuperLU of K_UU and the matrix K_UK, for the cotangent Laplacian, without scipy.sparse.
+
+    Raises
+    ------
+    sparse.Unsupported
+        When the scipy route must be taken instead.
+    """
+    k = sparse.cotan_stiffness(mesh.vertices, mesh.triangles, mesh.edges)
+    return sparse.splu(sparse.submatrix(k, unknown, unknown), symmetric=True), sparse.submatrix(k, unknown, known)
 
 
 def _factorize(k_uu, weights: str):

@@ -1,0 +1,175 @@
+"""Tests of warpcli._native: kernels run as cached machine code give the numba functions' bits."""
+
+from __future__ import annotations
+
+import importlib
+import threading
+
+import numpy as np
+import pytest
+
+from helpers import star
+from warpcli import _native
+from warpcli._native import Kernels, parallel
+
+RASTER = "warpcli.raster._kernels"
+FEM = "warpcli.maps.fem._kernels"
+MAPS = "warpcli.maps._kernels"
+
+
+def _same(module, name, make_args, depends=()):
+    """Call kernel ``name`` natively and as the numba function on equal fresh arguments;
+    assert the native route was taken and every argument and result is bitwise equal."""
+    kernels = Kernels(module, depends)
+    a, b = make_args(), make_args()
+    got = getattr(kernels, name)(*a)
+    want = getattr(importlib.import_module(module), name)(*b)
+    assert hasattr(kernels._calls[(name, _native._variant(a))], "_native"), "the native route was not taken"
+    assert got == want
+    for x, y in zip(a, b):
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype and x.tobytes() == y.tobytes()
+
+
+def _image(dtype, shape=(23, 31, 3), seed=0):
+    rng = np.random.default_rng(seed)
+    if np.dtype(dtype).kind == "u":
+        return rng.integers(0, np.iinfo(dtype).max, shape, dtype=dtype)
+    return rng.normal(0.5, 0.3, shape).astype(dtype)
+
+
+def _points(n=4000, seed=1):
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(-3.0, 34.0, (n, 2))
+    xy[::97] = np.nan  # no pre-image
+    xy[5] = [0.0, 0.0]  # the image's corner and border exactly
+    xy[6] = [31.0, 23.0]
+    return xy
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32, np.float64])
+def test_samplers_match_numba_bitwise(dtype):
+    work = np.float64 if dtype == np.float64 else np.float32
+    img, xy = _image(dtype), _points()
+    bg = np.array([0.25, 7.0, 1e3])
+    _same(RASTER, "sample_linear", lambda: (img, xy, bg, np.zeros((len(xy), 3), dtype=work)))
+    _same(RASTER, "sample_nearest", lambda: (img, xy, bg, np.zeros((len(xy), 3), dtype=work)))
+    rng = np.random.default_rng(2)
+    jac = rng.normal(0.0, 2.5, (len(xy), 2, 2))  # shrinking as well: up to 16 x 16 samples
+    jac[::13] = np.nan
+    _same(
+        RASTER, "sample_linear_aa",
+        lambda: (img, xy, jac, 16, bg, np.zeros((len(xy), 3), dtype=work), np.zeros(3)),
+    )  # fmt: skip
+
+
+def test_rounding_and_border_kernels_match_numba_bitwise():
+    values = np.random.default_rng(3).normal(100.0, 120.0, 5000).astype(np.float32)
+    values[::50] = np.float32(0.5)  # ties round to even
+    _same(RASTER, "store", lambda: (values, np.zeros(5000, dtype=np.uint8), 0.0, 255.0, True))
+    _same(RASTER, "store", lambda: (values.astype(np.float64), np.zeros(5000, dtype=np.uint16), 0.0, 65535.0, True))
+    _same(RASTER, "store", lambda: (values.astype(np.float64), np.zeros(5000, dtype=np.float32), 0.0, 0.0, False))
+    xy = _points()
+    _same(RASTER, "near_border", lambda: (xy, 31.0, 23.0, np.zeros(len(xy), dtype=np.int64)))
+
+
+def test_fem_kernels_match_numba_bitwise():
+    from warpcli.maps.compose import BijectiveMap
+    from warpcli.polygon import Polygon
+
+    f = BijectiveMap.between(Polygon(star()), Polygon(star(phase=0.3)))
+    phi0, phi1 = f.phi0, f.phi1
+    tri = phi1._triangles
+    size = 40 * 128
+
+    def scan():
+        return (
+            phi1.mesh.vertices, tri, phi1._domain_coefficients, phi1.values, phi1._coherent_order, 128, 128, 40, 80,
+            np.zeros(size, dtype=np.uint8), np.zeros(size, dtype=np.int64), np.zeros((size, 2)),
+            np.zeros(size, dtype=np.int32),
+        )  # fmt: skip
+
+    _same(FEM, "scan_grid", scan, ("locate.py",))
+    args = scan()
+    n = importlib.import_module(FEM).scan_grid(*args)
+    q = args[11][:n].copy()  # the pixel centres' images in Theta, in scan order
+
+    def walk():
+        return (
+            q, phi0._triangles, phi0._image_coefficients, phi0._neighbours, phi0.mesh.vertices,
+            len(phi0._triangles) + 64, np.full((n, 2), np.nan), np.zeros(n, dtype=np.int32),
+        )  # fmt: skip
+
+    _same(FEM, "walk", walk, ("locate.py",))
+
+
+def test_scatter_products_match_numba_bitwise():
+    rng = np.random.default_rng(4)
+    a, b = rng.normal(size=(300, 2, 2)), rng.normal(size=(300, 2, 2))
+    a[::7] = np.nan
+    idx = rng.permutation(600)[:300]
+    _same(MAPS, "scatter_products", lambda: (a, b, idx, np.full((600, 2, 2), np.nan)))
+
+
+def test_arguments_the_native_route_does_not_take_go_to_numba_with_the_same_result():
+    kernels = Kernels(RASTER)
+    img, xy = _image(np.uint8), _points()
+    strided = xy[::2]  # not contiguous
+    assert _native._variant((img, strided)) is None
+    out = np.zeros((len(strided), 3), dtype=np.float32)
+    kernels.sample_linear(img, strided, np.zeros(3), out)
+    want = np.zeros_like(out)
+    importlib.import_module(RASTER).sample_linear(img, np.ascontiguousarray(strided), np.zeros(3), want)
+    assert out.tobytes() == want.tobytes()
+    assert _native._variant((np.float16(1.0),)) is None
+    assert _native._variant((2**70,)) is None
+    assert _native._variant((True, 3, 2.5)) == ("b", "i", "f")
+
+
+def test_a_damaged_cache_entry_is_refused(tmp_path):
+    entry = {"format": 9, "symbol": "s", "restype": "void", "externs": [], "object": b"\x7fELF" + bytes(200)}
+    _native._write_entry([str(tmp_path)], "k.native", entry)
+    path = tmp_path / "k.native"
+    assert _native._read_entry(str(path))["object"] == entry["object"]
+    data = bytearray(path.read_bytes())
+    data[-3] ^= 0xFF  # same size, other bytes
+    path.write_bytes(bytes(data))
+    assert _native._read_entry(str(path)) is None
+    path.write_bytes(bytes(data[:-10]))  # cut short
+    assert _native._read_entry(str(path)) is None
+    assert _native._read_entry(str(tmp_path / "none.native")) is None
+
+
+def test_parallel_runs_every_part_once_and_raises_the_first_error(monkeypatch):
+    monkeypatch.setattr(_native, "cores", lambda: 3)
+    seen, lock = [], threading.Lock()
+
+    def record(k):
+        with lock:
+            seen.append(k)
+
+    parallel(record, range(10))
+    assert sorted(seen) == list(range(10))
+
+    def fail(k):
+        if k == 4:
+            raise ValueError("part 4")
+
+    with pytest.raises(ValueError, match="part 4"):
+        parallel(fail, range(10))
+
+
+def test_warps_do_not_depend_on_the_number_of_threads(monkeypatch):
+    """Compose bands and resample runs are shared out over the cores: same bytes on one."""
+    from warpcli.pipeline import warp_image
+
+    rng = np.random.default_rng(6)
+    img = rng.integers(0, 256, (300, 260, 4), dtype=np.uint8)
+    src, dst = star(6, 130, 150, 50, 120), star(6, 130, 150, 40, 125, 0.3)
+    results = []
+    for n in (1, 2, 5):
+        monkeypatch.setattr(_native, "cores", lambda n=n: n)
+        monkeypatch.setattr("warpcli.maps.compose.BAND_PIXELS", 4096)  # many bands
+        r = warp_image(img, src, dst, alpha_channel=3)
+        results.append((r.pixels.tobytes(), r.inverse_map.tobytes(), r.jacobian.tobytes()))
+    assert results[0] == results[1] == results[2]

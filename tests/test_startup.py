@@ -1,0 +1,175 @@
+"""Start-up: what each kind of ``warp`` run imports (timings are for bench/startup.py, not tests)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+from helpers import star, write_png, write_polygon
+
+#: Imported only when a run needs them (scipy: --interp cubic, BEM and MFS;
+#: numba: compiling a kernel the first time on a machine).
+HEAVY = ("numpy", "scipy", "numba", "llvmlite", "OpenImageIO", "triangle")
+
+_PROBE = """
+import json, sys
+from warpcli.cli import main
+code = main(sys.argv[1:])
+print(json.dumps({"code": code, "modules": sorted(m for m in sys.modules if m.split(".")[0] in %r)}))
+""" % (HEAVY,)
+
+
+def _imports(args, env_extra=None):
+    """Run the CLI in a fresh interpreter: its exit status, the heavy packages it imported, its stderr.
+
+    scipy counts only if the package itself was imported: SuperLU's extension
+    module alone is loaded without it (warpcli.maps.fem.sparse).
+    """
+    env = dict(os.environ, **(env_extra or {}))
+    done = subprocess.run([sys.executable, "-c", _PROBE, *args], capture_output=True, text=True, env=env)
+    doc = json.loads(done.stdout.strip().splitlines()[-1])
+    return doc["code"], {m for m in doc["modules"] if "." not in m}, done.stderr
+
+
+def _inputs(tmp_path):
+    px = np.random.default_rng(2).integers(0, 256, (60, 70, 3), dtype=np.uint8)
+    inp = write_png(tmp_path / "in.png", px)
+    src = write_polygon(tmp_path / "s.json", star(6, 35, 30, 12, 27))
+    dst = write_polygon(tmp_path / "d.json", star(6, 35, 30, 9, 28, 0.3))
+    return inp, src, dst
+
+
+def test_help_imports_nothing_heavy():
+    code, modules, _ = _imports(["--help"])
+    assert code == 0
+    assert modules == set()
+
+
+def test_a_missing_polygon_file_fails_before_any_heavy_import(tmp_path):
+    inp, _, dst = _inputs(tmp_path)
+    code, modules, err = _imports([inp, str(tmp_path / "out.png"), "--src", str(tmp_path / "none.json"), "--dst", dst])
+    assert code == 2
+    assert "none.json" in err and len(err.strip().splitlines()) == 1
+    # numpy and OpenImageIO check the output path first; nothing that builds maps.
+    assert not modules & {"scipy", "numba", "llvmlite", "triangle"}
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_a_default_warp_imports_neither_scipy_nor_numba(tmp_path):
+    inp, src, dst = _inputs(tmp_path)
+    args = [inp, str(tmp_path / "out.png"), "--src", src, "--dst", dst, "-q"]
+    _imports(args)  # the first run on a machine may compile the kernels (with numba)
+    code, modules, _ = _imports(args)
+    assert code == 0
+    assert "scipy" not in modules and "numba" not in modules
+    assert {"numpy", "OpenImageIO", "triangle", "llvmlite"} <= modules
+
+
+def test_the_same_bytes_with_the_numba_functions_themselves(tmp_path):
+    """WARPCLI_NATIVE=0 calls the @njit kernels instead of their cached machine code."""
+    inp, src, dst = _inputs(tmp_path)
+    outs = {}
+    for native in ("1", "0"):
+        for interp in ("linear", "nearest"):
+            out = tmp_path / f"out_{native}_{interp}.png"
+            code, modules, err = _imports(
+                [inp, str(out), "--src", src, "--dst", dst, "--interp", interp, "-q"], {"WARPCLI_NATIVE": native}
+            )
+            assert code == 0, err
+            outs[native, interp] = out.read_bytes()
+    assert outs["1", "linear"] == outs["0", "linear"]
+    assert outs["1", "nearest"] == outs["0", "nearest"]
+
+
+# The map is built on other threads while the image is read (warpcli.pipeline._EarlyMap).
+
+
+def _capture():
+    import logging
+
+    records = []
+
+    class Keep(logging.Handler):
+        def emit(self, record):
+            records.append(record.getMessage())
+
+    handler = Keep()
+    logging.getLogger("warpcli").addHandler(handler)
+    return records, handler
+
+
+def _logging_build(monkeypatch):
+    """BijectiveMap.between, logging a warning on the thread that builds the map; the
+    early maps started (to check the map was indeed built while the image was read)."""
+    import logging
+
+    from warpcli import pipeline
+    from warpcli.maps.compose import BijectiveMap
+
+    real = BijectiveMap.between.__func__
+
+    def between(cls, *args, **kwargs):
+        logging.getLogger("warpcli").warning("built on %s", "its thread")
+        return real(cls, *args, **kwargs)
+
+    monkeypatch.setattr(BijectiveMap, "between", classmethod(between))
+    started = []
+    real_start = pipeline._EarlyMap.start.__func__
+
+    def start(cls, *args):
+        started.append(real_start(cls, *args))
+        return started[-1]
+
+    monkeypatch.setattr(pipeline._EarlyMap, "start", classmethod(start))
+    return started
+
+
+def test_the_map_threads_log_where_building_the_map_logged(tmp_path, monkeypatch):
+    import logging
+
+    from warpcli.pipeline import warp_file, warp_image
+    from warpcli.raster.imageio import read_image
+
+    inp, src, dst = _inputs(tmp_path)
+    mirrored = write_polygon(tmp_path / "m.json", star(6, 35, 30, 9, 28, 0.3)[::-1])
+    started = _logging_build(monkeypatch)
+    records, handler = _capture()
+    try:
+        result = warp_file(inp, tmp_path / "out.png", src, mirrored)
+    finally:
+        logging.getLogger("warpcli").removeHandler(handler)
+    assert started and started[0] is not None
+    # The mirror warning (this thread, after reading) first, then the map's, once.
+    assert "opposite directions" in records[0]
+    assert records[1:] == ["built on its thread"]
+    image = read_image(inp)
+    again = warp_image(image.pixels, result.map.src, result.map.dst)
+    assert again.pixels.tobytes() == result.pixels.tobytes()
+
+
+def test_an_image_that_cannot_be_read_drops_the_maps_records(tmp_path, monkeypatch):
+    import logging
+
+    import pytest
+
+    from warpcli.errors import ImageInputError
+    from warpcli.pipeline import warp_file
+
+    inp, src, dst = _inputs(tmp_path)
+    data = open(inp, "rb").read()
+    cut = tmp_path / "cut.png"
+    cut.write_bytes(data[: len(data) // 2])  # the header is whole, the pixels are not
+    started = _logging_build(monkeypatch)
+    records, handler = _capture()
+    try:
+        with pytest.raises(ImageInputError, match="cut.png"):
+            warp_file(cut, tmp_path / "out.png", src, dst)
+    finally:
+        logging.getLogger("warpcli").removeHandler(handler)
+    assert started and started[0] is not None
+    assert records == []
+    assert not (tmp_path / "out.png").exists()

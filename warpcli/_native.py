@@ -1,0 +1,509 @@
+"""Compiled kernels without numba at run time: numba compiles them once, llvmlite loads the machine code.
+
+warpcli's inner loops are numba functions (``@njit`` in the ``_kernels``
+modules). Importing numba and loading even cached functions costs about 0.4 s
+in every process (numba builds its typing and lowering registries, which also
+import scipy.linalg): more than a whole 1-megapixel warp. So a kernel is called
+through `Kernels`, which compiles it with numba only once per argument types,
+as a C-callable wrapper (`numba.cfunc` over `numba.carray` views of the
+arrays), keeps that machine code on disk, and in later processes loads it with
+llvmlite's MCJIT and calls it through ctypes: about 0.03 s to import llvmlite
+and a millisecond per kernel, with numba never imported.
+
+The code is numba's own: the same function compiled for the same array types
+(C-contiguous, as numba types a contiguous array), emitted for this CPU with
+the options numba's JIT uses. Without fast-math flags (numba's default) LLVM
+keeps every floating-point operation as written (no reassociation, no fused
+multiply-add), so results are bit for bit those of calling the ``@njit``
+function (tests/test_native.py checks every kernel). Anything the native route
+does not cover runs the ``@njit`` function itself, with the same results: arguments other than C-contiguous aligned arrays
+and Python ints, floats and bools; ``NUMBA_DISABLE_JIT=1``;
+``WARPCLI_NATIVE=0``; a kernel whose code needs numba's runtime (allocation:
+kernels take scratch arrays instead); a missing llvmlite.
+
+Only numba's error paths are left out: the wrapper's hand-over of an exception
+to Python and the release of arrays numba allocated, which these kernels never
+reach (they raise nothing and allocate nothing). Their calls are bound to a
+trap, so a kernel that did reach one would stop the process rather than
+corrupt memory. Any other outside reference refuses the native route.
+
+The cache lives beside numba's: ``__pycache__`` next to the kernel module, or
+``$NUMBA_CACHE_DIR/warpcli``, or the user's cache directory when the package's
+is not writable. Each entry is keyed by the kernel's source (and the sources
+it names), the argument types, numba's and llvmlite's versions and this CPU,
+so an edit, an upgrade or another machine compiles anew; files are written
+atomically, so concurrent processes are safe.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import logging
+import os
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+# ctypes, hashlib, json and tempfile are imported where kernels are loaded
+# (usually on the thread that loads them while the maps are solved), not here.
+
+__all__ = ["Kernels", "cores", "native_enabled", "parallel"]
+
+_log = logging.getLogger("warpcli")
+
+#: Bumped when the cache format or the way wrappers are made changes.
+_FORMAT = 2
+_MAGIC = b"warpcli-native\n"
+
+#: Environment variable: ``0`` calls the numba functions themselves.
+NATIVE_ENV = "WARPCLI_NATIVE"
+
+# Outside references that numba emits for its error paths only (raising into
+# Python, freeing arrays it allocated): bound to a trap (see the module docstring).
+_ERROR_PATH = frozenset(
+    {
+        "numba_gil_ensure", "numba_gil_release", "numba_unpickle", "numba_do_raise",
+        "numba_runtime_build_excinfo_struct", "numba_fatal_error", "NRT_Free", "NRT_MemInfo_call_dtor",
+        "PyErr_WriteUnraisable", "PyErr_Clear", "PyErr_SetString", "PyErr_SetNone", "PyErr_SetObject",
+        "PyErr_Occurred", "PyErr_Fetch", "PyErr_Restore", "PyErr_NoMemory", "Py_DecRef", "Py_IncRef",
+        "PyUnicode_FromString", "PyBytes_FromStringAndSize", "PyExc_RuntimeError", "PyExc_StopIteration",
+        "PyExc_SystemError", "PyExc_MemoryError", "PyExc_ZeroDivisionError", "PyExc_ValueError",
+        "PyExc_IndexError", "PyExc_TypeError", "PyExc_AssertionError", "PyExc_NotImplementedError",
+    }
+)  # fmt: skip
+
+# C library functions the code may call, found in every process.
+_LIBC = frozenset(
+    {
+        "memset", "memcpy", "memmove", "ceil", "floor", "trunc", "rint", "nearbyint", "round", "sqrt",
+        "fabs", "fmod", "pow", "exp", "log", "sin", "cos", "tan", "atan2", "hypot",
+    }
+)  # fmt: skip
+
+
+def cores() -> int:
+    """The CPU cores this process may run on (at least 1)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def parallel(fn: Callable[[Any], None], parts: Sequence[Any]) -> None:
+    """``fn(part)`` for every part, the parts shared out over `cores` threads.
+
+    For independent pieces of work that write disjoint outputs, mostly in
+    kernels (which release the GIL): the results do not depend on how the
+    parts are shared out. The first error raised is raised here, after every
+    thread has finished.
+    """
+    workers = min(len(parts), cores())
+    if workers <= 1:
+        for part in parts:
+            fn(part)
+        return
+    errors: list[BaseException] = []
+
+    def run(share: Sequence[Any]) -> None:
+        try:
+            for part in share:
+                fn(part)
+        except BaseException as err:  # raised by the caller below
+            errors.append(err)
+
+    threads = [threading.Thread(target=run, args=(parts[k::workers],)) for k in range(1, workers)]
+    for t in threads:
+        t.start()
+    run(parts[0::workers])
+    for t in threads:
+        t.join()
+    if errors:
+        raise errors[0]
+
+
+def native_enabled() -> bool:
+    """Whether kernels may run as cached machine code (else as numba functions)."""
+    return os.environ.get(NATIVE_ENV, "1") != "0" and os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
+
+
+class Kernels:
+    """The compiled kernels of one module, called by attribute name.
+
+    Parameters
+    ----------
+    module : str
+        The module defining the ``@njit`` kernels, e.g.
+        ``"warpcli.raster._kernels"``; imported only to compile (or when the
+        native route is not taken).
+    depends : sequence of str
+        Other source files, relative to the module's directory, whose contents
+        the compiled code depends on (constants numba freezes at compile time).
+
+    Examples
+    --------
+    >>> k = Kernels("warpcli.maps._kernels")
+    >>> out = np.zeros((1, 2, 2))
+    >>> eye = np.eye(2)[None]
+    >>> k.scatter_products(eye, eye * 2.0, np.zeros(1, dtype=np.int64), out)
+    >>> out[0].tolist()
+    [[2.0, 0.0], [0.0, 2.0]]
+    """
+
+    def __init__(self, module: str, depends: Sequence[str] = ()) -> None:
+        self.module = module
+        self.depends = tuple(depends)
+        self._calls: dict[tuple, Callable[..., Any]] = {}
+        self._source_digest: tuple[str, str] | None = None
+
+    def __getattr__(self, name: str) -> Callable[..., Any]:
+        if name.startswith("_"):
+            raise AttributeError(name)
+
+        def call(*args: Any) -> Any:
+            return self._call(name, args)
+
+        call.__name__ = name
+        call.__qualname__ = f"{self.module}.{name}"
+        self.__dict__[name] = call
+        return call
+
+    def _call(self, name: str, args: tuple) -> Any:
+        variant = _variant(args)
+        fn = self._calls.get((name, variant)) if variant is not None else None
+        if fn is None:
+            fn = self._resolve(name, variant)
+        return fn(*args)
+
+    def _resolve(self, name: str, variant: tuple | None) -> Callable[..., Any]:
+        with _LOCK:
+            fn = self._calls.get((name, variant)) if variant is not None else None
+            if fn is not None:
+                return fn
+            native = None
+            if variant is not None and native_enabled():
+                try:
+                    native = self._native(name, variant)
+                except Exception as err:  # any failure falls back to numba, with the same results
+                    _log.debug("kernel %s.%s%s: native route not taken (%s: %s)", self.module, name, variant,
+                               type(err).__name__, err)  # fmt: skip
+            fn = native or getattr(importlib.import_module(self.module), name)
+            if variant is not None:
+                self._calls[(name, variant)] = fn
+            return fn
+
+    # The native route.
+
+    def _source(self) -> tuple[str, str]:
+        """A digest of the kernel module's source (and of the files it depends on), and its folder."""
+        if self._source_digest is None:
+            import hashlib
+
+            spec = importlib.util.find_spec(self.module)
+            if spec is None or not spec.origin:
+                raise ImportError(f"no source for {self.module}")
+            folder = os.path.dirname(spec.origin)
+            h = hashlib.sha256()
+            for path in (spec.origin, *(os.path.join(folder, d) for d in self.depends)):
+                with open(path, "rb") as fh:
+                    h.update(fh.read())
+            self._source_digest = (h.hexdigest(), folder)
+        return self._source_digest
+
+    def _native(self, name: str, variant: tuple) -> Callable[..., Any]:
+        import hashlib
+        import json
+
+        jit = _jit()
+        digest, folder = self._source()
+        key = hashlib.sha256(json.dumps([_FORMAT, self.module, name, variant, digest, jit.identity]).encode())
+        symbol = f"warpcli_{name}_{key.hexdigest()[:24]}"
+        if not jit.has(symbol):
+            # One file per kernel and argument types; a new source, numba or
+            # CPU gives it a new key, and the file it replaces is removed.
+            kind = hashlib.sha256(json.dumps([self.module, name, variant]).encode()).hexdigest()[:8]
+            filename = f"{self.module.rsplit('.', 1)[-1]}.{name}.{kind}-{key.hexdigest()[:24]}.native"
+            dirs = _cache_dirs(folder)
+            entry = None
+            for d in dirs:
+                entry = _read_entry(os.path.join(d, filename))
+                if entry is not None and entry.get("symbol") == symbol:
+                    break
+                entry = None
+            if entry is None:
+                entry = _compile(self.module, name, variant, symbol, jit)
+                jit.add(entry)  # kept only if it loads
+                _write_entry(dirs, filename, entry)
+            else:
+                jit.add(entry)
+        return jit.function(symbol, variant)
+
+
+def _variant(args: tuple) -> tuple | None:
+    """What the compiled code depends on in the arguments, or None if the native route cannot take them.
+
+    Arrays must be C-contiguous and aligned (numba types them ``C``);
+    scalars are Python ints (int64), floats (float64) and bools.
+    """
+    out = []
+    for a in args:
+        if isinstance(a, np.ndarray):
+            flags = a.flags
+            if not (flags.c_contiguous and flags.aligned) or a.dtype.kind not in "biuf" or not a.dtype.isnative:
+                return None
+            out.append((a.dtype.str, a.ndim))
+        elif isinstance(a, bool):
+            out.append("b")
+        elif isinstance(a, int):
+            if not -(2**63) <= a < 2**63:
+                return None
+            out.append("i")
+        elif isinstance(a, float):
+            out.append("f")
+        else:
+            return None
+    return tuple(out)
+
+
+_LOCK = threading.RLock()
+_JIT = None
+
+
+class _JitEngine:
+    """One MCJIT engine holding every kernel loaded in this process."""
+
+    def __init__(self) -> None:
+        import hashlib
+
+        import llvmlite
+        import llvmlite.binding as llvm
+
+        llvm.initialize_native_target()
+        llvm.initialize_native_asmprinter()
+        self.llvm = llvm
+        triple = llvm.get_process_triple()
+        cpu = llvm.get_host_cpu_name()
+        try:
+            features = llvm.get_host_cpu_features().flatten()
+        except RuntimeError:
+            features = ""
+        target = llvm.Target.from_triple(triple)
+        # The target machine of numba's JIT (numba.core.codegen.JITCPUCodegen):
+        # this CPU, static relocations on x86, the JIT code model.
+        reloc = "static" if target.name.startswith("x86") else ("pic" if target.name.startswith("ppc") else "default")
+        self.tm = target.create_target_machine(
+            cpu=cpu, features=features, opt=3, reloc=reloc, codemodel="jitdefault", jit=True
+        )
+        self.engine = llvm.create_mcjit_compiler(llvm.parse_assembly(""), self.tm)
+        self._objects: list = []
+        self._loaded: dict[str, tuple[int, str]] = {}  # symbol: (address, return type)
+        numba_spec = importlib.util.find_spec("numba")
+        numba_version = ""
+        if numba_spec is not None and numba_spec.origin:
+            try:
+                with open(os.path.join(os.path.dirname(numba_spec.origin), "_version.py"), "rb") as fh:
+                    numba_version = hashlib.sha256(fh.read()).hexdigest()[:16]
+            except OSError:
+                pass
+        #: What the machine code depends on besides the kernel and its arguments.
+        self.identity = [triple, cpu, features, llvmlite.__version__, numba_version, sys.implementation.cache_tag]
+
+    def has(self, symbol: str) -> bool:
+        """Whether the kernel ``symbol`` is loaded (a kernel is loaded once per process)."""
+        return symbol in self._loaded
+
+    def add(self, entry: dict) -> None:
+        """Load a compiled kernel (an entry of `_compile` or of the cache)."""
+        llvm = self.llvm
+        missing = [s for s in entry["externs"] if not llvm.address_of_symbol(s)]
+        if missing:
+            # MCJIT would abort the process on an unresolved symbol: refuse first.
+            raise RuntimeError(f"unresolved symbols {missing}")
+        obj = llvm.ObjectFileRef.from_data(entry["object"])
+        self.engine.add_object_file(obj)
+        self.engine.finalize_object()
+        self._objects.append(obj)
+        address = self.engine.get_function_address(entry["symbol"])
+        if not address:
+            raise RuntimeError(f"no symbol {entry['symbol']} in the compiled code")
+        self._loaded[entry["symbol"]] = (address, entry["restype"])
+
+    def function(self, symbol: str, variant: tuple) -> Callable[..., Any]:
+        """A Python callable for the loaded kernel ``symbol``, taking arguments of ``variant``."""
+        import ctypes
+
+        address, ret = self._loaded[symbol]
+        params: list = []
+        for code in variant:
+            if isinstance(code, tuple):  # an array: its data pointer, then its shape
+                params += [ctypes.c_void_p] + [ctypes.c_int64] * code[1]
+            else:
+                params.append(ctypes.c_double if code == "f" else ctypes.c_int64)
+        restype = {"int64": ctypes.c_int64, "float64": ctypes.c_double, "void": None}[ret]
+        # CFUNCTYPE releases the GIL for the call, as ``nogil=True`` does.
+        cfn = ctypes.CFUNCTYPE(restype, *params)(address)
+        arrays = [isinstance(code, tuple) for code in variant]
+
+        def call(*args: Any) -> Any:
+            flat = []
+            for a, is_array in zip(args, arrays):
+                if is_array:
+                    flat.append(a.ctypes.data)
+                    flat.extend(a.shape)
+                else:
+                    flat.append(a)
+            return cfn(*flat)
+
+        call._native = cfn  # type: ignore[attr-defined]  # keeps the function, and says which route was taken
+        return call
+
+
+def _jit() -> _JitEngine:
+    global _JIT
+    if _JIT is None:
+        _JIT = _JitEngine()
+    return _JIT
+
+
+def _cache_dirs(folder: str) -> list[str]:
+    """Where cached kernels are looked for, in order; the first writable one gets new ones."""
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    if env:
+        return [os.path.join(env, "warpcli")]
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return [os.path.join(folder, "__pycache__"), os.path.join(base, "warpcli", "native")]
+
+
+def _read_entry(path: str) -> dict | None:
+    import hashlib
+    import json
+
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError:
+        return None
+    if not data.startswith(_MAGIC):
+        return None
+    head, sep, obj = data[len(_MAGIC) :].partition(b"\n")
+    if not sep:
+        return None
+    try:
+        entry = json.loads(head)
+    except ValueError:
+        return None
+    if len(obj) != entry.get("size") or hashlib.sha256(obj).hexdigest() != entry.get("sha256"):
+        return None  # cut short or damaged: compiled again
+    entry["object"] = obj
+    return entry
+
+
+def _write_entry(dirs: list[str], filename: str, entry: dict) -> None:
+    import contextlib
+    import hashlib
+    import json
+    import tempfile
+
+    head = {k: v for k, v in entry.items() if k != "object"}
+    head["size"] = len(entry["object"])
+    head["sha256"] = hashlib.sha256(entry["object"]).hexdigest()
+    data = _MAGIC + json.dumps(head).encode() + b"\n" + entry["object"]
+    for d in dirs:
+        try:
+            os.makedirs(d, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{filename}.", dir=d)
+            try:
+                with os.fdopen(fd, "wb") as fh:
+                    fh.write(data)
+                os.chmod(tmp, 0o644)  # like numba's cache files (mkstemp makes them private)
+                os.replace(tmp, os.path.join(d, filename))
+            except BaseException:
+                os.unlink(tmp)
+                raise
+            stem = filename.rsplit("-", 1)[0] + "-"
+            for old in os.listdir(d):
+                if old.startswith(stem) and old.endswith(".native") and old != filename:
+                    with contextlib.suppress(OSError):
+                        os.unlink(os.path.join(d, old))
+            return
+        except OSError:
+            continue
+    _log.debug("no writable cache directory for %s (tried %s)", filename, ", ".join(dirs))
+
+
+def _compile(module: str, name: str, variant: tuple, symbol: str, jit: _JitEngine) -> dict:
+    """Compile kernel ``name`` of ``module`` for ``variant`` with numba; its machine code and how to call it."""
+    from numba import carray, cfunc, from_dtype, types
+
+    dispatcher = getattr(importlib.import_module(module), name)
+    argtypes, params, names, call = [], [], [], []
+    for i, code in enumerate(variant):
+        if isinstance(code, tuple):
+            dtype, ndim = from_dtype(np.dtype(code[0])), code[1]
+            dims = [f"n{i}_{d}" for d in range(ndim)]
+            argtypes.append(types.Array(dtype, ndim, "C"))
+            params += [types.CPointer(dtype)] + [types.int64] * ndim
+            names += [f"p{i}", *dims]
+            call.append(f"carray(p{i}, ({', '.join(dims)},))")
+        else:
+            argtypes.append({"i": types.int64, "f": types.float64, "b": types.boolean}[code])
+            params.append(types.float64 if code == "f" else types.int64)
+            names.append(f"x{i}")
+            call.append(f"x{i} != 0" if code == "b" else f"x{i}")
+    dispatcher.compile(tuple(argtypes))
+    restype = next(s.return_type for s in dispatcher.nopython_signatures if tuple(s.args) == tuple(argtypes))
+    if restype == types.none:
+        ret, sig = "void", types.void(*params)
+    elif restype in (types.int64, types.float64):
+        ret, sig = str(restype), restype(*params)
+    else:
+        raise TypeError(f"{name} returns {restype}; the native route takes int64, float64 or nothing")
+    namespace = {"kernel": dispatcher, "carray": carray}
+    exec(f"def wrapper({', '.join(names)}):\n    return kernel({', '.join(call)})\n", namespace)  # noqa: S102
+    wrapper = cfunc(sig)(namespace["wrapper"])
+    obj, externs = _machine_code(jit, wrapper.inspect_llvm(), wrapper.native_name, symbol)
+    return {"format": _FORMAT, "symbol": symbol, "restype": ret, "externs": externs, "object": obj}
+
+
+def _machine_code(jit: _JitEngine, ir: str, entry_name: str, symbol: str) -> tuple[bytes, list[str]]:
+    """The object code of a wrapper's module, self-contained but for the C library.
+
+    The entry is renamed to ``symbol`` and everything else made internal, so
+    kernels compiled in different processes never clash in one engine; numba's
+    error-path references are bound to a trap (see the module docstring).
+    """
+    llvm = jit.llvm
+    mod = llvm.parse_assembly(ir)
+    externs, stubs = [], []
+    for fn in mod.functions:
+        if not fn.is_declaration or fn.name.startswith("llvm."):
+            continue
+        if fn.name in _LIBC:
+            externs.append(fn.name)
+        elif fn.name in _ERROR_PATH:
+            ret, _, args = str(fn.global_value_type).partition(" (")  # "ret (args)"
+            stubs.append(f"define {ret} @{fn.name}({args[:-1]}) {{\n  call void @llvm.trap()\n  unreachable\n}}")
+        else:
+            raise RuntimeError(f"compiled code calls {fn.name}, which only numba's runtime provides")
+    for gv in mod.global_variables:
+        if gv.is_declaration:
+            if gv.name not in _ERROR_PATH:
+                raise RuntimeError(f"compiled code uses {gv.name}, which only numba's runtime provides")
+            stubs.append(f"@{gv.name} = global {gv.global_value_type} zeroinitializer")
+    if stubs:
+        stub = llvm.parse_assembly("declare void @llvm.trap()\n" + "\n".join(stubs) + "\n")
+        stub.triple = mod.triple
+        stub.data_layout = mod.data_layout
+        mod.link_in(stub)
+    mod.get_function(entry_name).name = symbol
+    for fn in mod.functions:
+        if not fn.is_declaration and fn.name != symbol:
+            fn.linkage = "internal"
+    for gv in mod.global_variables:
+        if not gv.is_declaration:
+            gv.linkage = "internal"
+    mod.verify()
+    return jit.tm.emit_object(mod), sorted(externs)

@@ -1,0 +1,331 @@
+"""FEM sparse algebra without scipy.sparse: the Dirichlet system of the cotangent Laplacian, and SuperLU.
+
+Importing scipy.sparse and scipy.sparse.linalg (which imports scipy.linalg)
+costs about 0.25 s per process, half of a whole 1-megapixel warp now, for a
+matrix assembly and one factorization. This module builds the same system in
+numpy and hands it to SuperLU, the C extension that ``scipy.sparse.linalg.splu``
+calls, loaded on its own. It reproduces scipy's arithmetic operation by
+operation, so the matrix, the right-hand side and the solution are bit for bit
+those of the scipy route in `warpcli.maps.fem.solve` (tested):
+
+- the stiffness matrix as ``coo_matrix((x, (r, c))).tocsr()`` sums it: the
+  entries of one (row, column) added in pairs, which is exact in any order
+  because each mesh edge has at most two triangles (more refuses this route);
+- the diagonal as ``-off.sum(axis=1)``: ``np.add.reduceat`` over each row's
+  entries, the very call scipy makes;
+- ``off + diags(d)``, which drops entries that are exactly zero;
+- the rows and columns of the unknowns, and the product with the boundary
+  values as scipy's ``csr_matvecs`` forms it, entry after entry from zero.
+
+Anything else (mean-value weights, natural boundary conditions, a SuperLU that
+cannot be loaded this way) goes through scipy.sparse as before.
+"""
+
+from __future__ import annotations
+
+import importlib.machinery
+import importlib.util
+import os
+import sys
+import threading
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .mesh import triangle_areas
+
+
+class Unsupported(Exception):
+    """This system or this scipy is not for the numpy route; use scipy.sparse."""
+
+
+class CSR(NamedTuple):
+    """A compressed sparse row matrix: row i holds ``data[indptr[i]:indptr[i+1]]`` at ``indices``."""
+
+    indptr: NDArray[np.int64]
+    indices: NDArray[np.int64]
+    data: NDArray[np.float64]
+    shape: tuple[int, int]
+
+    def rows(self) -> NDArray[np.int64]:
+        """The row of every stored entry."""
+        return np.repeat(np.arange(self.shape[0]), np.diff(self.indptr))
+
+    def __matmul__(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``self @ x`` for a dense (N,) or (N, k) ``x``, summed as scipy's ``csr_matvecs``:
+        each row starts from zero and adds ``a * x[j]`` entry after entry."""
+        x = np.asarray(x, dtype=np.float64)
+        vec = x.ndim == 1
+        x2 = x.reshape(len(x), -1)
+        out = np.zeros((self.shape[0], x2.shape[1]))
+        rows = self.rows()
+        position = np.arange(len(self.indices)) - self.indptr[rows]
+        for p in range(int(position.max(initial=-1)) + 1):
+            at = position == p  # at most one entry per row: a plain fancy-indexed add
+            r = rows[at]
+            out[r] = out[r] + self.data[at, None] * x2[self.indices[at]]
+        return out.ravel() if vec else out
+
+
+def _corner_weights(vertices: NDArray[np.float64], triangles: NDArray[np.integer]) -> list[NDArray[np.float64]]:
+    """``-(cot a) / 2`` for the angle a at each corner k of every triangle: a list of three (M,) arrays."""
+    tri = np.asarray(triangles)
+    v = [vertices[tri[:, k]] for k in range(3)]
+    double_area = np.abs(2.0 * triangle_areas(vertices, tri))
+    out = []
+    for k in range(3):
+        # The angle at corner k is opposite the edge (k + 1, k + 2).
+        u = v[(k + 1) % 3] - v[k]
+        w = v[(k + 2) % 3] - v[k]
+        cot = np.einsum("ij,ij->i", u, w) / double_area
+        out.append(-0.5 * cot)
+    return out
+
+
+def cotan_terms(
+    vertices: NDArray[np.float64], triangles: NDArray[np.integer]
+) -> tuple[NDArray[np.integer], NDArray[np.integer], NDArray[np.float64]]:
+    """The cotangent Laplacian's off-diagonal terms, (rows, columns, values), one per triangle corner and side.
+
+    ``-(cot a) / 2`` for the edge opposite each corner's angle a, at (i, j) and
+    (j, i); the terms of an edge shared by two triangles add up to
+    ``K[i, j] = -(cot a_ij + cot b_ij) / 2``.
+    """
+    tri = np.asarray(triangles)
+    rows, cols, vals = [], [], []
+    for k, weight in enumerate(_corner_weights(vertices, tri)):
+        i, j = (k + 1) % 3, (k + 2) % 3
+        rows += [tri[:, i], tri[:, j]]
+        cols += [tri[:, j], tri[:, i]]
+        vals += [weight, weight]
+    return np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+
+
+class Edges(NamedTuple):
+    """The edges of a triangle mesh, each with the one or two half-edges on it.
+
+    Half-edge ``h = k * M + t`` is the side of triangle t opposite its corner
+    k. Edges are sorted by (lo, hi), their vertices lo < hi; ``second`` is -1
+    on the boundary.
+    """
+
+    lo: NDArray[np.int64]
+    hi: NDArray[np.int64]
+    first: NDArray[np.int64]
+    second: NDArray[np.int64]
+
+
+def mesh_edges(triangles: NDArray[np.integer], n_vertices: int) -> Edges:
+    """The `Edges` of a mesh: one sort of its half-edges.
+
+    Raises
+    ------
+    Unsupported
+        If an edge has more than two triangles, or a triangle a repeated vertex.
+    """
+    tri = np.asarray(triangles, dtype=np.int64)
+    a = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    b = np.concatenate([tri[:, 2], tri[:, 0], tri[:, 1]])
+    if (a == b).any():
+        raise Unsupported("a triangle with a repeated vertex")
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key = lo * n_vertices + hi
+    order = np.argsort(key)
+    key = key[order]
+    head = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    runs = np.diff(np.r_[head, len(key)])
+    if runs.size and runs.max() > 2:
+        raise Unsupported("an edge with more than two triangles")
+    second = np.full(len(head), -1, dtype=np.int64)
+    pair = runs == 2
+    second[pair] = order[head[pair] + 1]
+    first = order[head]
+    return Edges(lo[first], hi[first], first, second)
+
+
+def neighbours(edges: Edges, n_triangles: int) -> NDArray[np.int64]:
+    """For each triangle and corner k, the triangle across the side opposite k (-1 on the boundary).
+
+    The same table as `warpcli.maps.fem.locate.triangle_neighbours`, from edges already found.
+    """
+    out = np.full(3 * n_triangles, -1, dtype=np.int64)
+    inner = edges.second >= 0
+    h1, h2 = edges.first[inner], edges.second[inner]
+    out[h1] = h2 % n_triangles
+    out[h2] = h1 % n_triangles
+    return out.reshape(3, n_triangles).T.copy()
+
+
+def cotan_stiffness(
+    vertices: NDArray[np.float64], triangles: NDArray[np.integer], edges: Edges | None = None
+) -> CSR:
+    """The cotangent Laplacian of `warpcli.maps.fem.solve.cotan_laplacian`, as a `CSR`, bit for bit.
+
+    Parameters
+    ----------
+    vertices : (N, 2) array of float
+    triangles : (M, 3) array of int
+    edges : Edges or None
+        The mesh's `mesh_edges`, if already found.
+
+    Raises
+    ------
+    Unsupported
+        If some edge has more than two triangles (the terms' order would matter).
+    """
+    n = len(vertices)
+    e = mesh_edges(triangles, n) if edges is None else edges
+    # coo -> csr -> sum_duplicates: an edge's entries (i, j) and (j, i) both sum
+    # its one or two corner terms; two terms add up alike in either order.
+    weight = np.concatenate(_corner_weights(vertices, triangles))
+    value = weight[e.first]
+    inner = e.second >= 0
+    value[inner] += weight[e.second[inner]]
+    # Each row: its entries below the diagonal (edges ending at it), then
+    # those above (edges starting at it), columns ascending in both.
+    below = np.argsort(e.hi * n + e.lo)
+    n_up = np.bincount(e.lo, minlength=n)
+    n_down = np.bincount(e.hi, minlength=n)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(n_up + n_down, out=indptr[1:])
+    first_up = np.cumsum(n_up) - n_up  # where each row's edges start among those sorted by (lo, hi)
+    first_down = np.cumsum(n_down) - n_down
+    count = len(e.lo)
+    cols = np.empty(2 * count, dtype=np.int64)
+    data = np.empty(2 * count)
+    rank = np.arange(count)
+    at = indptr[e.lo] + n_down[e.lo] + rank - first_up[e.lo]
+    cols[at], data[at] = e.hi, value
+    hi_sorted = e.hi[below]
+    at = indptr[hi_sorted] + rank - first_down[hi_sorted]
+    cols[at], data[at] = e.lo[below], value[below]
+    # -off.sum(axis=1): scipy reduces each non-empty row with np.add.reduceat.
+    diag = np.zeros(n)
+    nonempty = np.flatnonzero(np.diff(indptr))
+    if nonempty.size:
+        diag[nonempty] = np.add.reduceat(data, indptr[nonempty])
+    diag = -diag
+    # off + diags(diag): the diagonal merged in after each row's entries below
+    # it, and exact zeros dropped, as scipy's canonical sparse addition does (a
+    # stored entry plus 0 is itself).
+    rows = np.arange(n)
+    at = indptr[:-1] + n_down + rows  # where each diagonal entry lands
+    is_off = np.ones(2 * count + n, dtype=bool)
+    is_off[at] = False
+    merged_cols = np.empty(2 * count + n, dtype=np.int64)
+    merged_cols[is_off], merged_cols[at] = cols, rows
+    merged = np.empty(2 * count + n)
+    merged[is_off], merged[at] = data, diag
+    keep = merged != 0
+    row_of = np.repeat(rows, np.diff(indptr) + 1)
+    out_indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(row_of[keep], minlength=n), out=out_indptr[1:])
+    return CSR(out_indptr, merged_cols[keep], merged[keep], (n, n))
+
+
+def submatrix(k: CSR, rows: NDArray[np.integer], cols: NDArray[np.integer]) -> CSR:
+    """``k[rows][:, cols]`` for sorted, distinct ``rows`` and ``cols`` (scipy's fancy indexing keeps the values)."""
+    n_rows, n_cols = k.shape
+    rows = np.asarray(rows, dtype=np.int64)
+    cols = np.asarray(cols, dtype=np.int64)
+    for idx, size in ((rows, n_rows), (cols, n_cols)):
+        if idx.size and (np.any(np.diff(idx) <= 0) or idx[0] < 0 or idx[-1] >= size):
+            raise Unsupported("indices not sorted and distinct")
+    new_row = np.full(n_rows, -1, dtype=np.int64)
+    new_row[rows] = np.arange(len(rows))
+    new_col = np.full(n_cols, -1, dtype=np.int64)
+    new_col[cols] = np.arange(len(cols))
+    r = new_row[k.rows()]
+    c = new_col[k.indices]
+    keep = (r >= 0) & (c >= 0)
+    r, c, d = r[keep], c[keep], k.data[keep]
+    indptr = np.zeros(len(rows) + 1, dtype=np.int64)
+    np.cumsum(np.bincount(r, minlength=len(rows)), out=indptr[1:])
+    return CSR(indptr, c, d, (len(rows), len(cols)))
+
+
+def to_csc(a: CSR) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    """``(indptr, row indices, data)`` of ``a`` in compressed sparse columns, rows ascending in each column."""
+    order = np.argsort(a.indices, kind="stable")
+    indptr = np.zeros(a.shape[1] + 1, dtype=np.int64)
+    np.cumsum(np.bincount(a.indices, minlength=a.shape[1]), out=indptr[1:])
+    return indptr, a.rows()[order], a.data[order]
+
+
+_SUPERLU: Any = None
+_SUPERLU_LOCK = threading.Lock()
+_SUPERLU_NAME = "scipy.sparse.linalg._dsolve._superlu"
+
+
+def _superlu():
+    """scipy's SuperLU extension module, loaded without importing scipy.sparse.linalg.
+
+    Loaded from its file under its own name (and registered so), so a later
+    ``import scipy.sparse.linalg`` finds this module rather than another copy.
+    """
+    global _SUPERLU
+    with _SUPERLU_LOCK:
+        if _SUPERLU is None:
+            module = sys.modules.get(_SUPERLU_NAME)
+            if module is None:
+                spec = importlib.util.find_spec("scipy")
+                if spec is None or not spec.origin:
+                    raise Unsupported("scipy not found")
+                folder = os.path.join(os.path.dirname(spec.origin), "sparse", "linalg", "_dsolve")
+                for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+                    path = os.path.join(folder, "_superlu" + suffix)
+                    if os.path.isfile(path):
+                        break
+                else:
+                    raise Unsupported(f"no SuperLU extension in {folder}")
+                loader = importlib.machinery.ExtensionFileLoader(_SUPERLU_NAME, path)
+                module_spec = importlib.util.spec_from_file_location(_SUPERLU_NAME, path, loader=loader)
+                if module_spec is None:
+                    raise Unsupported(f"cannot load {path}")
+                module = importlib.util.module_from_spec(module_spec)
+                loader.exec_module(module)
+                sys.modules[_SUPERLU_NAME] = module
+            if not hasattr(module, "gstrf"):
+                raise Unsupported("SuperLU extension without gstrf")
+            _SUPERLU = module
+        return _SUPERLU
+
+
+def _csc_array(*args, **kwargs):
+    """What SuperLU builds its L and U with, when asked for them (imports scipy.sparse then)."""
+    from scipy.sparse import csc_array
+
+    return csc_array(*args, **kwargs)
+
+
+def splu(a: CSR, symmetric: bool = False):
+    """SuperLU of ``a`` exactly as `warpcli.maps.fem.solve._factorize` makes it with ``splu``.
+
+    The same call ``scipy.sparse.linalg.splu(A, permc_spec="MMD_AT_PLUS_A",
+    diag_pivot_thresh=0.0, options={"SymmetricMode": symmetric})`` makes of
+    the extension, with the matrix in compressed sparse columns. ``symmetric``
+    also says that ``a`` is exactly symmetric (the cotangent Laplacian is, term
+    by term: both entries of an edge add the same two values), so that its rows
+    serve as its columns.
+
+    Raises
+    ------
+    Unsupported
+        If the extension cannot be loaded or called this way.
+    """
+    module = _superlu()
+    # A symmetric matrix's compressed columns are its compressed rows.
+    indptr, indices, data = (a.indptr, a.indices, a.data) if symmetric else to_csc(a)
+    n = a.shape[0]
+    if a.shape[1] != n or len(data) > np.iinfo(np.intc).max:
+        raise Unsupported("not a square matrix with int32 indices")
+    options = {"DiagPivotThresh": 0.0, "ColPerm": "MMD_AT_PLUS_A", "PanelSize": None, "Relax": None}
+    options["SymmetricMode"] = symmetric
+    try:
+        return module.gstrf(
+            n, len(data), np.ascontiguousarray(data, dtype=np.float64), indices.astype(np.intc),
+            indptr.astype(np.intc), csc_construct_func=_csc_array, ilu=False, options=options,
+        )  # fmt: skip
+    except TypeError as err:  # another scipy's calling convention
+        raise Unsupported(f"SuperLU: {err}") from err
