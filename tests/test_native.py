@@ -52,14 +52,15 @@ def test_samplers_match_numba_bitwise(dtype):
     work = np.float64 if dtype == np.float64 else np.float32
     img, xy = _image(dtype), _points()
     bg = np.array([0.25, 7.0, 1e3])
-    _same(RASTER, "sample_linear", lambda: (img, xy, bg, np.zeros((len(xy), 3), dtype=work)))
-    _same(RASTER, "sample_nearest", lambda: (img, xy, bg, np.zeros((len(xy), 3), dtype=work)))
+    whole = (0, 0, img.shape[1], img.shape[0])
+    _same(RASTER, "sample_linear", lambda: (img, *whole, xy, bg, np.zeros((len(xy), 3), dtype=work)))
+    _same(RASTER, "sample_nearest", lambda: (img, *whole, xy, bg, np.zeros((len(xy), 3), dtype=work)))
     rng = np.random.default_rng(2)
     jac = rng.normal(0.0, 2.5, (len(xy), 2, 2))  # shrinking as well: up to 16 x 16 samples
     jac[::13] = np.nan
     _same(
         RASTER, "sample_linear_aa",
-        lambda: (img, xy, jac, 16, bg, np.zeros((len(xy), 3), dtype=work), np.zeros(3)),
+        lambda: (img, *whole, xy, jac, 16, bg, np.zeros((len(xy), 3), dtype=work), np.zeros(3)),
     )  # fmt: skip
 
 
@@ -117,9 +118,10 @@ def test_arguments_the_native_route_does_not_take_go_to_numba_with_the_same_resu
     strided = xy[::2]  # not contiguous
     assert _native._variant((img, strided)) is None
     out = np.zeros((len(strided), 3), dtype=np.float32)
-    kernels.sample_linear(img, strided, np.zeros(3), out)
+    whole = (0, 0, img.shape[1], img.shape[0])
+    kernels.sample_linear(img, *whole, strided, np.zeros(3), out)
     want = np.zeros_like(out)
-    importlib.import_module(RASTER).sample_linear(img, np.ascontiguousarray(strided), np.zeros(3), want)
+    importlib.import_module(RASTER).sample_linear(img, *whole, np.ascontiguousarray(strided), np.zeros(3), want)
     assert out.tobytes() == want.tobytes()
     assert _native._variant((np.float16(1.0),)) is None
     assert _native._variant((2**70,)) is None

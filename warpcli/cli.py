@@ -233,13 +233,19 @@ class DefaultGroup(click.Group):
     show_default=True,
     help="Which way an STMap's t runs: down (OpenImageIO st_warp) or up (Nuke STMap).",
 )
+@click.option(
+    "--tiled",
+    is_flag=True,
+    help="Warp in strips of 256 rows, never holding the whole image: the same output in bounded memory "
+    "(automatic when the image does not fit in memory).",
+)
 @click.option("-v", "--verbose", count=True, help="Report progress and timings on stderr (-vv for more).")
 @quiet_option
 @click.version_option(__version__, "--version", prog_name="warp")
 def warp(
     paths, src_path, dst_path, src_label, dst_label, frames, inverse, out_dir, scheduler, jobs, out_name, interp, size, dtype, background, method, theta,
     boundary, src_boundary, dst_boundary, save_theta, energy, theta_start, nodes, conditions, max_area, antialias, outside, vacated, weights, report_path,
-    grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t, verbose, quiet,
+    grid_path, heatmap_path, heatmap_measure, save_map, save_forward_map, stmap_t, tiled, verbose, quiet,
 ):  # fmt: skip
     """Warp INPUT so that polygon SRC goes onto polygon DST; write OUTPUT.
 
@@ -274,6 +280,7 @@ def warp(
     single_only = {
         "--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path,
         "--save-map": save_map, "--save-forward-map": save_forward_map, "--size": size, "--save-theta": save_theta,
+        "--tiled": True if tiled else None,
     }  # fmt: skip
     used = [name for name, value in single_only.items() if value is not None]
     from .sequence import is_pattern
@@ -319,6 +326,7 @@ def warp(
             heatmap_path=heatmap_path,
             heatmap_measure=heatmap_measure,
             progress=progress.stage,
+            tiled=True if tiled else None,
         )
     if report_path == "-":
         click.echo(json.dumps(result.report, indent=2))

@@ -403,6 +403,7 @@ def warp_file(
     src_label: str | None = None,
     dst_label: str | None = None,
     progress: Callable[[str], None] | None = None,
+    tiled: bool | None = None,
     **changes: Any,
 ) -> WarpResult:
     """Read an image and two polygon files, warp, and write the result atomically.
@@ -437,10 +438,15 @@ def warp_file(
         Which polygon to take from a polygon file holding several.
     progress : callable or None
         Called with the name of each stage as it starts.
+    tiled : bool or None
+        Warp in strips, never holding the whole image (`warpcli.tiled`):
+        True always, None (the default) when a whole warp would not fit in
+        memory. The output is the same; the result then has no pixels (they
+        are in the file), and the report, figures and STMaps are refused.
 
     Returns
     -------
-    WarpResult
+    WarpResult or warpcli.tiled.TiledResult
 
     Raises
     ------
@@ -478,6 +484,13 @@ def warp_file(
     src = read_polygon(src_path, src_label)
     dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
+    if _in_parts(input_path, opts, tiled):
+        return _warp_file_tiled(
+            input_path, output_path, src, dst, opts, progress,
+            {"--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path, "--save-map": save_map,
+             "--save-forward-map": save_forward_map},
+            save_theta,
+        )  # fmt: skip
     # The map needs the image's size, not its pixels: it is built on other
     # threads while the pixels are decoded (the decoder releases the GIL).
     early = _EarlyMap.start(input_path, src, dst, opts)
@@ -540,6 +553,38 @@ def warp_file(
             if os.fspath(report_path) != "-":
                 _write_json(pending.path(report_path), doc)
             result = dataclasses.replace(result, report=doc)
+    return result
+
+
+def _in_parts(input_path, opts: WarpOptions, tiled: bool | None) -> bool:
+    """Whether `warp_file` warps in strips: asked to, or a whole warp would not fit in memory."""
+    if tiled is not None:
+        return bool(tiled)
+    from .raster.parts import read_header
+    from .tiled import tiled_needed
+
+    try:
+        header = read_header(input_path)
+    except WarpError:
+        return False  # read_image says what is wrong with it
+    width, height = opts.size if opts.size is not None else (header.width, header.height)
+    return tiled_needed(header, width, height)
+
+
+def _warp_file_tiled(input_path, output_path, src, dst, opts, progress, refused: dict, save_theta):
+    from .tiled import warp_file_tiled
+
+    used = [name for name, value in refused.items() if value is not None]
+    if used:
+        raise InputError(
+            f"{os.fspath(input_path)}: {', '.join(used)} needs the whole image in memory, and it is warped in parts "
+            "(it does not fit, or --tiled was given)"
+        )
+    with PendingOutputs() as pending:
+        result = warp_file_tiled(input_path, pending.path(output_path), src, dst, opts, progress=progress)
+        if save_theta is not None:
+            theta = result.map.theta
+            _write_json(pending.path(save_theta), {"theta": theta.name, "points": theta.points.tolist()})
     return result
 
 

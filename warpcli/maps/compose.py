@@ -247,7 +247,9 @@ class BijectiveMap:
         """The exact boundary map backwards: the source point of parameter t on target edge i."""
         return self.phi0.boundary_from_theta(edge, self.phi1.to_theta_parameter(edge, t))
 
-    def pull_back(self, width: int, height: int, *, jacobian: bool = True) -> PullBack:
+    def pull_back(
+        self, width: int, height: int, *, jacobian: bool = True, rows: tuple[int, int] | None = None
+    ) -> PullBack:
         """f^-1 (and its Jacobian) at the pixel centres of a ``width`` x ``height`` output grid.
 
         Only the window around the target's bounding box is computed, in
@@ -261,12 +263,17 @@ class BijectiveMap:
             Output size in pixels (the target polygon's coordinates).
         jacobian : bool
             Also compute the Jacobian of f^-1 per pixel.
+        rows : (int, int) or None
+            Only the rows ``start <= r < stop`` of the grid (the window is cut
+            to them; it may be empty): for images warped strip by strip
+            (`warpcli.tiled`). The bands are those of the whole grid, so the
+            values are those of the whole pull-back, bit for bit.
 
         Returns
         -------
         PullBack
         """
-        return _through_theta(self.phi1, self.phi0, width, height, jacobian)
+        return _through_theta(self.phi1, self.phi0, width, height, jacobian, rows)
 
     def inverse_grid(self, width: int, height: int) -> NDArray[np.float64]:
         """`inverse` at every pixel centre of a ``width`` x ``height`` output image.
@@ -295,38 +302,57 @@ class BijectiveMap:
         return out
 
 
-def _through_theta(phi_grid: ThetaMap, phi_other: ThetaMap, width: int, height: int, jacobian: bool) -> PullBack:
-    """phi_other^-1 o phi_grid at the pixel centres of the grid phi_grid's polygon lives on."""
-    r0, r1, c0, c1 = window(phi_grid.polygon.bounds, width, height)
+def _through_theta(
+    phi_grid: ThetaMap, phi_other: ThetaMap, width: int, height: int, jacobian: bool,
+    rows: tuple[int, int] | None = None,
+) -> PullBack:  # fmt: skip
+    """phi_other^-1 o phi_grid at the pixel centres of the grid phi_grid's polygon lives on
+    (in the rows ``rows`` only, if given)."""
+    w0, w1, c0, c1 = window(phi_grid.polygon.bounds, width, height)
+    band = max(1, BAND_PIXELS // width)
+    r0, r1 = w0, w1
+    if rows is not None:
+        r0 = min(max(rows[0], w0), w1)
+        r1 = max(min(rows[1], w1), r0)
     ww = c1 - c0
     points = np.empty(((r1 - r0) * ww, 2))
     jac = np.empty(((r1 - r0) * ww, 2, 2)) if jacobian else None
-    band = max(1, BAND_PIXELS // width)
 
-    def one_band(start: int) -> None:
+    def one_band(first: int) -> None:
         # Bands are independent (each walk starts afresh) and write their own
         # rows of the window, so they run on all cores with the same result.
-        stop = min(start + band, r1)
+        # They are the whole window's bands, whatever ``rows`` cuts out, and
+        # every point of a band is inverted: a walk's rounding depends on
+        # where it starts.
+        last = min(first + band, w1)
+        start, stop = max(first, r0), min(last, r1)
         lo, hi = (start - r0) * ww, (stop - r0) * ww
         points[lo:hi] = np.nan
         if jac is not None:
             jac[lo:hi] = np.nan
-        g = phi_grid.evaluate_grid(width, height, (start, stop), jacobian=jacobian)
+        g = phi_grid.evaluate_grid(width, height, (first, last), jacobian=jacobian)
         row, col = np.divmod(g.pixels, width)
-        idx = (row - r0) * ww + (col - c0)
         # The window holds every centre in the polygon (its bounding box and
         # a margin); a method that reported one beyond it would be dropped.
         keep = (col >= c0) & (col < c1)
         values, jac_grid = g.values, g.jacobian
         if not keep.all():
-            idx, values = idx[keep], values[keep]
+            row, col, values = row[keep], col[keep], values[keep]
             jac_grid = None if jac_grid is None else jac_grid[keep]
         m = phi_other.inverse(values, jacobian=jacobian, coherent=True)
-        points[idx] = m.points
+        found, jac_found = m.points, m.jacobian
+        if start != first or stop != last:
+            cut = (row >= start) & (row < stop)
+            row, col, found = row[cut], col[cut], found[cut]
+            jac_grid = None if jac_grid is None else jac_grid[cut]
+            jac_found = None if jac_found is None else jac_found[cut]
+        idx = (row - r0) * ww + (col - c0)
+        points[idx] = found
         if jac is not None:
-            _compiled.scatter_products(m.jacobian, jac_grid, idx, jac)
+            _compiled.scatter_products(np.ascontiguousarray(jac_found), np.ascontiguousarray(jac_grid), idx, jac)
 
-    parallel(one_band, range(r0, r1, band))
+    if r1 > r0:
+        parallel(one_band, range(w0 + (r0 - w0) // band * band, r1, band))
     shape = (r1 - r0, ww)
     return PullBack(
         points.reshape(*shape, 2), None if jac is None else jac.reshape(*shape, 2, 2), (r0, c0), (width, height)

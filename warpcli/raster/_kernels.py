@@ -28,27 +28,36 @@ def _background_if_outside(x, y, w, h, background, out, n):
 
 
 @njit(cache=True, nogil=True)
-def sample_linear(img, xy, background, out):
-    """Bilinear samples of ``img`` (H, W, C) at continuous points ``xy`` (N, 2).
+def sample_linear(img, x0, y0, w, h, xy, background, out):
+    """Bilinear samples of a W x H image at continuous points ``xy`` (N, 2).
 
-    Pixel i has its centre at i + 0.5; beyond the outermost centres the edge
-    pixels extend (like scipy.ndimage.map_coordinates with mode='nearest').
-    Points outside [0, W] x [0, H], or NaN, get ``background``.
+    ``img`` (rows, columns, C) holds the part of the image whose top-left
+    pixel is column ``x0``, row ``y0`` (all of it: 0, 0, W, H); a part must
+    hold every pixel the points reach (a pixel beyond it is read as the
+    nearest one it holds, never outside the array). Pixel i has its centre at
+    i + 0.5; beyond the outermost centres the edge pixels extend (like
+    scipy.ndimage.map_coordinates with mode='nearest'). Points outside
+    [0, W] x [0, H], or NaN, get ``background``.
     """
-    h, w, nc = img.shape
+    nc = img.shape[2]
     for n in range(xy.shape[0]):
         x = xy[n, 0]
         y = xy[n, 1]
         if _background_if_outside(x, y, w, h, background, out, n):
             continue
         for ch in range(nc):
-            out[n, ch] = _bilinear(img, x, y, ch)
+            out[n, ch] = _bilinear(img, x0, y0, w, h, x, y, ch)
 
 
 @njit(cache=True, nogil=True)
-def _bilinear(img, x, y, ch):
+def _held(img, x0, y0, i, j, ch):
+    """Pixel (column i, row j) of the image from its part ``img`` at (x0, y0), clamped into the part."""
+    return img[min(max(j - y0, 0), img.shape[0] - 1), min(max(i - x0, 0), img.shape[1] - 1), ch]
+
+
+@njit(cache=True, nogil=True)
+def _bilinear(img, x0, y0, w, h, x, y, ch):
     """Bilinear sample of channel ch at continuous (x, y); the edge pixels extend."""
-    h, w, _ = img.shape
     u = min(max(x - 0.5, 0.0), w - 1.0)
     v = min(max(y - 0.5, 0.0), h - 1.0)
     i0 = int(u)
@@ -57,13 +66,13 @@ def _bilinear(img, x, y, ch):
     j1 = min(j0 + 1, h - 1)
     tu = u - i0
     tv = v - j0
-    top = img[j0, i0, ch] * (1.0 - tu) + img[j0, i1, ch] * tu
-    bottom = img[j1, i0, ch] * (1.0 - tu) + img[j1, i1, ch] * tu
+    top = _held(img, x0, y0, i0, j0, ch) * (1.0 - tu) + _held(img, x0, y0, i1, j0, ch) * tu
+    bottom = _held(img, x0, y0, i0, j1, ch) * (1.0 - tu) + _held(img, x0, y0, i1, j1, ch) * tu
     return top * (1.0 - tv) + bottom * tv
 
 
 @njit(cache=True, nogil=True)
-def sample_linear_aa(img, xy, jac, kmax, background, out, acc):  # noqa: C901
+def sample_linear_aa(img, x0, y0, w, h, xy, jac, kmax, background, out, acc):  # noqa: C901
     """Bilinear samples averaged over each output pixel's footprint in the source.
 
     The footprint of output pixel n is the parallelogram ``J [-1/2, 1/2]^2``
@@ -76,8 +85,10 @@ def sample_linear_aa(img, xy, jac, kmax, background, out, acc):  # noqa: C901
     average of a linear function is its value at the centre: linear data is
     still reproduced exactly. ``acc`` is float64 scratch space of one value
     per channel (the kernels allocate nothing: see `warpcli._native`).
+    ``img``, ``x0``, ``y0``, ``w``, ``h``: the image, or the part of it the
+    samples reach, as in `sample_linear`.
     """
-    h, w, nc = img.shape
+    nc = img.shape[2]
     for n in range(xy.shape[0]):
         x = xy[n, 0]
         y = xy[n, 1]
@@ -100,7 +111,7 @@ def sample_linear_aa(img, xy, jac, kmax, background, out, acc):  # noqa: C901
         if ku == 1 and kv == 1:
             # One sample (most pixels): bilinear at the centre, straight into out.
             for ch in range(nc):
-                out[n, ch] = _bilinear(img, x, y, ch)
+                out[n, ch] = _bilinear(img, x0, y0, w, h, x, y, ch)
             continue
         for ch in range(nc):
             acc[ch] = 0.0
@@ -113,7 +124,7 @@ def sample_linear_aa(img, xy, jac, kmax, background, out, acc):  # noqa: C901
                 sy = y + c * su + d * sv
                 if sx >= 0.0 and sx <= w and sy >= 0.0 and sy <= h:
                     for ch in range(nc):
-                        acc[ch] += weight * _bilinear(img, sx, sy, ch)
+                        acc[ch] += weight * _bilinear(img, x0, y0, w, h, sx, sy, ch)
                 else:
                     for ch in range(nc):
                         acc[ch] += weight * background[ch]
@@ -122,10 +133,12 @@ def sample_linear_aa(img, xy, jac, kmax, background, out, acc):  # noqa: C901
 
 
 @njit(cache=True, nogil=True)
-def sample_nearest(img, xy, background, out):
+def sample_nearest(img, x0, y0, w, h, xy, background, out):
     """The pixel each point ``xy`` (N, 2) falls in (the border belongs to the edge
-    pixels); ``background`` outside [0, W] x [0, H]."""
-    h, w, nc = img.shape
+    pixels); ``background`` outside [0, W] x [0, H]. ``img``, ``x0``, ``y0``,
+    ``w``, ``h``: the image, or the part of it the points reach, as in
+    `sample_linear`."""
+    nc = img.shape[2]
     for n in range(xy.shape[0]):
         x = xy[n, 0]
         y = xy[n, 1]
@@ -134,7 +147,7 @@ def sample_nearest(img, xy, background, out):
         i = min(int(x), w - 1)
         j = min(int(y), h - 1)
         for ch in range(nc):
-            out[n, ch] = img[j, i, ch]
+            out[n, ch] = _held(img, x0, y0, i, j, ch)
 
 
 

@@ -33,6 +33,7 @@ def resample(
     associated_alpha: bool = False,
     jacobian: ArrayLike | None = None,
     coverage: EdgeCoverage | None = None,
+    part: tuple[int, int, int, int] | None = None,
 ) -> NDArray:
     """Sample ``image`` at the source positions of the output pixels.
 
@@ -72,6 +73,13 @@ def resample(
         Antialias the target polygon's edge: the fraction of each edge pixel
         inside the polygon goes into alpha (with an alpha channel) or blends
         the pixel with the background (without).
+    part : (x0, y0, W, H) or None
+        ``image`` is only the part of a W x H image whose top-left pixel is
+        column x0, row y0 (`warpcli.tiled` reads images part by part). It must
+        hold every pixel the samples reach, then the result is that of the
+        whole image, bit for bit with ``nearest`` and ``linear``; ``cubic``
+        prefilters the part only, so it agrees to rounding given a margin of
+        a dozen pixels.
 
     Returns
     -------
@@ -90,6 +98,9 @@ def resample(
     if img.ndim == 2:
         img = img[:, :, None]
     h, w, nc = img.shape
+    x0, y0 = 0, 0
+    if part is not None:
+        x0, y0, w, h = (int(v) for v in part)
     coords = np.asarray(inverse_map, dtype=np.float64)
     if coords.ndim != 3 or coords.shape[2] != 2:
         raise InputError(f"inverse_map must be (H, W, 2), got shape {coords.shape}")
@@ -156,18 +167,18 @@ def resample(
         out[:] = bg.astype(work_dtype)
         valid = np.flatnonzero((x >= 0) & (x <= w) & (y >= 0) & (y <= h))
         # Array index i has its centre at coordinate i + 0.5.
-        idx = np.stack([y[valid] - 0.5, x[valid] - 0.5])
+        idx = np.stack([y[valid] - (0.5 + y0), x[valid] - (0.5 + x0)])
         for c in range(nc):
             out[valid, c] = map_coordinates(src[:, :, c], idx, order=3, mode="nearest", prefilter=True)
     else:
 
         def sample(xy, j, dest):
             if interp == "nearest":
-                _compiled.sample_nearest(src, xy, bg, dest)
+                _compiled.sample_nearest(src, x0, y0, w, h, xy, bg, dest)
             elif j is None:
-                _compiled.sample_linear(src, xy, bg, dest)
+                _compiled.sample_linear(src, x0, y0, w, h, xy, bg, dest)
             else:
-                _compiled.sample_linear_aa(src, xy, j, MAX_FOOTPRINT_SAMPLES, bg, dest, np.zeros(nc))
+                _compiled.sample_linear_aa(src, x0, y0, w, h, xy, j, MAX_FOOTPRINT_SAMPLES, bg, dest, np.zeros(nc))
 
         # Pixels are independent: runs of them are sampled on all cores.
         n = len(points)

@@ -1,0 +1,191 @@
+"""Warps in strips (`warpcli.tiled`): the in-memory warp's output, in bounded memory."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import warpcli.raster.parts as parts
+import warpcli.tiled as tiled
+from warpcli.pipeline import warp_file
+from warpcli.raster.resample import resample
+
+from .helpers import read_pixels, run_cli, simple_polygons, star, write_png, write_polygon
+
+
+@pytest.fixture
+def small_strips(monkeypatch):
+    """Strips of 16 rows and chunks of 24 columns, so that small images cross many of both."""
+    monkeypatch.setattr(parts, "TILE", 16)
+    monkeypatch.setattr(tiled, "TILE", 16)
+    monkeypatch.setattr(tiled, "CHUNK", 24)
+
+
+def _image(kind: str, rng, h: int = 130, w: int = 150):
+    if kind == "rgb8":
+        return rng.integers(0, 256, (h, w, 3)).astype(np.uint8), None
+    if kind == "rgba16":  # straight alpha, blended premultiplied
+        px = rng.integers(0, 65536, (h, w, 4)).astype(np.uint16)
+        return px, 3
+    return rng.normal(0.5, 0.3, (h, w, 1)).astype(np.float32), None
+
+
+def _both(tmp, src, dst, px, ext, **options):
+    """The outputs of the in-memory warp and of the warp in strips."""
+    inp = write_png(os.path.join(tmp, "in.tif" if px.shape[2] == 4 or px.dtype != np.uint8 else "in.png"), px)
+    if px.shape[2] == 4:
+        import OpenImageIO as oiio
+
+        # A TIFF with a straight alpha channel named as such.
+        out = oiio.ImageOutput.create(inp)
+        spec = oiio.ImageSpec(px.shape[1], px.shape[0], 4, "uint16")
+        spec.alpha_channel = 3
+        spec.attribute("oiio:UnassociatedAlpha", 1)
+        assert out.open(inp, spec) and out.write_image(px)
+        out.close()
+    a, b = write_polygon(os.path.join(tmp, "a.json"), src), write_polygon(os.path.join(tmp, "b.json"), dst)
+    whole, parts_ = os.path.join(tmp, f"whole.{ext}"), os.path.join(tmp, f"parts.{ext}")
+    warp_file(inp, whole, a, b, tiled=False, **options)
+    warp_file(inp, parts_, a, b, tiled=True, **options)
+    return read_pixels(whole), read_pixels(parts_)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    n=st.integers(5, 8),
+    data=st.data(),
+    interp=st.sampled_from(["linear", "nearest"]),
+    kind=st.sampled_from(["rgb8", "rgba16", "float"]),
+    ext=st.sampled_from(["png", "tif", "exr"]),
+    scale=st.sampled_from([1.0, 0.45, 1.15]),
+    size=st.sampled_from([None, (97, 141)]),
+)
+def test_strips_give_the_in_memory_output_bit_for_bit(small_strips, tmp_path_factory, n, data, interp, kind, ext, scale, size):
+    # Random simple polygons of either orientation, the target scaled (0.45:
+    # the map shrinks, so pixels average wide footprints) and an output of
+    # another size: every strip and chunk boundary, the window's edges, the
+    # edge coverage and the footprints must come out as in one piece.
+    src = data.draw(simple_polygons(n))
+    dst = data.draw(simple_polygons(n))
+    dst = 64.0 + (dst - 64.0) * scale
+    if kind == "float" and ext == "png":
+        ext = "tif"
+    px, _ = _image(kind, np.random.default_rng(n))
+    whole, strips = _both(str(tmp_path_factory.mktemp("t")), src, dst, px, ext, interp=interp, size=size)
+    assert whole.dtype == strips.dtype and whole.shape == strips.shape
+    assert whole.tobytes() == strips.tobytes()
+
+
+def test_cubic_in_strips_agrees_to_rounding(small_strips, tmp_path):
+    px, _ = _image("rgb8", np.random.default_rng(5))
+    whole, strips = _both(str(tmp_path), star(7), star(7, r_in=30, phase=0.2), px, "png", interp="cubic")
+    assert np.abs(whole.astype(int) - strips.astype(int)).max() <= 1
+
+
+def test_a_chunk_that_reaches_too_much_input_is_split_with_the_same_result(small_strips, monkeypatch, tmp_path):
+    # A strong shrink: each output pixel averages a wide footprint, so the
+    # parts read are large; with a budget of ~1000 RGB pixels chunks halve
+    # down to a few pixels, each read on its own.
+    reads = []
+    real = parts.PartReader.read
+
+    def read(self, x0, y0, x1, y1):
+        reads.append((x1 - x0) * (y1 - y0))
+        return real(self, x0, y0, x1, y1)
+
+    monkeypatch.setattr(parts.PartReader, "read", read)
+    monkeypatch.setattr(tiled, "PART_BYTES", 3000)
+    px, _ = _image("rgb8", np.random.default_rng(6))
+    src = star(6, r_in=40, r_out=62)
+    dst = 64.0 + (star(6, r_in=40, r_out=62, phase=0.1) - 64.0) * 0.12
+    whole, strips = _both(str(tmp_path), src, dst, px, "png")
+    assert whole.tobytes() == strips.tobytes()
+    assert len(reads) > 20
+    # Only chunks of one pixel may exceed the budget.
+    assert sorted(reads)[len(reads) // 2] * 3 <= 3000
+
+
+def test_parts_read_are_small_beside_the_image(small_strips, monkeypatch, tmp_path):
+    reads = []
+    real = parts.PartReader.read
+
+    def read(self, x0, y0, x1, y1):
+        reads.append((x1 - x0) * (y1 - y0))
+        return real(self, x0, y0, x1, y1)
+
+    monkeypatch.setattr(parts.PartReader, "read", read)
+    px, _ = _image("rgb8", np.random.default_rng(7), h=300, w=320)
+    src = star(9, cx=160, cy=150, r_in=90, r_out=140)
+    dst = star(9, cx=160, cy=150, r_in=100, r_out=145, phase=0.15)
+    whole, strips = _both(str(tmp_path), src, dst, px, "png")
+    assert whole.tobytes() == strips.tobytes()
+    # Strips of 16 rows and 24 columns read about 16 x 24 pixels plus the
+    # map's displacement: never more than a small share of the 96,000.
+    assert max(reads) < 0.05 * 300 * 320
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**31),
+    interp=st.sampled_from(["linear", "nearest"]),
+    spread=st.sampled_from([0.5, 3.0, 20.0]),
+)
+def test_resampling_a_part_reads_what_the_whole_image_gives(seed, interp, spread):
+    # Points anywhere (inside, on and beyond the border), Jacobians from
+    # magnifying to strongly shrinking, some unknown: the part `_reach` picks
+    # must give the whole image's samples exactly.
+    rng = np.random.default_rng(seed)
+    h, w = 40, 55
+    img = rng.integers(0, 256, (h, w, 2)).astype(np.uint8)
+    centre = rng.uniform([-3, -3], [w + 3, h + 3])
+    pts = centre + rng.normal(0, 4, (6, 7, 2))
+    jac = rng.normal(0, spread, (6, 7, 2, 2))
+    jac[0, :2] = np.nan
+    pts[1, 3] = np.nan
+    want = resample(img, pts, interp=interp, background=(7, 9), jacobian=jac)
+    header = parts.ImageHeader(w, h, 2, np.dtype(np.uint8))
+    x0, y0, x1, y1 = tiled._reach(pts, jac if interp == "linear" else None, None, header, 1)
+    got = resample(img[y0:y1, x0:x1], pts, interp=interp, background=(7, 9), jacobian=jac, part=(x0, y0, w, h))
+    assert got.tobytes() == want.tobytes()
+
+
+def test_a_warp_too_large_for_memory_goes_to_strips_by_itself(monkeypatch, tmp_path):
+    px, _ = _image("rgb8", np.random.default_rng(8))
+    inp = write_png(tmp_path / "in.png", px)
+    a, b = write_polygon(tmp_path / "a.json", star(6)), write_polygon(tmp_path / "b.json", star(6, phase=0.3))
+    code, err = run_cli([inp, "--src", a, "--dst", b, tmp_path / "whole.png", "-q"])
+    assert code == 0, err
+    # 30 kB of pixels may be held: the image (58 kB) does not fit.
+    monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", "30000")
+    code, err = run_cli([inp, "--src", a, "--dst", b, tmp_path / "strips.png", "-v"])
+    assert code == 0, err
+    assert "warping in strips" in err
+    assert read_pixels(tmp_path / "whole.png").tobytes() == read_pixels(tmp_path / "strips.png").tobytes()
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--grid", "g.png"], ["--report", "r.json"], ["--save-map", "m.exr"], ["--outside", "input"]],
+)
+def test_what_needs_the_whole_image_is_refused_in_strips(tmp_path, extra):
+    px, _ = _image("rgb8", np.random.default_rng(9))
+    inp = write_png(tmp_path / "in.png", px)
+    a, b = write_polygon(tmp_path / "a.json", star(6)), write_polygon(tmp_path / "b.json", star(6, phase=0.3))
+    extra = [str(tmp_path / e) if e.endswith((".png", ".json", ".exr")) else e for e in extra]
+    code, err = run_cli([inp, "--src", a, "--dst", b, tmp_path / "out.png", "--tiled", *extra])
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert sorted(os.listdir(tmp_path)) == ["a.json", "b.json", "in.png"]
+
+
+def test_jpeg_is_refused_before_any_work(tmp_path):
+    px, _ = _image("rgb8", np.random.default_rng(10))
+    inp = write_png(tmp_path / "in.png", px)
+    a, b = write_polygon(tmp_path / "a.json", star(6)), write_polygon(tmp_path / "b.json", star(6, phase=0.3))
+    code, err = run_cli([inp, "--src", a, "--dst", b, tmp_path / "out.jpg", "--tiled"])
+    assert code == 2 and "JPEG cannot be written in parts" in err
+    assert sorted(os.listdir(tmp_path)) == ["a.json", "b.json", "in.png"]

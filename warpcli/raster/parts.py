@@ -1,0 +1,259 @@
+"""Images read and written part by part, for images larger than memory (`warpcli.tiled`).
+
+`PartReader` reads any rectangle of an image through OpenImageIO's
+ImageCache: tiles (or, for files stored in scanlines, strips of 256 rows)
+decoded on demand and kept up to a memory budget, so reading a part costs
+memory in proportion to the part, not to the image. `StripWriter` writes an
+image strip after strip, tiled where the format stores tiles (TIFF, OpenEXR),
+in scanlines otherwise, under a temporary name renamed into place when the
+last strip is written and the file reads back whole (`atomic_path`).
+
+Both keep what `warpcli.raster.imageio` keeps: the file's own pixel type,
+channel names, alpha and its convention, and metadata.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import ImageInputError, ImageIOError
+from .imageio import (
+    _DROP_PREFIXES,
+    _KEEP,
+    _OIIO_TYPES,
+    _PREMULTIPLIED_FORMATS,
+    _c_stderr,
+    _check_input_file,
+    _one_line,
+    _premultiplied,
+    _verify,
+)
+
+#: Rows of a strip, and the side of a tile in tiled outputs.
+TILE = 256
+#: Memory OpenImageIO's cache may keep of decoded input tiles, in megabytes.
+CACHE_MB = 512.0
+
+
+@dataclass(frozen=True)
+class ImageHeader:
+    """What an image file's header says: its size, pixel type, channels and metadata."""
+
+    width: int
+    height: int
+    channels: int
+    dtype: np.dtype
+    channel_names: tuple[str, ...] = ()
+    alpha_channel: int | None = None
+    attributes: tuple = field(default=(), repr=False)
+    associated_alpha: bool = True
+    oriented: bool = False
+
+
+def read_header(path: str | os.PathLike[str]) -> ImageHeader:
+    """The header of the image at ``path``, as `read_image` would read it (no pixels).
+
+    Raises
+    ------
+    ImageInputError
+        If the file is missing, not a regular file, or not an image OpenImageIO reads.
+    """
+    import OpenImageIO as oiio
+
+    name = os.fspath(path)
+    _check_input_file(name)
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    with _c_stderr() as said:
+        inp = oiio.ImageInput.open(name, config)
+    if inp is None:
+        raise ImageInputError(f"{name}: cannot read image: {_one_line(oiio.geterror(), said.text)}")
+    try:
+        spec = inp.spec()
+    finally:
+        with _c_stderr():
+            inp.close()
+        inp.geterror()
+    dtype = _dtype_of(spec.format)
+    if dtype is None or spec.channelformats:
+        raise ImageInputError(f"{name}: pixel type {spec.format} (or per-channel types) cannot be warped in parts")
+    attrs = tuple(
+        (a.name, str(a.type), a.value) for a in spec.extra_attribs if a.name in _KEEP or not a.name.startswith(_DROP_PREFIXES)
+    )
+    return ImageHeader(
+        int(spec.width), int(spec.height), int(spec.nchannels), dtype, tuple(spec.channelnames),
+        spec.alpha_channel if spec.alpha_channel >= 0 else None, attrs,
+        spec.get_int_attribute("oiio:UnassociatedAlpha", 0) != 1, spec.get_int_attribute("Orientation", 1) != 1,
+    )  # fmt: skip
+
+
+def _dtype_of(typedesc) -> np.dtype | None:
+    name = str(typedesc)
+    for dtype, oiio_name in _OIIO_TYPES.items():
+        if oiio_name == name:
+            return dtype
+    return None
+
+
+class PartReader:
+    """Rectangles of one image file, decoded on demand through a private ImageCache.
+
+    Parameters
+    ----------
+    path : path-like
+    header : ImageHeader
+        Its `read_header`.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], header: ImageHeader) -> None:
+        import OpenImageIO as oiio
+
+        self.name = os.fspath(path)
+        self.header = header
+        self._oiio = oiio
+        self._cache = oiio.ImageCache(False)  # private: its memory is freed with it
+        self._cache.attribute("max_memory_MB", CACHE_MB)
+        self._cache.attribute("autotile", TILE)  # scanline files in strips, not whole
+        self._cache.attribute("unassociatedalpha", 1)
+        self._type = oiio.TypeDesc(_OIIO_TYPES[header.dtype])
+
+    def read(self, x0: int, y0: int, x1: int, y1: int) -> NDArray:
+        """Pixels of columns ``x0 <= x < x1`` and rows ``y0 <= y < y1``: (rows, columns, C).
+
+        Raises
+        ------
+        ImageInputError
+            If the file cannot be decoded there (cut short, damaged).
+        """
+        with _c_stderr() as said:
+            px = self._cache.get_pixels(self.name, 0, 0, x0, x1, y0, y1, 0, 1, self._type)
+        problem = self._cache.geterror()
+        if px is None or problem:
+            raise ImageInputError(f"{self.name}: cannot read image: {_one_line(problem, said.text)}")
+        px = np.asarray(px)
+        if px.ndim == 2:
+            px = px[:, :, None]
+        return px.reshape(y1 - y0, x1 - x0, self.header.channels)
+
+    def close(self) -> None:
+        self._cache.invalidate(self.name)
+        self._cache = None
+
+    def __enter__(self) -> PartReader:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._cache is not None:
+            self.close()
+
+
+def check_writable_in_parts(fmt: str, shown_name: str) -> None:
+    """Refuse a format that cannot be written strip by strip (JPEG: libjpeg ends the
+    process when a write fails, and the room for the whole file cannot be checked first)."""
+    if fmt == "jpeg":
+        raise ImageInputError(f"{shown_name}: JPEG cannot be written in parts; write TIFF, OpenEXR or PNG")
+
+
+def output_format(path: str) -> str:
+    """The format OpenImageIO writes for ``path``'s extension ("" if none)."""
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(path)
+    oiio.geterror()
+    return "" if out is None else out.format_name()
+
+
+class StripWriter:
+    """An image file written strip after strip, top to bottom.
+
+    Open it on the temporary path of `atomic_path`; `write` each strip of
+    `TILE` rows (the last may be shorter), then `close`, which checks that the
+    file reads back with its size. Every write is checked: a full disk is an
+    `ImageIOError` naming ``shown_name``.
+
+    Parameters
+    ----------
+    filename : str
+        Where to write (the format comes from the extension).
+    shown_name : str
+        The name given in messages (the user's path).
+    width, height : int
+    header : ImageHeader
+        Pixel type, channels, alpha and metadata of the output.
+    """
+
+    def __init__(self, filename: str, shown_name: str, width: int, height: int, header: ImageHeader) -> None:
+        import OpenImageIO as oiio
+
+        self._oiio = oiio
+        self.filename, self.shown_name = filename, shown_name
+        out = oiio.ImageOutput.create(filename)
+        if out is None:
+            raise ImageIOError(f"{shown_name}: cannot write: {_one_line(oiio.geterror())}")
+        self._out = out
+        self.format = out.format_name()
+        check_writable_in_parts(self.format, shown_name)
+        spec = oiio.ImageSpec(width, height, header.channels, _OIIO_TYPES[header.dtype])
+        if header.channel_names:
+            spec.channelnames = tuple(header.channel_names)
+        spec.alpha_channel = -1 if header.alpha_channel is None else int(header.alpha_channel)
+        self._premultiply = None
+        if header.alpha_channel is not None and not header.associated_alpha:
+            if self.format in _PREMULTIPLIED_FORMATS:
+                self._premultiply = header.alpha_channel
+            else:
+                spec.attribute("oiio:UnassociatedAlpha", 1)
+        for attr_name, attr_type, value in header.attributes:
+            try:
+                spec.attribute(attr_name, oiio.TypeDesc(attr_type), value)
+            except (TypeError, ValueError, RuntimeError):
+                continue
+        if not any(attr[0] == "DateTime" for attr in header.attributes):
+            spec.attribute("DateTime", "")
+        self.tiled = bool(out.supports("tiles"))
+        if self.tiled:
+            spec.tile_width = spec.tile_height = TILE
+        self._spec = spec
+        self._next = 0
+        with _c_stderr() as said:
+            ok = bool(out.open(filename, spec))
+        if not ok:
+            raise ImageIOError(f"{shown_name}: cannot write: {_one_line(out.geterror(), oiio.geterror(), said.text)}")
+
+    def write(self, pixels: NDArray) -> None:
+        """Write the next strip, (rows, width, C) in the header's pixel type."""
+        rows = pixels.shape[0]
+        y0, y1 = self._next, self._next + rows
+        if y1 > self._spec.height or (rows != TILE and y1 != self._spec.height):
+            raise ValueError(f"strip of rows {y0}-{y1} does not fit a {self._spec.height}-row image in strips of {TILE}")
+        px = pixels if self._premultiply is None else _premultiplied(pixels, self._premultiply)
+        px = np.ascontiguousarray(px)
+        with _c_stderr() as said:
+            if self.tiled:
+                ok = self._out.write_tiles(0, self._spec.width, y0, y1, 0, 1, px)
+            else:
+                ok = self._out.write_scanlines(y0, y1, 0, px)
+        if not ok:
+            raise ImageIOError(f"{self.shown_name}: cannot write: {_one_line(self._out.geterror(), said.text)}")
+        self._next = y1
+
+    def close(self) -> None:
+        """Finish the file and check that it reads back whole."""
+        if self._next != self._spec.height:
+            raise ValueError(f"{self._next} of {self._spec.height} rows written")
+        with _c_stderr() as said:
+            ok = bool(self._out.close())
+        problem = _one_line(self._out.geterror(), said.text, default="")
+        if not ok:
+            raise ImageIOError(f"{self.shown_name}: cannot write: {problem or 'unknown error'}")
+        _verify(self._oiio, self.filename, self.format, self._spec, None, self.shown_name, problem)
+
+    def abandon(self) -> None:
+        """Give up the file (its temporary path is removed by `atomic_path`)."""
+        with _c_stderr():
+            self._out.close()
+        self._out.geterror()
