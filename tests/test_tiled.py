@@ -189,3 +189,20 @@ def test_jpeg_is_refused_before_any_work(tmp_path):
     code, err = run_cli([inp, "--src", a, "--dst", b, tmp_path / "out.jpg", "--tiled"])
     assert code == 2 and "JPEG cannot be written in parts" in err
     assert sorted(os.listdir(tmp_path)) == ["a.json", "b.json", "in.png"]
+
+
+def test_a_batch_warps_an_image_too_large_for_memory_in_strips(monkeypatch, tmp_path):
+    from warpcli.pipeline import warp_batch
+
+    rng = np.random.default_rng(11)
+    small = write_png(tmp_path / "small.png", rng.integers(0, 256, (40, 50, 3)).astype(np.uint8))
+    big = write_png(tmp_path / "big.png", rng.integers(0, 256, (130, 150, 3)).astype(np.uint8))
+    a, b = write_polygon(tmp_path / "a.json", star(6)), write_polygon(tmp_path / "b.json", star(6, phase=0.3))
+    (tmp_path / "whole").mkdir()
+    (tmp_path / "strips").mkdir()
+    assert all(i.error is None for i in warp_batch([small, big], tmp_path / "whole", a, b))
+    monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", "30000")  # the big image (58 kB) does not fit
+    items = warp_batch([small, big], tmp_path / "strips", a, b)
+    assert [i.error for i in items] == [None, None]
+    for name in ("small.png", "big.png"):
+        assert read_pixels(tmp_path / "whole" / name).tobytes() == read_pixels(tmp_path / "strips" / name).tobytes()

@@ -743,8 +743,16 @@ class _Plans:
 
 
 def _warp_one(inp: str, out: str, plans: _Plans, opts: WarpOptions, src: Polygon) -> BatchItem:
-    """One image of a batch or sequence: read, resample, write; its error in the item."""
+    """One image of a batch or sequence: read, resample, write; its error in the item.
+
+    An image too large for memory is warped in strips (`warpcli.tiled`) with the same map."""
     try:
+        fmap = getattr(plans, "fmap", None)  # a Dask worker has the pull-backs only
+        if fmap is not None and _in_parts(inp, opts, None):
+            from .tiled import warp_file_tiled
+
+            warp_file_tiled(inp, out, fmap.src, fmap.dst, opts, fmap=fmap)
+            return BatchItem(inp, out)
         image = read_image(inp)
         shape = opts.size if opts.size is not None else (image.width, image.height)
         _check_paste(opts, shape, (image.width, image.height), inp)
