@@ -86,18 +86,24 @@ def test_cubic_in_strips_agrees_to_rounding(small_strips, tmp_path):
     assert np.abs(whole.astype(int) - strips.astype(int)).max() <= 1
 
 
-def test_a_chunk_that_reaches_too_much_input_is_split_with_the_same_result(small_strips, monkeypatch, tmp_path):
-    # A strong shrink: each output pixel averages a wide footprint, so the
-    # parts read are large; with a budget of ~1000 RGB pixels chunks halve
-    # down to a few pixels, each read on its own.
-    reads = []
+@pytest.fixture
+def reads(monkeypatch):
+    """The pixel count of every part of the input read, in order."""
+    counts = []
     real = parts.PartReader.read
 
     def read(self, x0, y0, x1, y1):
-        reads.append((x1 - x0) * (y1 - y0))
+        counts.append((x1 - x0) * (y1 - y0))
         return real(self, x0, y0, x1, y1)
 
     monkeypatch.setattr(parts.PartReader, "read", read)
+    return counts
+
+
+def test_a_chunk_that_reaches_too_much_input_is_split_with_the_same_result(small_strips, reads, monkeypatch, tmp_path):
+    # A strong shrink: each output pixel averages a wide footprint, so the
+    # parts read are large; with a budget of ~1000 RGB pixels chunks halve
+    # down to a few pixels, each read on its own.
     monkeypatch.setattr(tiled, "PART_BYTES", 3000)
     px, _ = _image("rgb8", np.random.default_rng(6))
     src = star(6, r_in=40, r_out=62)
@@ -109,15 +115,7 @@ def test_a_chunk_that_reaches_too_much_input_is_split_with_the_same_result(small
     assert sorted(reads)[len(reads) // 2] * 3 <= 3000
 
 
-def test_parts_read_are_small_beside_the_image(small_strips, monkeypatch, tmp_path):
-    reads = []
-    real = parts.PartReader.read
-
-    def read(self, x0, y0, x1, y1):
-        reads.append((x1 - x0) * (y1 - y0))
-        return real(self, x0, y0, x1, y1)
-
-    monkeypatch.setattr(parts.PartReader, "read", read)
+def test_parts_read_are_small_beside_the_image(small_strips, reads, tmp_path):
     px, _ = _image("rgb8", np.random.default_rng(7), h=300, w=320)
     src = star(9, cx=160, cy=150, r_in=90, r_out=140)
     dst = star(9, cx=160, cy=150, r_in=100, r_out=145, phase=0.15)

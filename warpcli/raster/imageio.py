@@ -137,16 +137,7 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
     import OpenImageIO as oiio
 
     name = os.fspath(path)
-    _check_input_file(name)
-    # Ask for straight colour where the file stores it so (PNG): OpenImageIO
-    # would otherwise premultiply it in 8 bits, losing the colour of
-    # transparent pixels and precision at low alpha.
-    config = oiio.ImageSpec()
-    config.attribute("oiio:UnassociatedAlpha", 1)
-    with _c_stderr() as said:
-        inp = oiio.ImageInput.open(name, config)
-    if inp is None:
-        raise ImageInputError(f"{name}: cannot read image: {_one_line(oiio.geterror(), said.text)}")
+    inp, config = _open_input(name)
     try:
         spec = inp.spec()
         oriented = spec.get_int_attribute("Orientation", 1) != 1
@@ -186,6 +177,29 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
     alpha = spec.alpha_channel if spec.alpha_channel >= 0 else None
     associated = spec.get_int_attribute("oiio:UnassociatedAlpha", 0) != 1
     return RasterImage(np.ascontiguousarray(pixels), tuple(spec.channelnames), alpha, attrs, associated)
+
+
+def _open_input(name: str):
+    """An OpenImageIO ImageInput on the regular file ``name``, and the configuration it was opened with.
+
+    Raises
+    ------
+    ImageInputError
+        If the file is missing, not a regular file, or not an image OpenImageIO reads.
+    """
+    import OpenImageIO as oiio
+
+    _check_input_file(name)
+    # Ask for straight colour where the file stores it so (PNG): OpenImageIO
+    # would otherwise premultiply it in 8 bits, losing the colour of
+    # transparent pixels and precision at low alpha.
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    with _c_stderr() as said:
+        inp = oiio.ImageInput.open(name, config)
+    if inp is None:
+        raise ImageInputError(f"{name}: cannot read image: {_one_line(oiio.geterror(), said.text)}")
+    return inp, config
 
 
 # A complaint that comes with pixels but means the file was cut short.

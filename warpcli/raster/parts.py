@@ -27,8 +27,8 @@ from .imageio import (
     _OIIO_TYPES,
     _PREMULTIPLIED_FORMATS,
     _c_stderr,
-    _check_input_file,
     _one_line,
+    _open_input,
     _premultiplied,
     _verify,
 )
@@ -62,16 +62,8 @@ def read_header(path: str | os.PathLike[str]) -> ImageHeader:
     ImageInputError
         If the file is missing, not a regular file, or not an image OpenImageIO reads.
     """
-    import OpenImageIO as oiio
-
     name = os.fspath(path)
-    _check_input_file(name)
-    config = oiio.ImageSpec()
-    config.attribute("oiio:UnassociatedAlpha", 1)
-    with _c_stderr() as said:
-        inp = oiio.ImageInput.open(name, config)
-    if inp is None:
-        raise ImageInputError(f"{name}: cannot read image: {_one_line(oiio.geterror(), said.text)}")
+    inp, _ = _open_input(name)
     try:
         spec = inp.spec()
     finally:
