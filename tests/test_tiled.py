@@ -204,3 +204,50 @@ def test_a_batch_warps_an_image_too_large_for_memory_in_strips(monkeypatch, tmp_
     assert [i.error for i in items] == [None, None]
     for name in ("small.png", "big.png"):
         assert read_pixels(tmp_path / "whole" / name).tobytes() == read_pixels(tmp_path / "strips" / name).tobytes()
+
+
+@pytest.mark.parametrize("ext", ["png", "tif", "exr"])
+def test_a_file_size_limit_in_strips_is_one_line_naming_the_output_and_leaves_nothing(tmp_path, ext):
+    # RLIMIT_FSIZE (ulimit -f) in a subprocess: the write of a strip fails
+    # with EFBIG part way through the file.
+    import resource
+    import subprocess
+    import sys
+
+    px = np.random.default_rng(12).integers(0, 256, (256, 256, 3)).astype(np.uint8)
+    inp = write_png(tmp_path / "in.png", px)
+    frame = write_polygon(tmp_path / "f.json", [[0, 0], [256, 0], [256, 256], [0, 256]])
+    (tmp_path / "out").mkdir()
+    out = tmp_path / "out" / f"o.{ext}"
+    done = subprocess.run(
+        [sys.executable, "-m", "warpcli", inp, "--src", frame, "--dst", frame, str(out), "--tiled", "--interp", "nearest"],
+        capture_output=True, text=True, timeout=300,
+        preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (65536, 65536)),
+    )  # fmt: skip
+    assert done.returncode == 1
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"warp: error: {out}: cannot write: File too large"), lines
+    assert ".warpcli-" not in done.stderr
+    assert os.listdir(tmp_path / "out") == []
+
+
+def test_an_input_cut_short_is_one_line_exit_2_and_leaves_nothing(tmp_path):
+    import OpenImageIO as oiio
+
+    px = np.random.default_rng(13).integers(0, 256, (200, 180, 3)).astype(np.uint8)
+    whole = str(tmp_path / "whole.tif")
+    out = oiio.ImageOutput.create(whole)
+    spec = oiio.ImageSpec(180, 200, 3, "uint8")
+    spec.tile_width = spec.tile_height = 32
+    spec.attribute("compression", "none")
+    assert out.open(whole, spec) and out.write_image(px)
+    out.close()
+    data = (tmp_path / "whole.tif").read_bytes()
+    cut = tmp_path / "cut.tif"
+    cut.write_bytes(data[: len(data) // 2])
+    a = write_polygon(tmp_path / "a.json", [[0, 0], [180, 0], [180, 200], [0, 200]])
+    b = write_polygon(tmp_path / "b.json", [[5, 0], [180, 9], [170, 200], [0, 190]])
+    (tmp_path / "out").mkdir()
+    code, err = run_cli([cut, "--src", a, "--dst", b, tmp_path / "out" / "o.tif", "--tiled"])
+    assert code == 2 and err.startswith(f"warp: error: {cut}: cannot read image") and len(err.strip().splitlines()) == 1
+    assert os.listdir(tmp_path / "out") == []

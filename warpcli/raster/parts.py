@@ -31,6 +31,7 @@ from .imageio import (
     _open_input,
     _premultiplied,
     _verify,
+    _write_failure,
 )
 
 #: Rows of a strip, and the side of a tile in tiled outputs.
@@ -214,7 +215,7 @@ class StripWriter:
         with _c_stderr() as said:
             ok = bool(out.open(filename, spec))
         if not ok:
-            raise ImageIOError(f"{shown_name}: cannot write: {_one_line(out.geterror(), oiio.geterror(), said.text)}")
+            self._fail(_one_line(out.geterror(), oiio.geterror(), said.text))
 
     def write(self, pixels: NDArray) -> None:
         """Write the next strip, (rows, width, C) in the header's pixel type."""
@@ -230,8 +231,13 @@ class StripWriter:
             else:
                 ok = self._out.write_scanlines(y0, y1, 0, px)
         if not ok:
-            raise ImageIOError(f"{self.shown_name}: cannot write: {_one_line(self._out.geterror(), said.text)}")
+            self._fail(_one_line(self._out.geterror(), said.text))
         self._next = y1
+
+    def _fail(self, text: str) -> None:
+        # The temporary name replaced by the output's, and the OS's likely
+        # reason (a full disk, a file size limit) added where the library gave none.
+        raise ImageIOError(_write_failure(self.shown_name, text, self.filename, self.filename, True))
 
     def close(self) -> None:
         """Finish the file and check that it reads back whole."""
@@ -241,7 +247,7 @@ class StripWriter:
             ok = bool(self._out.close())
         problem = _one_line(self._out.geterror(), said.text, default="")
         if not ok:
-            raise ImageIOError(f"{self.shown_name}: cannot write: {problem or 'unknown error'}")
+            self._fail(problem or "unknown error")
         _verify(self._oiio, self.filename, self.format, self._spec, None, self.shown_name, problem)
 
     def abandon(self) -> None:
