@@ -251,3 +251,20 @@ def test_an_input_cut_short_is_one_line_exit_2_and_leaves_nothing(tmp_path):
     code, err = run_cli([cut, "--src", a, "--dst", b, tmp_path / "out" / "o.tif", "--tiled"])
     assert code == 2 and err.startswith(f"warp: error: {cut}: cannot read image") and len(err.strip().splitlines()) == 1
     assert os.listdir(tmp_path / "out") == []
+
+
+def test_a_header_declaring_far_more_pixels_than_its_file_holds_is_refused(tmp_path, monkeypatch):
+    # A 30000 x 30000 PNG header with 4 kB after it: too large for memory
+    # (the limit lowered to 100 MiB), and not taken into strips unasked,
+    # where it would be decoded for minutes: one line, exit 2, no output.
+    from .test_imageio import png_of_zeros
+
+    full = png_of_zeros(tmp_path / "full.png", 30000, 30000)
+    bomb = tmp_path / "bomb.png"
+    bomb.write_bytes(open(full, "rb").read()[:4096])
+    os.unlink(full)
+    monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", str(100 * 2**20))
+    a = write_polygon(tmp_path / "a.json", star(6))
+    code, err = run_cli([bomb, "--src", a, "--dst", a, tmp_path / "out.png"])
+    assert code == 2 and "decompression bomb" in err and len(err.strip().splitlines()) == 1
+    assert sorted(os.listdir(tmp_path)) == ["a.json", "bomb.png"]

@@ -568,7 +568,12 @@ def _in_parts(input_path, opts: WarpOptions, tiled: bool | None) -> bool:
     except WarpError:
         return False  # read_image says what is wrong with it
     width, height = opts.size if opts.size is not None else (header.width, header.height)
-    return tiled_needed(header, width, height)
+    if not tiled_needed(header, width, height):
+        return False
+    from .tiled import check_plausible
+
+    check_plausible(input_path, header)
+    return True
 
 
 def _warp_file_tiled(input_path, output_path, src, dst, opts, progress, refused: dict, save_theta):

@@ -248,6 +248,32 @@ def _clip(v: float, lo: int, hi: int) -> int:
     return int(min(max(v, lo), hi))
 
 
+#: The most decoded bytes per byte of file an image taken into strips by itself
+#: may declare: zlib (PNG, TIFF, OpenEXR) compresses at most about 1032 to 1.
+MAX_COMPRESSION = 1100
+
+
+def check_plausible(path: str | os.PathLike[str], header: ImageHeader) -> None:
+    """Refuse to warp in strips, unasked, an image whose header declares far more
+    pixels than its file could hold (a decompression bomb): it would run for
+    hours and fill the disk. ``--tiled`` takes it anyway.
+
+    Raises
+    ------
+    ImageInputError
+    """
+    from .errors import ImageInputError
+
+    decoded = header.width * header.height * header.channels * header.dtype.itemsize
+    size = max(os.stat(path).st_size, 1)
+    if decoded > MAX_COMPRESSION * size:
+        raise ImageInputError(
+            f"{os.fspath(path)}: declares {header.width} x {header.height} pixels ({decoded / 1e9:.3g} GB) in a "
+            f"file of {size} bytes, more than any compression gives: refused as a decompression bomb "
+            "(it does not fit in memory; --tiled warps it in strips anyway)"
+        )
+
+
 def tiled_needed(header: ImageHeader, width: int, height: int) -> bool:
     """Whether a whole warp would not fit in memory: the input's pixels, or the
     output with its per-pixel map (the limits `warpcli.pipeline.warp_image` checks)."""
@@ -262,4 +288,4 @@ def tiled_needed(header: ImageHeader, width: int, height: int) -> bool:
     return False
 
 
-__all__ = ["CHUNK", "CUBIC_MARGIN", "PART_BYTES", "TiledResult", "tiled_needed", "warp_file_tiled"]
+__all__ = ["CHUNK", "CUBIC_MARGIN", "MAX_COMPRESSION", "PART_BYTES", "TiledResult", "check_plausible", "tiled_needed", "warp_file_tiled"]
