@@ -16,6 +16,7 @@ from . import _kernels
 from .surface import Surface
 from .tetmesh import TetMesh, tet_volumes
 from .theta import Theta
+from .untangle import inverted, pinned_flat
 
 #: The pull-back works through the output grid in slabs of whole slices of
 #: about this many voxels, so its temporary arrays stay small (about 100
@@ -121,11 +122,15 @@ class TetMap(VolumeThetaMap):
         The mesh of the polyhedron.
     values : (N, 3) ndarray of float
         phi at its nodes: points of Theta.
+    harmonic : (N, 3) ndarray of float or None
+        The discrete harmonic map's values, when ``values`` are those
+        untangled from it (`warpcli.volume.untangle`); else None.
     """
 
     mesh: TetMesh = field(default=None, kw_only=True)  # type: ignore[assignment]
     values: NDArray[np.float64] = field(default=None, kw_only=True)  # type: ignore[assignment]
     info: dict = field(default_factory=dict, kw_only=True)
+    harmonic: NDArray[np.float64] | None = field(default=None, kw_only=True)
 
     @cached_property
     def domain_coefficients(self) -> NDArray[np.float64]:
@@ -153,25 +158,30 @@ class TetMap(VolumeThetaMap):
         return _Buckets(self.values, self.mesh.tets)
 
     def flipped(self) -> NDArray[np.bool_]:
-        """Tetrahedra whose image is inverted, or flat with a node inside the solid.
+        """Tetrahedra whose image is inverted, or flat though a free node could lift it.
 
-        A tetrahedron with all four nodes on the boundary can have a flat
-        image (its nodes on one flat face of Theta where the cage bends):
-        it collapses a sliver onto the boundary, which is harmless for the
-        warp, and is counted apart (`flattened`).
+        A tetrahedron whose boundary nodes alone make its image flat (all
+        four on one flat face of Theta where the cage bends, or three on one
+        edge of Theta) collapses a sliver onto a triangle, which does not
+        fold the warp, and is counted apart (`flattened`); see
+        `warpcli.volume.untangle.pinned_flat`.
         """
-        vol = tet_volumes(self.values, self.mesh.tets)
-        return (vol < 0) | ((vol == 0) & ~self._all_boundary())
+        return inverted(self.values, self.mesh.tets, self._fixed())
 
     def flattened(self) -> int:
-        """Boundary slivers with a flat image (see `flipped`)."""
-        vol = tet_volumes(self.values, self.mesh.tets)
-        return int(((vol == 0) & self._all_boundary()).sum())
+        """Slivers flat by their boundary nodes (see `flipped`)."""
+        return int(pinned_flat(self.values, self.mesh.tets, self._fixed()).sum())
 
-    def _all_boundary(self) -> NDArray[np.bool_]:
+    def _fixed(self) -> NDArray[np.bool_]:
         on = np.zeros(self.mesh.n_vertices, dtype=bool)
         on[self.mesh.boundary] = True
-        return on[self.mesh.tets].all(axis=1)
+        return on
+
+    def moved(self) -> NDArray[np.int64]:
+        """Nodes whose values differ from the harmonic map's (none unless untangled)."""
+        if self.harmonic is None:
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero((self.values != self.harmonic).any(axis=1))
 
     def certify(self) -> Certificate:
         return Certificate(int(self.flipped().sum()), self.mesh.n_tets)
@@ -179,7 +189,7 @@ class TetMap(VolumeThetaMap):
     def describe(self) -> dict:
         return {
             "vertices": self.mesh.n_vertices, "tetrahedra": self.mesh.n_tets,
-            "flattened_boundary_slivers": self.flattened(), **self.info,
+            "flattened_slivers": self.flattened(), **self.info,
         }  # fmt: skip
 
     def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
@@ -395,6 +405,31 @@ class VolumeMap:
                 f"the maps flip {c0.flipped} tetrahedra of {self.src.name} and {c1.flipped} of {self.dst.name}; "
                 "the warp would fold the volume over itself"
             )
+
+    def untangling_displacement(self) -> float | None:
+        """How far untangling moved the warp: the largest displacement at a moved node, in world units.
+
+        At a target node whose image in Theta moved from y0 (harmonic) to
+        y1, f^-1 moved from phi0^-1(y0) to phi0^-1(y1) in the source; at a
+        source node, f from phi1^-1(y0) to phi1^-1(y1) in the target. Both
+        maps being piecewise linear, the largest difference of the warps
+        is at such nodes where the other map is affine around them. None
+        when no node moved (or no moved node's images can be followed).
+        """
+        worst = None
+        for mine, other in ((self.phi0, self.phi1), (self.phi1, self.phi0)):
+            if not isinstance(mine, TetMap) or mine.harmonic is None:
+                continue
+            moved = mine.moved()
+            if len(moved) == 0:
+                continue
+            a = other.inverse(mine.harmonic[moved]).points
+            b = other.inverse(mine.values[moved]).points
+            d = np.linalg.norm(a - b, axis=1)
+            d = d[np.isfinite(d)]
+            if len(d):
+                worst = max(worst or 0.0, float(d.max()))
+        return worst
 
     def forward(self, points: ArrayLike) -> NDArray[np.float64]:
         """Source points to the target; NaN outside the source polyhedron."""

@@ -41,8 +41,9 @@ def build_map(
     voxel: float = 1.0,
     solver: str = "auto",
     grade: bool = True,
+    untangle: bool = True,
 ) -> VolumeMap:
-    """Build f between two checked cages: choose Theta, mesh, solve.
+    """Build f between two checked cages: choose Theta, mesh, solve, untangle.
 
     Parameters
     ----------
@@ -59,6 +60,10 @@ def build_map(
         See `warpcli.volume.fem.solve_dirichlet`.
     grade : bool
         Refine towards concave edges.
+    untangle : bool
+        Move the images of the nodes of inverted tetrahedra into the kernels
+        of their stars (`warpcli.volume.untangle`); False keeps the discrete
+        harmonic maps as they are.
 
     Returns
     -------
@@ -83,9 +88,13 @@ def build_map(
             maps.append(IdentityMap(cage, th))
         elif k == 1 and same and isinstance(maps[0], TetMap):
             m0 = maps[0]
-            maps.append(TetMap(cage, th, mesh=m0.mesh, values=m0.values, info=m0.info))  # type: ignore[attr-defined]
+            maps.append(TetMap(cage, th, mesh=m0.mesh, values=m0.values, info=m0.info, harmonic=m0.harmonic))  # type: ignore[attr-defined]
         else:
-            maps.append(build_tet_map(cage, th, edge=edge, voxel=voxel, solver=solver, grade=grade, timings=timings))
+            maps.append(
+                build_tet_map(
+                    cage, th, edge=edge, voxel=voxel, solver=solver, grade=grade, untangle=untangle, timings=timings
+                )
+            )
     result = VolumeMap(maps[0], maps[1])
     result.timings.update(timings)
     return result
@@ -99,9 +108,16 @@ def build_tet_map(
     voxel: float = 1.0,
     solver: str = "auto",
     grade: bool = True,
+    untangle: bool = True,
     timings: dict | None = None,
 ) -> TetMap:
-    """The harmonic map of one cage onto Theta: mesh, P1 Laplacian, Dirichlet solve."""
+    """The harmonic map of one cage onto Theta: mesh, P1 Laplacian, Dirichlet solve, then untangled
+    (`warpcli.volume.untangle.untangle`) unless ``untangle`` is False.
+
+    ``info["untangle"]`` says how many tetrahedra were inverted before and
+    after, and how many nodes moved; the map keeps the harmonic values
+    (`TetMap.harmonic`) when any moved.
+    """
     timings = {} if timings is None else timings
     h = auto_edge(cage, voxel) if edge is None else float(edge)
     t0 = time.perf_counter()
@@ -111,7 +127,19 @@ def build_tet_map(
     t2 = time.perf_counter()
     timings["mesh"] = timings.get("mesh", 0.0) + t1 - t0
     timings["solve"] = timings.get("solve", 0.0) + t2 - t1
-    return TetMap(cage, theta, mesh=mesh, values=values, info={"edge": h, **info})
+    harmonic = None
+    info = {"edge": h, **info}
+    if untangle:
+        from .untangle import untangle as untangle_map
+
+        fixed = np.zeros(mesh.n_vertices, dtype=bool)
+        fixed[mesh.boundary] = True
+        done = untangle_map(values, mesh.tets, fixed)
+        info["untangle"] = done.describe()
+        if len(done.moved):
+            harmonic, values = values, done.values
+        timings["untangle"] = timings.get("untangle", 0.0) + time.perf_counter() - t2
+    return TetMap(cage, theta, mesh=mesh, values=values, info=info, harmonic=harmonic)
 
 
 def warp_volume(
@@ -187,6 +215,7 @@ def warp_volume_file(
     background: float = 0.0,
     edge: float | None = None,
     solver: str = "auto",
+    untangle: bool = True,
     check: bool = False,
     report: str | os.PathLike[str] | None = None,
     picture: str | os.PathLike[str] | None = None,
@@ -213,8 +242,11 @@ def warp_volume_file(
     edge : float or None
         Nominal tetrahedron edge length, in the cages' units.
     solver : str
+    untangle : bool
+        Untangle the discrete harmonic maps (see `build_map`).
     check : bool
-        Refuse (`FoldOverError`) a map that flips any tetrahedron.
+        Refuse (`FoldOverError`) a map that flips any tetrahedron (after
+        untangling): nothing is written.
     report : path-like or None
         Write the report (JSON) there.
     picture : path-like or None
@@ -247,7 +279,7 @@ def warp_volume_file(
     volume = read_volume(input)
     voxel = float(np.cbrt(abs(np.linalg.det(volume.grid.affine[:3, :3]))))
     t0 = time.perf_counter()
-    vmap = build_map(a, b, theta, edge=edge, voxel=voxel, solver=solver)
+    vmap = build_map(a, b, theta, edge=edge, voxel=voxel, solver=solver, untangle=untangle)
     vmap.timings["build"] = time.perf_counter() - t0
     if check:
         vmap.check_bijective()

@@ -81,16 +81,29 @@ def build_report(result) -> dict:
             }
         )  # fmt: skip
     c0, c1 = vmap.certificates()
+    moved = vmap.untangling_displacement()
+    voxel = float(np.cbrt(abs(np.linalg.det(grid.affine[:3, :3]))))
+    untangling = {
+        "source": _untangle_info(vmap.phi0), "target": _untangle_info(vmap.phi1),
+        "max_displacement_voxels": 0.0 if moved is None else round(moved / voxel, 4),
+    }  # fmt: skip
     return {
         "source": vmap.src.name,
         "target": vmap.dst.name,
         "theta": {"name": vmap.theta.name, "convex": vmap.theta.convex, **vmap.theta.notes},
         "maps": {"source": vmap.phi0.describe(), "target": vmap.phi1.describe()},
         "flipped_tetrahedra": {"source": c0.flipped, "target": c1.flipped},
+        "untangling": untangling,
         "output_voxels_inside": int(result.inside),
         "distortion": summary,
         "timings": {k: round(v, 4) for k, v in result.timings.items()},
     }
+
+
+def _untangle_info(phi) -> dict | None:
+    """Inverted tetrahedra of the harmonic map and of the untangled one, and the nodes moved; None without a mesh."""
+    info = getattr(phi, "info", {}).get("untangle")
+    return dict(info) if info else None
 
 
 def report_picture(volume, result, step: int = GRID_STEP) -> bytes:
