@@ -431,8 +431,8 @@ def build_map(
     theta = theta_for(src, dst, opts)
     method = METHODS[opts.method].load()
 
-    def built(polygon: Polygon, role: str, region: Region | None, side: str) -> ThetaMap:
-        phi = method.build(polygon, theta, opts, role, region)
+    def built(polygon: Polygon, role: str, region: Region | None, side: str, pending: Any = None) -> ThetaMap:
+        phi = pending.result() if pending is not None else method.build(polygon, theta, opts, role, region)
         # Maps built for images (regions given) are pulled back next: the
         # target evaluated on the output grid, the source inverted. A method
         # that keeps lookup tables for that makes them here, on this thread.
@@ -440,13 +440,22 @@ def build_map(
             phi.precompute(side)
         return phi
 
-    # The target is built here while the source is built on a second thread,
-    # and the method's kernels load on a third: solving (SuperLU) releases the
-    # GIL (meshing, in triangle, does not). Each map is independent, so the
-    # results do not depend on the scheduling.
-    source = Task(built, src, "source", regions[0], "inverse")
+    # The target is built here while the source is built beside it: in a
+    # forked child where the method can (FEM: triangle and SuperLU hold the
+    # GIL, so two threads would take turns), else on a second thread; its
+    # lookup tables are made on a second thread either way, and the method's
+    # kernels load on a third. Each map is independent, so the results do
+    # not depend on the scheduling.
+    forked = getattr(method, "build_forked", None)
+    pending = forked(src, theta, opts, "source", regions[0]) if forked is not None else None
+    source = Task(built, src, "source", regions[0], "inverse", pending)
     Task(method.prepare)  # nobody waits: a kernel called before it is loaded waits for it
-    phi1 = built(dst, "target", regions[1], "grid")
+    try:
+        phi1 = built(dst, "target", regions[1], "grid")
+    except BaseException:
+        if pending is not None:
+            pending.cancel()  # the source is no longer wanted
+        raise
     phi0 = source.result()
     result = BijectiveMap(phi0, phi1)
     for phi in (phi0, phi1):

@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
@@ -19,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..._native import Kernels
 from ...boundary import nearest_edge
+from ...errors import MeshingError
 from ...options import MapOptions
 from ...polygon import Polygon
 from ..base import Certificate, GridSample, Mapped, ThetaMap, as_points, inv2
@@ -347,6 +349,57 @@ def build(
     if options.check:
         phi = repaired(phi)
     return phi
+
+
+def _mesh_and_solve(polygon: Polygon, theta: Theta, options: MapOptions, role: str, region) -> tuple:
+    """What `build` computes before its repair, as plain data for a forked child to send back."""
+    phi = build(polygon, theta, dataclasses.replace(options, check=False), role, region)
+    return phi.mesh, phi.values, phi.timings
+
+
+class _Forked:
+    """An FEM map being built in a forked child (`warpcli._fork`); `result` gives it."""
+
+    def __init__(self, polygon: Polygon, theta: Theta, options: MapOptions, role: str, region) -> None:
+        from ..._fork import Forked
+
+        self.polygon, self.theta, self.options, self.role = polygon, theta, options, role
+        sparse.load_superlu()  # in the parent, so the child imports nothing
+        self._child = Forked(_mesh_and_solve, polygon, theta, options, role, region)
+
+    def result(self) -> FEMMap:
+        from ..._fork import ChildDied
+
+        try:
+            mesh, values, timings = self._child.result()
+        except ChildDied as err:
+            raise MeshingError(f"{self.polygon.name}: the process meshing and solving it {err}") from None
+        boundary = self.options.src_boundary if self.role == "source" else self.options.dst_boundary
+        phi = FEMMap(
+            self.polygon, self.theta, mesh, values, self.options.weights, timings=timings, boundary=boundary,
+            conditions=self.options.conditions,
+        )  # fmt: skip
+        return repaired(phi) if self.options.check else phi
+
+    def cancel(self) -> None:
+        self._child.cancel()
+
+
+def build_forked(
+    polygon: Polygon, theta: Theta, options: MapOptions, role: str = "source", region=None
+) -> _Forked | None:
+    """`build` in a forked child process, so that it runs beside the other map's build
+    (triangle and SuperLU hold the GIL, so threads take turns); None where that is
+    not available (`warpcli._fork.available`) or not for these options (mixed
+    conditions keep their solver). ``.result()`` is what `build` returns, bit for bit."""
+    from ..._fork import available
+
+    if not available() or options.conditions == "mixed":
+        return None
+    try:
+        return _Forked(polygon, theta, options, role, region)
+    except OSError:  # no memory or processes left for a child: the caller builds on a thread
+        return None
 
 
 def repaired(phi: FEMMap) -> FEMMap:

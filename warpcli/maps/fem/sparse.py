@@ -292,6 +292,14 @@ def _superlu():
         return _SUPERLU
 
 
+def load_superlu() -> None:
+    """Load SuperLU now if it can be (a forked child then finds it loaded)."""
+    try:
+        _superlu()
+    except Unsupported:
+        pass
+
+
 def _csc_array(*args, **kwargs):
     """What SuperLU builds its L and U with, when asked for them (imports scipy.sparse then)."""
     from scipy.sparse import csc_array

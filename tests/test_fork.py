@@ -1,0 +1,96 @@
+"""Work in a forked child (`warpcli._fork`): the same result as in the parent, its errors, its crashes."""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from warpcli import _fork
+from warpcli.errors import InputError, MeshingError
+from warpcli.maps import fem
+from warpcli.maps.theta import theta_for
+from warpcli.options import MapOptions
+from warpcli.polygon import Polygon
+
+from .helpers import simple_polygons
+
+pytestmark = pytest.mark.skipif(not _fork.available(), reason="no fork here")
+
+
+def _die():
+    os.kill(os.getpid(), signal.SIGSEGV)
+
+
+def _fail():
+    raise InputError("bad.json: nothing to mesh")
+
+
+def _say_and_return(x):
+    logging.getLogger("warpcli").warning("from the child: %d", x)
+    return {"twice": 2 * x, "array": np.arange(x)}
+
+
+def test_a_result_and_an_error_come_back_as_they_were():
+    got = _fork.Forked(_say_and_return, 5).result()
+    assert got["twice"] == 10 and got["array"].tolist() == [0, 1, 2, 3, 4]
+    with pytest.raises(InputError, match="^bad.json: nothing to mesh$"):
+        _fork.Forked(_fail).result()
+
+
+def test_a_child_that_crashes_is_an_error_not_a_crash():
+    with pytest.raises(_fork.ChildDied, match="killed by SIGSEGV"):
+        _fork.Forked(_die).result()
+
+
+def test_what_the_child_logs_is_logged_once_by_the_parent(caplog):
+    pending = _fork.Forked(_say_and_return, 3)
+    with caplog.at_level(logging.WARNING, logger="warpcli"):
+        pending.result()
+        pending.result()
+    assert [r.getMessage() for r in caplog.records] == ["from the child: 3"]
+
+
+def test_a_cancelled_child_is_stopped():
+    pending = _fork.Forked(time.sleep, 60)
+    t0 = time.perf_counter()
+    pending.cancel()
+    with pytest.raises(_fork.ChildDied, match="SIGKILL"):
+        pending.result()
+    assert time.perf_counter() - t0 < 10
+
+
+@settings(max_examples=8, deadline=None)
+@given(n=st.integers(4, 9), data=st.data(), weights=st.sampled_from(["cotan", "positive"]))
+def test_an_fem_map_built_in_a_child_is_the_one_built_here_bit_for_bit(n, data, weights):
+    src = Polygon(data.draw(simple_polygons(n)), name="a")
+    dst = Polygon(data.draw(simple_polygons(n)), name="b")
+    opts = MapOptions(weights=weights)
+    theta = theta_for(src, dst, opts)
+    here = fem.build(src, theta, opts, "source", (0.0, 0.0, 128.0, 128.0))
+    there = fem.build_forked(src, theta, opts, "source", (0.0, 0.0, 128.0, 128.0)).result()
+    assert np.array_equal(here.mesh.vertices, there.mesh.vertices)
+    assert np.array_equal(here.mesh.triangles, there.mesh.triangles)
+    assert here.values.tobytes() == there.values.tobytes()
+    assert here.weights == there.weights
+
+
+def test_an_fem_build_that_dies_in_its_child_names_the_polygon(monkeypatch):
+    monkeypatch.setattr(fem, "_mesh_and_solve", lambda *args: _die())
+    sq = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), name="square.json")
+    opts = MapOptions()
+    with pytest.raises(MeshingError, match="^square.json: the process meshing and solving it killed by SIGSEGV"):
+        fem.build_forked(sq, theta_for(sq, sq, opts), opts).result()
+
+
+def test_fork_can_be_turned_off(monkeypatch):
+    monkeypatch.setenv(_fork.FORK_ENV, "0")
+    assert not _fork.available()
+    sq = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), name="sq")
+    assert fem.build_forked(sq, theta_for(sq, sq, MapOptions()), MapOptions()) is None
