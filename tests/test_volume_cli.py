@@ -64,3 +64,26 @@ def test_warp_volume_bytes_do_not_depend_on_the_thread_count(tmp_path):
         assert done.returncode == 0, done.stderr
         outs.append(out.read_bytes())
     assert outs[0] == outs[1] == outs[2]
+
+
+def test_a_folded_volume_is_refused_unless_folds_are_allowed(tmp_path, monkeypatch):
+    # A map that stays folded after untangling (forced here: no untangling,
+    # and a certificate that reports one inverted tetrahedron) is not
+    # written, exit 1; --allow-folds writes it with a warning.
+    from warpcli.volume import compose
+
+    data = np.random.default_rng(3).integers(0, 255, (16, 16, 16), dtype=np.uint8)
+    tifffile.imwrite(tmp_path / "in.tif", data, photometric="minisblack")
+    v, f = box(1, (2.0, 2.0, 2.0), (14.0, 14.0, 14.0))
+    write_obj(tmp_path / "cube.obj", v, f)
+    real = compose.TetMap.certify
+    monkeypatch.setattr(compose.TetMap, "certify", lambda self: type(real(self))(1, self.mesh.n_tets))
+    w = v * 0.9 + 1.0
+    write_obj(tmp_path / "small.obj", w, f)
+    args = ["volume", tmp_path / "in.tif", tmp_path / "out.tif", "--src", tmp_path / "cube.obj", "--dst", tmp_path / "small.obj"]
+    code, err = run_cli(args)
+    assert code == 1 and "fold the volume" in err and "--allow-folds" in err and err.count("\n") == 1, err
+    assert not (tmp_path / "out.tif").exists()
+    code, err = run_cli(args + ["--allow-folds"])
+    assert code == 0 and "folds the volume there" in err, err
+    assert (tmp_path / "out.tif").exists()

@@ -467,11 +467,11 @@ def points(input_path, output_path, src_path, dst_path, src_label, dst_label, in
 @click.option("--background", default=0.0, show_default=True, type=float, help="Value of voxels outside DST (in the volume's stored units).")
 @click.option("--edge", type=click.FloatRange(min=0, min_open=True), help="Tetrahedron edge length in the cages' units.  [default: from each cage's size and the voxel size]")
 @click.option("--untangle/--no-untangle", default=True, show_default=True, help="Move interior nodes of inverted tetrahedra to where their stars keep their orientation (the boundary stays); --no-untangle keeps the discrete harmonic maps as solved.")
-@click.option("--check", is_flag=True, help="Refuse (exit 1, nothing written) a map with a flipped tetrahedron: in 3D no theorem rules folds out.")
+@click.option("--allow-folds", is_flag=True, help="Write the volume even if a tetrahedron stays inverted after untangling (with a warning); by default such a map is refused, exit 1, nothing written: in 3D no theorem rules folds out.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write a JSON report: flipped tetrahedra before and after untangling, 3D distortion, min det J, timings.")
 @click.option("--picture", type=click.Path(dir_okay=False), help="Write three orthogonal slices of input and output with a grid carried through the map (PNG).")
 @quiet_option
-def volume(input_path, output_path, src_path, dst_path, theta, interpolation, background, edge, untangle, check, report_path, picture, quiet):
+def volume(input_path, output_path, src_path, dst_path, theta, interpolation, background, edge, untangle, allow_folds, report_path, picture, quiet):
     """Warp a 3D image (NIfTI .nii/.nii.gz, or a multi-page TIFF stack) so that cage SRC goes onto cage DST.
 
     The paper's 5.3: both solids are mapped harmonically onto one convex
@@ -490,7 +490,7 @@ def volume(input_path, output_path, src_path, dst_path, theta, interpolation, ba
 
     warp_volume_file(
         input_path, output_path, src_path, dst_path, theta=theta, interpolation=interpolation,
-        background=background, edge=edge, untangle=untangle, check=check, report=report_path, picture=picture,
+        background=background, edge=edge, untangle=untangle, check=not allow_folds, report=report_path, picture=picture,
     )  # fmt: skip
 
 

@@ -403,7 +403,7 @@ class VolumeMap:
         if not (c0.ok and c1.ok):
             raise FoldOverError(
                 f"the maps flip {c0.flipped} tetrahedra of {self.src.name} and {c1.flipped} of {self.dst.name}; "
-                "the warp would fold the volume over itself"
+                "the warp would fold the volume over itself (--allow-folds writes it anyway)"
             )
 
     def untangling_displacement(self) -> float | None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from dataclasses import dataclass, field
@@ -216,7 +217,7 @@ def warp_volume_file(
     edge: float | None = None,
     solver: str = "auto",
     untangle: bool = True,
-    check: bool = False,
+    check: bool = True,
     report: str | os.PathLike[str] | None = None,
     picture: str | os.PathLike[str] | None = None,
 ) -> VolumeWarpResult:
@@ -246,7 +247,8 @@ def warp_volume_file(
         Untangle the discrete harmonic maps (see `build_map`).
     check : bool
         Refuse (`FoldOverError`) a map that flips any tetrahedron (after
-        untangling): nothing is written.
+        untangling): nothing is written. False writes it anyway, with a
+        warning (the CLI's ``--allow-folds``).
     report : path-like or None
         Write the report (JSON) there.
     picture : path-like or None
@@ -283,6 +285,13 @@ def warp_volume_file(
     vmap.timings["build"] = time.perf_counter() - t0
     if check:
         vmap.check_bijective()
+    else:
+        c0, c1 = vmap.certificates()
+        if not (c0.ok and c1.ok):
+            logging.getLogger("warpcli").warning(
+                "the maps flip %d tetrahedra of %s and %d of %s: the warp folds the volume there (written as asked)",
+                c0.flipped, a.name, c1.flipped, b.name,
+            )  # fmt: skip
     result = warp_volume(volume, vmap, interpolation=interpolation, background=background)
     body = encode_volume(result.volume, output)
     extras = []
