@@ -22,7 +22,16 @@ from .maps.compose import BijectiveMap, PullBack
 from .options import WarpOptions
 from .polygon import Polygon, check_pair, read_polygon
 from .outputs import PendingOutputs, write_checked
-from .raster.imageio import RasterImage, check_fits, check_output_path, convert_pixels, read_image, write_image
+from .raster.imageio import (
+    ImageHeader,
+    RasterImage,
+    check_fits,
+    check_output_path,
+    convert_pixels,
+    read_header,
+    read_image,
+    write_image,
+)
 from .raster.pixels import unit
 from .raster.resample import EdgeCoverage, edge_coverage, resample
 from .report import build_report
@@ -366,14 +375,11 @@ class _EarlyMap:
                 log.handle(record)
 
     @classmethod
-    def start(cls, input_path, src: Polygon, dst: Polygon, opts: WarpOptions) -> _EarlyMap | None:
-        """Start building the map for the image at ``input_path``, if its header can tell the size."""
-        from .raster.imageio import image_size
-
-        header = image_size(input_path)
+    def start(cls, header: ImageHeader | None, src: Polygon, dst: Polygon, opts: WarpOptions) -> _EarlyMap | None:
+        """Start building the map for an image with this header (None: unread, then no map is started)."""
         if header is None:
             return None
-        w, h, channels = header
+        (w, h), channels = header.displayed_size, header.channels
         width, height = opts.size if opts.size is not None else (w, h)
         try:
             _check_paste(opts, (width, height), (w, h), "the input")
@@ -484,16 +490,17 @@ def warp_file(
     src = read_polygon(src_path, src_label)
     dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
-    if _in_parts(input_path, opts, tiled):
+    header = _header(input_path)
+    if _in_parts(input_path, header, opts, tiled):
         return _warp_file_tiled(
             input_path, output_path, src, dst, opts, progress,
             {"--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path, "--save-map": save_map,
              "--save-forward-map": save_forward_map},
-            save_theta,
+            save_theta, header,
         )  # fmt: skip
     # The map needs the image's size, not its pixels: it is built on other
     # threads while the pixels are decoded (the decoder releases the GIL).
-    early = _EarlyMap.start(input_path, src, dst, opts)
+    early = _EarlyMap.start(header, src, dst, opts)
     t0 = clock()
     stage("reading")
     image = read_image(input_path)
@@ -556,27 +563,30 @@ def warp_file(
     return result
 
 
-def _in_parts(input_path, opts: WarpOptions, tiled: bool | None) -> bool:
+def _header(input_path) -> ImageHeader | None:
+    """The image's header, or None if it cannot be read (`read_image` then says why)."""
+    try:
+        return read_header(input_path)
+    except WarpError:
+        return None
+
+
+def _in_parts(input_path, header: ImageHeader | None, opts: WarpOptions, tiled: bool | None) -> bool:
     """Whether `warp_file` warps in strips: asked to, or a whole warp would not fit in memory."""
     if tiled is not None:
         return bool(tiled)
-    from .raster.parts import read_header
-    from .tiled import tiled_needed
+    if header is None:
+        return False
+    from .tiled import check_plausible, tiled_needed
 
-    try:
-        header = read_header(input_path)
-    except WarpError:
-        return False  # read_image says what is wrong with it
     width, height = opts.size if opts.size is not None else (header.width, header.height)
     if not tiled_needed(header, width, height):
         return False
-    from .tiled import check_plausible
-
     check_plausible(input_path, header)
     return True
 
 
-def _warp_file_tiled(input_path, output_path, src, dst, opts, progress, refused: dict, save_theta):
+def _warp_file_tiled(input_path, output_path, src, dst, opts, progress, refused: dict, save_theta, header):
     from .tiled import warp_file_tiled
 
     used = [name for name, value in refused.items() if value is not None]
@@ -586,7 +596,7 @@ def _warp_file_tiled(input_path, output_path, src, dst, opts, progress, refused:
             "(it does not fit, or --tiled was given)"
         )
     with PendingOutputs() as pending:
-        result = warp_file_tiled(input_path, pending.path(output_path), src, dst, opts, progress=progress)
+        result = warp_file_tiled(input_path, pending.path(output_path), src, dst, opts, progress=progress, header=header)
         if save_theta is not None:
             theta = result.map.theta
             _write_json(pending.path(save_theta), {"theta": theta.name, "points": theta.points.tolist()})
@@ -753,10 +763,11 @@ def _warp_one(inp: str, out: str, plans: _Plans, opts: WarpOptions, src: Polygon
     An image too large for memory is warped in strips (`warpcli.tiled`) with the same map."""
     try:
         fmap = getattr(plans, "fmap", None)  # a Dask worker has the pull-backs only
-        if fmap is not None and _in_parts(inp, opts, None):
+        header = _header(inp) if fmap is not None else None
+        if header is not None and _in_parts(inp, header, opts, None):
             from .tiled import warp_file_tiled
 
-            warp_file_tiled(inp, out, fmap.src, fmap.dst, opts, fmap=fmap)
+            warp_file_tiled(inp, out, fmap.src, fmap.dst, opts, fmap=fmap, header=header)
             return BatchItem(inp, out)
         image = read_image(inp)
         shape = opts.size if opts.size is not None else (image.width, image.height)

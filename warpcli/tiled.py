@@ -41,7 +41,8 @@ from .errors import InputError
 from .maps.compose import BijectiveMap
 from .options import WarpOptions
 from .polygon import Polygon
-from .raster.parts import TILE, ImageHeader, PartReader, StripWriter, check_writable_in_parts, output_format, read_header
+from .raster.imageio import ImageHeader, read_header
+from .raster.parts import TILE, PartReader, StripWriter, check_writable_in_parts, output_format
 from .raster.resample import edge_coverage, resample
 
 log = logging.getLogger("warpcli")
@@ -73,10 +74,12 @@ def warp_file_tiled(
     *,
     fmap: BijectiveMap | None = None,
     progress: Callable[[str], None] | None = None,
+    header: ImageHeader | None = None,
 ) -> TiledResult:
     """Warp the image at ``input_path`` into ``output_path`` strip by strip.
 
-    The caller has checked the paths and the polygons (`warpcli.pipeline.warp_file`).
+    The caller has checked the paths and the polygons (`warpcli.pipeline.warp_file`);
+    ``header`` is the input's `read_header` when the caller has read it.
 
     Raises
     ------
@@ -86,11 +89,11 @@ def warp_file_tiled(
         If reading or writing fails.
     """
     from .pipeline import _background, _warn_if_outside
-    from .raster.imageio import atomic_path, convert_pixels
+    from .raster.imageio import DTYPES, atomic_path, convert_pixels
 
     stage = progress or (lambda name: None)
     clock = time.perf_counter
-    header = read_header(input_path)
+    header = header or read_header(input_path)
     name = os.fspath(input_path)
     if header.oriented:
         raise InputError(f"{name}: an image with an EXIF orientation cannot be warped in parts; upright it first")
@@ -109,8 +112,7 @@ def warp_file_tiled(
         fmap = BijectiveMap.between(src, dst, opts.map, regions=regions)
         timings.update(fmap.timings)
         timings["map"] = clock() - t0
-    out_dtype = np.dtype(convert_pixels(np.zeros((1, 1, 1), dtype=header.dtype), opts.dtype).dtype) if opts.dtype else header.dtype
-    out_header = dataclasses.replace(header, dtype=out_dtype)
+    out_header = dataclasses.replace(header, dtype=np.dtype(DTYPES[opts.dtype])) if opts.dtype else header
     sampler = _Sampler(fmap, header, opts, bg)
     timings.update(compose=0.0, resample=0.0, write=0.0)
     stage("warping in strips")

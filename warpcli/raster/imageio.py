@@ -169,14 +169,20 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
         pixels = np.asarray(oriented_px)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
+    attrs, alpha, associated = _file_metadata(spec)
+    return RasterImage(np.ascontiguousarray(pixels), tuple(spec.channelnames), alpha, attrs, associated)
+
+
+def _file_metadata(spec) -> tuple[tuple, int | None, bool]:
+    """What a derived image keeps of a file's header: its metadata (less what describes the
+    file), its alpha channel, and whether its colour is premultiplied by alpha."""
     attrs = tuple(
         (a.name, str(a.type), a.value)
         for a in spec.extra_attribs
         if a.name in _KEEP or not a.name.startswith(_DROP_PREFIXES)
     )
     alpha = spec.alpha_channel if spec.alpha_channel >= 0 else None
-    associated = spec.get_int_attribute("oiio:UnassociatedAlpha", 0) != 1
-    return RasterImage(np.ascontiguousarray(pixels), tuple(spec.channelnames), alpha, attrs, associated)
+    return attrs, alpha, spec.get_int_attribute("oiio:UnassociatedAlpha", 0) != 1
 
 
 def _open_input(name: str):
@@ -206,36 +212,56 @@ def _open_input(name: str):
 _TRUNCATED = re.compile(r"premature end|truncat|unexpected end", re.I)
 
 
-def image_size(path: str | os.PathLike[str]) -> tuple[int, int, int] | None:
-    """``(width, height, channels)`` of an image file as `read_image` will return it, from its header.
+@dataclass(frozen=True)
+class ImageHeader:
+    """What an image file's header says: its size, pixel type, channels and metadata."""
 
-    For starting work that needs only the size while the pixels are decoded.
-    Never raises and never prints: None if the header cannot be read (then
-    `read_image` reports why).
+    width: int
+    height: int
+    channels: int
+    dtype: np.dtype
+    channel_names: tuple[str, ...] = ()
+    alpha_channel: int | None = None
+    attributes: tuple = field(default=(), repr=False)
+    associated_alpha: bool = True
+    orientation: int = 1
+
+    @property
+    def oriented(self) -> bool:
+        """Whether `read_image` turns or flips the pixels (an EXIF orientation other than 1)."""
+        return self.orientation != 1
+
+    @property
+    def displayed_size(self) -> tuple[int, int]:
+        """``(width, height)`` of the image as `read_image` returns it: orientations 5 to 8 turn it a quarter."""
+        return (self.height, self.width) if self.orientation in (5, 6, 7, 8) else (self.width, self.height)
+
+
+def read_header(path: str | os.PathLike[str]) -> ImageHeader:
+    """The header of the image at ``path``, as `read_image` would read it, without its pixels.
+
+    Raises
+    ------
+    ImageInputError
+        If the file is missing, not a regular file, not an image OpenImageIO
+        reads, or of a pixel type with no numpy twin (or per-channel types).
     """
-    import OpenImageIO as oiio
-
     name = os.fspath(path)
+    inp, _ = _open_input(name)
     try:
-        if not stat.S_ISREG(os.stat(name).st_mode):
-            return None
+        spec = inp.spec()
+    finally:
         with _c_stderr():
-            inp = oiio.ImageInput.open(name)
-            if inp is None:
-                oiio.geterror()
-                return None
-            try:
-                spec = inp.spec()
-                width, height = spec.width, spec.height
-                # EXIF orientations 5 to 8 turn the image a quarter (read_image applies them).
-                if spec.get_int_attribute("Orientation", 1) in (5, 6, 7, 8):
-                    width, height = height, width
-                return int(width), int(height), int(spec.nchannels)
-            finally:
-                inp.close()
-                inp.geterror()
-    except Exception:  # a header that cannot be read: read_image says why
-        return None
+            inp.close()
+        inp.geterror()
+    dtype = next((d for d, oiio_name in _OIIO_TYPES.items() if oiio_name == str(spec.format)), None)
+    if dtype is None or spec.channelformats:
+        raise ImageInputError(f"{name}: pixel type {spec.format} (or per-channel types) cannot be warped in parts")
+    attrs, alpha, associated = _file_metadata(spec)
+    return ImageHeader(
+        int(spec.width), int(spec.height), int(spec.nchannels), dtype, tuple(spec.channelnames), alpha, attrs,
+        associated, spec.get_int_attribute("Orientation", 1),
+    )  # fmt: skip
 
 
 def max_image_bytes() -> int:
@@ -597,24 +623,12 @@ def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
     if out is None:
         raise ImageIOError(f"{shown_name}: cannot write: {_oiio_error(oiio)}")
     fmt = out.format_name()
-    spec = oiio.ImageSpec(w, h, nc, type_name)
-    if image.channel_names:
-        spec.channelnames = tuple(image.channel_names)
-    spec.alpha_channel = -1 if image.alpha_channel is None else int(image.alpha_channel)
-    if image.alpha_channel is not None and not image.associated_alpha:
-        if fmt in _PREMULTIPLIED_FORMATS:
-            px = _premultiplied(px, image.alpha_channel)
-        else:
-            spec.attribute("oiio:UnassociatedAlpha", 1)  # store the straight colour as it is
-    for attr_name, attr_type, value in image.attributes:
-        try:
-            spec.attribute(attr_name, oiio.TypeDesc(attr_type), value)
-        except (TypeError, ValueError, RuntimeError):
-            continue  # metadata OpenImageIO cannot round-trip is dropped, not fatal
-    if not any(attr[0] == "DateTime" for attr in image.attributes):
-        # OpenImageIO's TIFF and OpenEXR writers stamp the time of writing
-        # unless told a DateTime; an empty one writes none.
-        spec.attribute("DateTime", "")
+    spec, premultiply = _output_spec(
+        oiio, fmt, (w, h, nc), type_name, image.channel_names, image.alpha_channel, image.associated_alpha,
+        image.attributes,
+    )  # fmt: skip
+    if premultiply is not None:
+        px = _premultiplied(px, premultiply)
     staged = _memory_file("warpcli-image")
     target = filename if staged is None else f"/proc/self/fd/{staged}"
     try:
@@ -637,6 +651,33 @@ def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
     _verify(oiio, filename, fmt, spec, size, shown_name, problem)
     if problem:
         _log.debug("%s: %s", shown_name, problem)
+
+
+def _output_spec(oiio, fmt: str, size: tuple[int, int, int], type_name: str, channel_names, alpha_channel,
+                 associated_alpha: bool, attributes):  # fmt: skip
+    """The ImageSpec of an output of format ``fmt``, ``size`` (width, height, channels), with
+    the channel names, alpha and metadata given; and the alpha channel to premultiply the
+    pixels by before writing them (straight colour into a premultiplied format), or None."""
+    spec = oiio.ImageSpec(*size, type_name)
+    if channel_names:
+        spec.channelnames = tuple(channel_names)
+    spec.alpha_channel = -1 if alpha_channel is None else int(alpha_channel)
+    premultiply = None
+    if alpha_channel is not None and not associated_alpha:
+        if fmt in _PREMULTIPLIED_FORMATS:
+            premultiply = alpha_channel
+        else:
+            spec.attribute("oiio:UnassociatedAlpha", 1)  # store the straight colour as it is
+    for attr_name, attr_type, value in attributes:
+        try:
+            spec.attribute(attr_name, oiio.TypeDesc(attr_type), value)
+        except (TypeError, ValueError, RuntimeError):
+            continue  # metadata OpenImageIO cannot round-trip is dropped, not fatal
+    if not any(attr[0] == "DateTime" for attr in attributes):
+        # OpenImageIO's TIFF and OpenEXR writers stamp the time of writing
+        # unless told a DateTime; an empty one writes none.
+        spec.attribute("DateTime", "")
+    return spec, premultiply
 
 
 # Formats whose library ends the process when a write fails (libjpeg's

@@ -15,20 +15,17 @@ channel names, alpha and its convention, and metadata.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ImageInputError, ImageIOError
 from .imageio import (
-    _DROP_PREFIXES,
-    _KEEP,
     _OIIO_TYPES,
-    _PREMULTIPLIED_FORMATS,
+    ImageHeader,
     _c_stderr,
     _one_line,
-    _open_input,
+    _output_spec,
     _premultiplied,
     _verify,
     _write_failure,
@@ -40,58 +37,6 @@ TILE = 256
 CACHE_MB = 512.0
 
 
-@dataclass(frozen=True)
-class ImageHeader:
-    """What an image file's header says: its size, pixel type, channels and metadata."""
-
-    width: int
-    height: int
-    channels: int
-    dtype: np.dtype
-    channel_names: tuple[str, ...] = ()
-    alpha_channel: int | None = None
-    attributes: tuple = field(default=(), repr=False)
-    associated_alpha: bool = True
-    oriented: bool = False
-
-
-def read_header(path: str | os.PathLike[str]) -> ImageHeader:
-    """The header of the image at ``path``, as `read_image` would read it (no pixels).
-
-    Raises
-    ------
-    ImageInputError
-        If the file is missing, not a regular file, or not an image OpenImageIO reads.
-    """
-    name = os.fspath(path)
-    inp, _ = _open_input(name)
-    try:
-        spec = inp.spec()
-    finally:
-        with _c_stderr():
-            inp.close()
-        inp.geterror()
-    dtype = _dtype_of(spec.format)
-    if dtype is None or spec.channelformats:
-        raise ImageInputError(f"{name}: pixel type {spec.format} (or per-channel types) cannot be warped in parts")
-    attrs = tuple(
-        (a.name, str(a.type), a.value) for a in spec.extra_attribs if a.name in _KEEP or not a.name.startswith(_DROP_PREFIXES)
-    )
-    return ImageHeader(
-        int(spec.width), int(spec.height), int(spec.nchannels), dtype, tuple(spec.channelnames),
-        spec.alpha_channel if spec.alpha_channel >= 0 else None, attrs,
-        spec.get_int_attribute("oiio:UnassociatedAlpha", 0) != 1, spec.get_int_attribute("Orientation", 1) != 1,
-    )  # fmt: skip
-
-
-def _dtype_of(typedesc) -> np.dtype | None:
-    name = str(typedesc)
-    for dtype, oiio_name in _OIIO_TYPES.items():
-        if oiio_name == name:
-            return dtype
-    return None
-
-
 class PartReader:
     """Rectangles of one image file, decoded on demand through a private ImageCache.
 
@@ -99,7 +44,7 @@ class PartReader:
     ----------
     path : path-like
     header : ImageHeader
-        Its `read_header`.
+        Its `warpcli.raster.imageio.read_header`.
     """
 
     def __init__(self, path: str | os.PathLike[str], header: ImageHeader) -> None:
@@ -190,23 +135,10 @@ class StripWriter:
         self._out = out
         self.format = out.format_name()
         check_writable_in_parts(self.format, shown_name)
-        spec = oiio.ImageSpec(width, height, header.channels, _OIIO_TYPES[header.dtype])
-        if header.channel_names:
-            spec.channelnames = tuple(header.channel_names)
-        spec.alpha_channel = -1 if header.alpha_channel is None else int(header.alpha_channel)
-        self._premultiply = None
-        if header.alpha_channel is not None and not header.associated_alpha:
-            if self.format in _PREMULTIPLIED_FORMATS:
-                self._premultiply = header.alpha_channel
-            else:
-                spec.attribute("oiio:UnassociatedAlpha", 1)
-        for attr_name, attr_type, value in header.attributes:
-            try:
-                spec.attribute(attr_name, oiio.TypeDesc(attr_type), value)
-            except (TypeError, ValueError, RuntimeError):
-                continue
-        if not any(attr[0] == "DateTime" for attr in header.attributes):
-            spec.attribute("DateTime", "")
+        spec, self._premultiply = _output_spec(
+            oiio, self.format, (width, height, header.channels), _OIIO_TYPES[header.dtype], header.channel_names,
+            header.alpha_channel, header.associated_alpha, header.attributes,
+        )  # fmt: skip
         self.tiled = bool(out.supports("tiles"))
         if self.tiled:
             spec.tile_width = spec.tile_height = TILE
