@@ -82,7 +82,7 @@ def test_an_fem_map_built_in_a_child_is_the_one_built_here_bit_for_bit(n, data, 
 
 
 def test_an_fem_build_that_dies_in_its_child_names_the_polygon(monkeypatch):
-    monkeypatch.setattr(fem, "_mesh_and_solve", lambda *args: _die())
+    monkeypatch.setattr(fem, "_built_to_send", lambda *args: _die())
     sq = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), name="square.json")
     opts = MapOptions()
     with pytest.raises(MeshingError, match="^square.json: the process meshing and solving it killed by SIGSEGV"):

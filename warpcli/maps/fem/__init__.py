@@ -351,10 +351,10 @@ def build(
     return phi
 
 
-def _mesh_and_solve(polygon: Polygon, theta: Theta, options: MapOptions, role: str, region) -> tuple:
-    """What `build` computes before its repair, as plain data for a forked child to send back."""
-    phi = build(polygon, theta, dataclasses.replace(options, check=False), role, region)
-    return phi.mesh, phi.values, phi.timings
+def _built_to_send(polygon: Polygon, theta: Theta, options: MapOptions, role: str, region) -> FEMMap:
+    """`build`, in a forked child: the map without its solver (a factorization does not pickle;
+    `FEMMap.with_theta` makes a new one if it is needed)."""
+    return dataclasses.replace(build(polygon, theta, options, role, region), solver=None)
 
 
 class _Forked:
@@ -363,23 +363,17 @@ class _Forked:
     def __init__(self, polygon: Polygon, theta: Theta, options: MapOptions, role: str, region) -> None:
         from ..._fork import Forked
 
-        self.polygon, self.theta, self.options, self.role = polygon, theta, options, role
+        self.name = polygon.name
         sparse.load_superlu()  # in the parent, so the child imports nothing
-        self._child = Forked(_mesh_and_solve, polygon, theta, options, role, region)
+        self._child = Forked(_built_to_send, polygon, theta, options, role, region)
 
     def result(self) -> FEMMap:
         from ..._fork import ChildDied
 
         try:
-            mesh, values, timings = self._child.result()
+            return self._child.result()
         except ChildDied as err:
-            raise MeshingError(f"{self.polygon.name}: the process meshing and solving it {err}") from None
-        boundary = self.options.src_boundary if self.role == "source" else self.options.dst_boundary
-        phi = FEMMap(
-            self.polygon, self.theta, mesh, values, self.options.weights, timings=timings, boundary=boundary,
-            conditions=self.options.conditions,
-        )  # fmt: skip
-        return repaired(phi) if self.options.check else phi
+            raise MeshingError(f"{self.name}: the process meshing and solving it {err}") from None
 
     def cancel(self) -> None:
         self._child.cancel()
