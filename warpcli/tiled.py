@@ -213,8 +213,8 @@ def _reach(points: NDArray, jac: NDArray | None, extra: NDArray | None, header: 
     if jac is not None:
         j = np.abs(jac.reshape(-1, 2, 2))
         with np.errstate(invalid="ignore"):
-            ex = np.nan_to_num(0.5 * (j[:, 0, 0] + j[:, 0, 1]), nan=0.0, posinf=math.inf)
-            ey = np.nan_to_num(0.5 * (j[:, 1, 0] + j[:, 1, 1]), nan=0.0, posinf=math.inf)
+            ex = np.nan_to_num(0.5 * (j[:, 0, 0] + j[:, 0, 1]), nan=0.0, posinf=np.inf)
+            ey = np.nan_to_num(0.5 * (j[:, 1, 0] + j[:, 1, 1]), nan=0.0, posinf=np.inf)
     finite = np.isfinite(xy[:, 0]) & np.isfinite(xy[:, 1])
     with np.errstate(invalid="ignore"):
         lo_x = (xy[:, 0] - ex)[finite]
@@ -229,25 +229,12 @@ def _reach(points: NDArray, jac: NDArray | None, extra: NDArray | None, header: 
     w, h = header.width, header.height
     if lo_x.size == 0:
         return 0, 0, 1, 1
-    x0 = _clip(math.floor(_finite_min(lo_x) - 0.5) - margin, 0, w - 1)
-    x1 = _clip(math.floor(_finite_max(hi_x) - 0.5) + 2 + margin, x0 + 1, w)
-    y0 = _clip(math.floor(_finite_min(lo_y) - 0.5) - margin, 0, h - 1)
-    y1 = _clip(math.floor(_finite_max(hi_y) - 0.5) + 2 + margin, y0 + 1, h)
+    # Beyond the image by more than a pixel (or infinite) reads no more than its edge.
+    x0 = min(max(math.floor(np.clip(lo_x, -2.0, w + 2.0).min() - 0.5) - margin, 0), w - 1)
+    x1 = min(max(math.floor(np.clip(hi_x, -2.0, w + 2.0).max() - 0.5) + 2 + margin, x0 + 1), w)
+    y0 = min(max(math.floor(np.clip(lo_y, -2.0, h + 2.0).min() - 0.5) - margin, 0), h - 1)
+    y1 = min(max(math.floor(np.clip(hi_y, -2.0, h + 2.0).max() - 0.5) + 2 + margin, y0 + 1), h)
     return x0, y0, x1, y1
-
-
-def _finite_min(v: NDArray) -> float:
-    m = float(np.min(v))
-    return m if math.isfinite(m) else -1e18
-
-
-def _finite_max(v: NDArray) -> float:
-    m = float(np.max(v))
-    return m if math.isfinite(m) else 1e18
-
-
-def _clip(v: float, lo: int, hi: int) -> int:
-    return int(min(max(v, lo), hi))
 
 
 #: The most decoded bytes per byte of file an image taken into strips by itself
