@@ -225,7 +225,7 @@ def write_text(path, text: str) -> str:
 
 def _missing_polygon(f):
     p = str(f.dir / "missing.json")
-    return argv(f, src=p), [p, "cannot read polygon file", "No such file"]
+    return argv(f, src=p), [p, "no such file"]
 
 
 def _invalid_json(f):

@@ -355,7 +355,7 @@ def test_anything_but_a_regular_file_is_refused_at_once(tmp_path, kind):
     reader.join(timeout=20)
     assert not reader.is_alive(), f"read_image({path!r}) blocked"
     msg = str(result["error"])
-    assert msg.startswith(f"{path}: is a") and SPECIALS[kind] in msg and "\n" not in msg
+    assert msg.startswith(f"{path}: cannot read image: it is ") and SPECIALS[kind] in msg and "\n" not in msg
 
 
 def test_an_output_that_is_not_a_regular_file_is_never_replaced(tmp_path):

@@ -94,10 +94,9 @@ def test_polygon_error_is_an_input_error_and_a_value_error():
 
 def test_missing_file(tmp_path):
     path = str(tmp_path / "nope.json")
-    with pytest.raises(PolygonError, match="cannot read polygon file") as info:
+    with pytest.raises(PolygonError) as info:
         read_polygon(path)
-    assert str(info.value).startswith(f"{path}: ")
-    assert "No such file" in str(info.value)
+    assert str(info.value) == f"{path}: no such file"
 
 
 def test_path_with_a_nul_character():
@@ -167,7 +166,7 @@ def test_file_larger_than_the_limit_is_refused_unread(tmp_path):
         fh.truncate(7 << 30)  # sparse: 7 GiB of zero bytes that take no space
     with pytest.raises(PolygonError, match="too large") as info:
         read_polygon(path)
-    assert str(info.value) == f"{path}: polygon file is too large: 7 GiB, more than the limit of 64 MiB"
+    assert str(info.value) == f"{path}: polygon file is too large: 7.0 GiB, more than the limit of 64 MiB"
     assert MAX_FILE_BYTES == 64 << 20
 
 

@@ -66,8 +66,10 @@ def test_a_user_theta_file_is_checked(tmp_path):
     path.write_text("[[0, 0], [1")
     with pytest.raises(InputError, match="cannot read Theta"):
         from_file(str(path), 5)
-    with pytest.raises(InputError, match="cannot read Theta"):
+    with pytest.raises(InputError, match="missing.json: no such file"):
         from_file(str(tmp_path / "missing.json"), 5)
+    with pytest.raises(InputError, match="cannot read Theta file: it is a directory"):
+        from_file(str(tmp_path), 5)
 
 
 @pytest.mark.parametrize("flip", [False, True])

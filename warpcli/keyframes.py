@@ -16,7 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError, PolygonError
-from .polygon import Polygon, _parse_int, _parse_json, _points_of, _read_file, _short
+from .files import read_small_file
+from .polygon import MAX_FILE_BYTES, Polygon, _parse_int, _parse_json, _points_of, _short
 from .sequence import FRAME_LIMIT
 
 __all__ = ["Keyframes", "read_animated", "read_keyframes"]
@@ -325,7 +326,7 @@ def read_animated(path: str | os.PathLike[str], label: str | None = None) -> Key
 
 
 def _load(name: str) -> tuple[object, str]:
-    raw = _read_file(name)
+    raw = read_small_file(name, "polygon file", PolygonError, max_bytes=MAX_FILE_BYTES)
     try:
         text = raw.decode("utf-8-sig")  # as read_polygon: a BOM is allowed
     except UnicodeDecodeError as err:

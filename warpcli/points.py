@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from .errors import InputError
 from .maps.compose import BijectiveMap
 from .options import MapOptions
+from .files import read_small_file
 from .outputs import PendingOutputs, write_checked
 from .polygon import check_pair, read_polygon
 
@@ -136,15 +137,7 @@ def map_points_file(
 
 
 def _read(name: str) -> bytes:
-    try:
-        if not os.path.isfile(name):
-            raise InputError(f"{name}: not a regular file")
-        if os.path.getsize(name) > MAX_BYTES:
-            raise InputError(f"{name}: larger than {MAX_BYTES >> 20} MiB")
-        with open(name, "rb") as fh:
-            return fh.read()
-    except OSError as err:
-        raise InputError(f"{name}: cannot read: {err.strerror or err}") from None
+    return read_small_file(name, "points file", InputError, max_bytes=MAX_BYTES)
 
 
 def _as_xy(values, name: str) -> NDArray[np.float64]:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import stat
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -14,6 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import PolygonError
+from .files import read_small_file
 
 __all__ = [
     "COORD_LIMIT",
@@ -208,7 +208,7 @@ def read_polygon(path: str | os.PathLike[str], label: str | None = None) -> Poly
         message is one line and starts with the file's name.
     """
     name = os.fspath(path)
-    raw = _read_file(name)
+    raw = read_small_file(name, "polygon file", PolygonError, max_bytes=MAX_FILE_BYTES)
     try:
         # RFC 8259 lets a parser ignore a byte order mark; some editors write one.
         text = raw.decode("utf-8-sig")
@@ -220,68 +220,6 @@ def read_polygon(path: str | os.PathLike[str], label: str | None = None) -> Poly
         return Polygon(points, name=name)
     except RecursionError as err:  # comparing or printing arrays nested ~1000 deep
         raise PolygonError(f"{name}: invalid polygon file: arrays nested too deeply") from err
-
-
-def _read_file(name: str) -> bytes:
-    """The bytes of a regular file of at most MAX_FILE_BYTES, without blocking on anything else."""
-
-    def refuse(err: OSError) -> PolygonError:
-        return PolygonError(f"{name}: cannot read polygon file: {err.strerror or err}")
-
-    if "\0" in name:  # os.stat would raise a ValueError
-        raise PolygonError(f"{name!r}: cannot read polygon file: embedded null byte")
-    try:
-        # Look before opening: opening a FIFO for reading waits for a writer.
-        _check_regular(name, os.stat(name))
-        # O_NONBLOCK in case the path became a FIFO since: it makes open
-        # return at once (it changes nothing for a regular file).
-        fd = os.open(name, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
-    except OSError as err:
-        raise refuse(err) from err
-    try:
-        _check_regular(name, os.fstat(fd))
-        chunks = []
-        size = 0
-        while size <= MAX_FILE_BYTES:
-            chunk = os.read(fd, min(1 << 24, MAX_FILE_BYTES + 1 - size))
-            if not chunk:
-                break
-            chunks.append(chunk)
-            size += len(chunk)
-    except OSError as err:
-        raise refuse(err) from err
-    finally:
-        os.close(fd)
-    if size > MAX_FILE_BYTES:  # it grew since fstat
-        raise PolygonError(f"{name}: polygon file is too large: over {_fmt_bytes(MAX_FILE_BYTES)}")
-    return b"".join(chunks)
-
-
-def _check_regular(name: str, st: os.stat_result) -> None:
-    mode = st.st_mode
-    if not stat.S_ISREG(mode):
-        kinds = (
-            (stat.S_ISDIR, "a directory"),
-            (stat.S_ISFIFO, "a FIFO (named pipe)"),
-            (stat.S_ISCHR, "a character device"),
-            (stat.S_ISBLK, "a block device"),
-            (stat.S_ISSOCK, "a socket"),
-        )
-        kind = next((text for test, text in kinds if test(mode)), "not a file")
-        raise PolygonError(f"{name}: cannot read polygon file: it is {kind}, not a regular file")
-    if st.st_size > MAX_FILE_BYTES:
-        raise PolygonError(
-            f"{name}: polygon file is too large: {_fmt_bytes(st.st_size)}, "
-            f"more than the limit of {_fmt_bytes(MAX_FILE_BYTES)}"
-        )
-
-
-def _fmt_bytes(size: int) -> str:
-    """'64 MiB', '7.5 GiB', '900 bytes'."""
-    for unit, scale in (("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
-        if size >= scale:
-            return f"{size / scale:.3g} {unit}"
-    return f"{size} bytes"
 
 
 class _LongInteger:

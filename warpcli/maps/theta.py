@@ -8,7 +8,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
+from ..files import read_small_file
 from ..polygon import Polygon, signed_area
+
+#: Largest Theta file read, in bytes (n vertices as JSON).
+MAX_THETA_BYTES = 1 << 20
 
 
 @dataclass(frozen=True, eq=False)
@@ -260,10 +264,10 @@ def from_file(path: str, n: int) -> Theta:
     """
     import json
 
+    raw = read_small_file(path, "Theta file", InputError, max_bytes=MAX_THETA_BYTES)
     try:
-        with open(path, "rb") as fh:
-            doc = json.loads(fh.read(1 << 20).decode("utf-8"))
-    except (OSError, ValueError, RecursionError) as err:
+        doc = json.loads(raw.decode("utf-8-sig"))
+    except (ValueError, RecursionError) as err:
         raise InputError(f"{path}: cannot read Theta: {getattr(err, 'strerror', None) or err}") from None
     pts = doc.get("points") if isinstance(doc, dict) else doc
     try:

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ImageInputError, ImageIOError, WarpError
+from ..files import check_regular_file, file_kind, format_bytes
 from ..options import DTYPES as DTYPE_NAMES
 from .pixels import from_unit, to_unit
 
@@ -331,7 +332,7 @@ def _check_bytes(dims: tuple[int, int, int, int], copies: int, what: str) -> Non
         source = MAX_IMAGE_BYTES_ENV if os.environ.get(MAX_IMAGE_BYTES_ENV, "").strip() else (
             f"{MEMORY_FRACTION:.0%} of the available memory; set {MAX_IMAGE_BYTES_ENV} to change it"
         )
-        shown_need, shown_limit = _nbytes(need), _nbytes(limit)
+        shown_need, shown_limit = format_bytes(need), format_bytes(limit)
         if shown_need == shown_limit:  # rounded alike: give them exactly
             shown_need, shown_limit = f"{need} bytes", f"{limit} bytes"
         raise ImageInputError(
@@ -379,37 +380,10 @@ def _cgroup_room() -> int | None:
         return None
 
 
-def _nbytes(n: float) -> str:
-    """A byte count for people: 858 MiB, 4.0 GiB."""
-    for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
-        if n >= size:
-            return f"{n / size:.1f} {unit}" if n < 10 * size else f"{n / size:.0f} {unit}"
-    return f"{int(n)} bytes"
-
-
 def _check_input_file(name: str) -> None:
     """Refuse at once what is not a regular file: opening a FIFO blocks until a
     writer comes, /dev/zero never ends."""
-    try:
-        st = os.stat(name)
-    except FileNotFoundError:
-        raise ImageInputError(f"{name}: no such file") from None
-    except OSError as err:
-        raise ImageInputError(f"{name}: cannot read: {err.strerror or err}") from None
-    if stat.S_ISDIR(st.st_mode):
-        raise ImageInputError(f"{name}: is a directory, not an image")
-    if not stat.S_ISREG(st.st_mode):
-        raise ImageInputError(f"{name}: is a {_file_kind(st.st_mode)}, not an image file")
-
-
-def _file_kind(mode: int) -> str:
-    for test, kind in (
-        (stat.S_ISFIFO, "FIFO (named pipe)"), (stat.S_ISCHR, "character device"),
-        (stat.S_ISBLK, "block device"), (stat.S_ISSOCK, "socket"), (stat.S_ISDIR, "directory"),
-    ):  # fmt: skip
-        if test(mode):
-            return kind
-    return "special file"
+    check_regular_file(name, "image", ImageInputError)
 
 
 def convert_pixels(pixels: NDArray, dtype: str) -> NDArray:
@@ -570,7 +544,7 @@ def _check_replaceable(name: str) -> None:
     if stat.S_ISDIR(st.st_mode):
         raise ImageInputError(f"{name}: is a directory")
     if not stat.S_ISREG(st.st_mode):
-        raise ImageInputError(f"{name}: is a {_file_kind(st.st_mode)}; an output must be a regular file")
+        raise ImageInputError(f"{name}: is {file_kind(st.st_mode)}; an output must be a regular file")
 
 
 def _why_unwritable(directory: str) -> str:
@@ -701,12 +675,12 @@ def _check_room(fmt: str, image: RasterImage, px: NDArray, filename: str, shown_
         return
     meta = sum(np.asarray(value).nbytes if not isinstance(value, str) else len(value) for _, _, value in image.attributes)
     bound = 2 * px.nbytes + meta + (16 << 10)
-    what = f"a {fmt.upper()} of {px.shape[1]} x {px.shape[0]} may take up to {_nbytes(bound)}"
+    what = f"a {fmt.upper()} of {px.shape[1]} x {px.shape[0]} may take up to {format_bytes(bound)}"
     soft = _file_size_limit()
     if soft is not None and bound > soft:
         raise ImageIOError(
             f"{shown_name}: cannot write: {os.strerror(errno.EFBIG)}: {what}, "
-            f"the file size limit (ulimit -f) is {_nbytes(soft)}"
+            f"the file size limit (ulimit -f) is {format_bytes(soft)}"
         )
     if staged:
         return  # the copy from memory reports a full disk as an exception
@@ -716,7 +690,7 @@ def _check_room(fmt: str, image: RasterImage, px: NDArray, filename: str, shown_
         return
     free = vfs.f_bavail * vfs.f_frsize
     if free < bound:
-        raise ImageIOError(f"{shown_name}: cannot write: {os.strerror(errno.ENOSPC)}: {what}, {_nbytes(free)} free")
+        raise ImageIOError(f"{shown_name}: cannot write: {os.strerror(errno.ENOSPC)}: {what}, {format_bytes(free)} free")
 
 
 def _file_size_limit() -> int | None:

@@ -12,12 +12,16 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError
+from ..files import read_small_file
 
 #: Surface formats read by extension.
 SURFACE_EXTENSIONS = (".obj", ".off", ".ply")
 
 #: A triangle whose area is below this fraction of the squared diameter is degenerate.
 DEGENERATE_AREA = 1e-14
+
+#: Largest surface mesh file read, in bytes.
+MAX_FILE_BYTES = 256 << 20
 
 
 class SurfaceError(InputError):
@@ -147,15 +151,7 @@ def read_surface(path: str | os.PathLike[str], *, check: bool = True) -> Surface
         raise SurfaceError(
             f"{name}: unknown surface mesh format {ext or '(no extension)'}; use one of {', '.join(SURFACE_EXTENSIONS)}"
         )
-    try:
-        with open(name, "rb") as fh:
-            data = fh.read()
-    except FileNotFoundError:
-        raise SurfaceError(f"{name}: no such file") from None
-    except IsADirectoryError:
-        raise SurfaceError(f"{name}: is a directory, not a surface mesh") from None
-    except OSError as err:
-        raise SurfaceError(f"{name}: cannot read: {err.strerror or err}") from None
+    data = read_small_file(name, "surface mesh", SurfaceError, max_bytes=MAX_FILE_BYTES)
     reader = {".obj": _parse_obj, ".off": _parse_off, ".ply": _parse_ply}[ext]
     vertices, faces = reader(data, name)
     surface = from_faces(vertices, faces, name)

@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ImageInputError, ImageIOError
+from ..files import check_regular_file
 from ..outputs import write_checked
 from ..raster.imageio import atomic_path, check_output_path, max_image_bytes
 from .compose import VoxelGrid
@@ -82,8 +83,7 @@ def read_volume(path: str | os.PathLike[str]) -> Volume:
     """
     name = os.fspath(path)
     kind = volume_format(name)
-    if not os.path.isfile(name):
-        raise ImageInputError(f"{name}: no such file" if not os.path.exists(name) else f"{name}: not a regular file")
+    check_regular_file(name, "volume", ImageInputError)
     if kind == "nifti":
         return _read_nifti(name)
     return _read_tiff(name)
