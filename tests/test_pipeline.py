@@ -249,7 +249,7 @@ def test_edge_coverage_of_a_huge_polygon_costs_only_its_visible_boundary():
 @pytest.mark.parametrize("pattern", ["../x.png", "{name.__class__}", "{name!r}", "{name:>20}", "{0}", "", "sub/{name}", ".."])
 def test_output_names_stay_inside_the_output_directory(pattern):
     from warpcli.errors import InputError
-    from warpcli.pipeline import output_name
+    from warpcli.batch import output_name
 
     with pytest.raises(InputError):
         output_name("shots/a.png", pattern)

@@ -190,7 +190,7 @@ def test_jpeg_is_refused_before_any_work(tmp_path):
 
 
 def test_a_batch_warps_an_image_too_large_for_memory_in_strips(monkeypatch, tmp_path):
-    from warpcli.pipeline import warp_batch
+    from warpcli.batch import warp_batch
 
     rng = np.random.default_rng(11)
     small = write_png(tmp_path / "small.png", rng.integers(0, 256, (40, 50, 3)).astype(np.uint8))

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 __version__ = "0.2.0"
 
 _EXPORTS = {
-    "BatchItem": "pipeline",
+    "BatchItem": "batch",
     "BijectiveMap": "maps.compose",
     "Certificate": "maps.base",
     "FoldOverError": "errors",
@@ -26,6 +26,7 @@ _EXPORTS = {
     "PolygonError": "errors",
     "PullBack": "maps.compose",
     "RasterImage": "raster.imageio",
+    "SamplingPlan": "plan",
     "Theta": "maps.theta",
     "ThetaMap": "maps.base",
     "WarpError": "errors",
@@ -39,10 +40,11 @@ _EXPORTS = {
     "read_image": "raster.imageio",
     "read_polygon": "polygon",
     "save_stmap": "raster.stmap",
-    "warp_batch": "pipeline",
+    "resample": "raster.resample",
+    "warp_batch": "batch",
     "warp_file": "pipeline",
     "warp_image": "pipeline",
-    "warp_sequence": "pipeline",
+    "warp_sequence": "batch",
     "read_keyframes": "keyframes",
     "parse_frames": "sequence",
     "write_image": "raster.imageio",
@@ -66,10 +68,13 @@ if TYPE_CHECKING:
     from .maps.theta import Theta
     from .options import MapOptions, WarpOptions
     from .keyframes import read_keyframes
-    from .pipeline import BatchItem, WarpResult, apply_map_file, warp_batch, warp_file, warp_image, warp_sequence
+    from .batch import BatchItem, warp_batch, warp_sequence
+    from .pipeline import WarpResult, apply_map_file, warp_file, warp_image
+    from .plan import SamplingPlan
     from .sequence import parse_frames
     from .polygon import Polygon, read_polygon
     from .raster.imageio import RasterImage, read_image, write_image
+    from .raster.resample import resample
     from .raster.stmap import load_stmap, save_stmap
     from .report import build_report
 

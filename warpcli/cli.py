@@ -340,7 +340,7 @@ def warp(
 def _sequence(paths, frames, src_path, dst_path, src_label, dst_label, options, jobs=1):
     """Warp the frames of a sequence; report failed frames one line each and go on."""
     from .errors import InputError
-    from .pipeline import warp_sequence
+    from .batch import warp_sequence
     from .sequence import is_pattern, missing_frames_error, parse_frames
 
     if frames is None:
@@ -366,7 +366,7 @@ def _batch(paths, out_dir, out_name, src_path, dst_path, src_label, dst_label, o
         )  # fmt: skip
         _exit_for(items, "inputs")
         return
-    from .pipeline import warp_batch
+    from .batch import warp_batch
 
     items = warp_batch(
         list(paths), out_dir, src_path, dst_path, options, pattern=out_name, src_label=src_label,

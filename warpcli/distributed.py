@@ -1,10 +1,10 @@
 """Batches on a Dask cluster (``warp --out-dir DIR --scheduler ADDRESS``): one map, one task per image.
 
 The client checks every path and builds the map once, as `warp_batch` does,
-then computes the map's pull-back for each output size among the inputs (from
-their headers) and ships it to the workers once (``Client.scatter``,
-broadcast): the same arrays a local batch resamples with, so every output has
-the bytes of a local run. Each image is one task: the worker reads it,
+then makes its sampling plan (`warpcli.plan.SamplingPlan`) for each output
+size among the inputs (from their headers) and ships the plans to the workers
+once (``Client.scatter``, broadcast): the plans a local batch renders with,
+so every output has the bytes of a local run. Each image is one task: the worker reads it,
 resamples, writes (atomically, as everywhere). A task that fails is that
 image's error (a bad input, a full disk, a lost worker); the others go on.
 
@@ -19,26 +19,10 @@ import os
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from .batch import BatchItem, PlanCache, prepare_batch, warp_one
 from .errors import ImageIOError, InputError, WarpError
-from .options import WarpOptions
-from .pipeline import BatchItem, _batch_setup, _options, _sampling, _warp_one
-
-
-class _Shipped:
-    """Pull-backs by output size, as shipped to a worker (what `_warp_one` asks ``get`` of)."""
-
-    def __init__(self, plans: dict) -> None:
-        self.plans = plans
-
-    def get(self, shape):
-        try:
-            return self.plans[tuple(shape)]
-        except KeyError:
-            raise ImageIOError(f"no pull-back was made for an output of {shape[0]}x{shape[1]}") from None
-
-
-def _task(inp: str, out: str, plans, opts: WarpOptions, src) -> BatchItem:
-    return _warp_one(inp, out, _Shipped(plans), opts, src)
+from .options import WarpOptions, resolve_options
+from .pipeline import read_header_or_none
 
 
 def warp_batch_dask(
@@ -86,28 +70,18 @@ def warp_batch_dask(
         from dask.distributed import Client, LocalCluster
     except ImportError:
         raise InputError("--scheduler needs dask.distributed: pip install 'warpcli[dask]'") from None
-    import OpenImageIO as oiio
-
     from .maps.compose import BijectiveMap
 
-    opts = _options(options, changes)
-    tasks, src, dst = _batch_setup(input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label)
-    fmap = BijectiveMap.between(src, dst, opts.map)
-    # One pull-back per output size; an input whose header cannot be read
-    # fails in its task, with the message a local run gives.
-    shapes = set()
+    opts = resolve_options(options, changes)
+    tasks, src, dst = prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label)
+    # One sampling plan per output size, made here and shipped; an input whose
+    # header cannot be read fails in its task, with the message a local run gives.
+    cache = PlanCache(BijectiveMap.between(src, dst, opts.map), opts)
     for inp, _ in tasks:
-        if opts.size is not None:
-            shapes.add(tuple(opts.size))
-            break
-        probe = oiio.ImageInput.open(inp)
-        if probe is None:
-            oiio.geterror()  # retrieved, so that OpenImageIO does not print it at exit
-            continue
-        spec = probe.spec()
-        shapes.add((spec.width, spec.height))
-        probe.close()
-    plans = {shape: _sampling(fmap, shape[0], shape[1], opts, keep_jacobian=False) for shape in sorted(shapes)}
+        header = read_header_or_none(inp) if opts.size is None else None
+        if opts.size is not None or header is not None:
+            cache.get(tuple(opts.size) if opts.size is not None else header.displayed_size)
+    plans = PlanCache(None, opts, cache.plans)
 
     cluster = None
     if isinstance(scheduler, Client):
@@ -124,7 +98,7 @@ def warp_batch_dask(
         own = True
     try:
         shipped = client.scatter(plans, broadcast=True)
-        futures = [client.submit(_task, inp, out, shipped, opts, src, pure=False) for inp, out in tasks]
+        futures = [client.submit(warp_one, inp, out, shipped, pure=False) for inp, out in tasks]
         items = []
         for (inp, out), future in zip(tasks, futures):
             try:

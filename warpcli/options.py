@@ -243,3 +243,17 @@ def check_size(size: object) -> tuple[int, int]:
     if w <= 0 or h <= 0:
         raise InputError(f"size must be positive, got width {w} and height {h}")
     return w, h
+
+
+def resolve_options(options: WarpOptions | None, changes: dict[str, Any]) -> WarpOptions:
+    """``options`` (the defaults if None) with ``changes`` applied: what every library call takes.
+
+    Raises
+    ------
+    InputError
+        If ``options`` is not a `WarpOptions`, or a change is unknown or invalid.
+    """
+    opts = options if options is not None else WarpOptions()
+    if not isinstance(opts, WarpOptions):
+        raise InputError(f"options must be WarpOptions, got {type(opts).__name__}")
+    return opts.changed(**changes) if changes else opts

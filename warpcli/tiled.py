@@ -40,10 +40,10 @@ from numpy.typing import NDArray
 from .errors import InputError
 from .maps.compose import BijectiveMap
 from .options import WarpOptions
+from .plan import SamplingPlan, plan_for, warn_if_outside
 from .polygon import Polygon
 from .raster.imageio import ImageHeader, read_header
 from .raster.parts import TILE, PartReader, StripWriter, check_writable_in_parts, output_format
-from .raster.resample import edge_coverage, resample
 
 log = logging.getLogger("warpcli")
 
@@ -88,7 +88,6 @@ def warp_file_tiled(
     WarpError
         If reading or writing fails.
     """
-    from .pipeline import _background, _warn_if_outside
     from .raster.imageio import DTYPES, atomic_path, convert_pixels
 
     stage = progress or (lambda name: None)
@@ -101,9 +100,8 @@ def warp_file_tiled(
     if opts.outside == "input":
         raise InputError(f"{name}: --outside input cannot be used on an image warped in parts")
     width, height = opts.size if opts.size is not None else (header.width, header.height)
-    _warn_if_outside(src, (header.width, header.height), name, "all background")
-    _warn_if_outside(dst, (width, height), os.fspath(output_path), "all background")
-    bg = _background(opts.background, np.zeros((1, 1, header.channels), dtype=header.dtype))
+    warn_if_outside(src, (header.width, header.height), name, "all background")
+    warn_if_outside(dst, (width, height), os.fspath(output_path), "all background")
     timings: dict[str, float] = {}
     if fmap is None:
         stage("building the map")
@@ -113,7 +111,7 @@ def warp_file_tiled(
         timings.update(fmap.timings)
         timings["map"] = clock() - t0
     out_header = dataclasses.replace(header, dtype=np.dtype(DTYPES[opts.dtype])) if opts.dtype else header
-    sampler = _Sampler(fmap, header, opts, bg)
+    sampler = _Sampler(fmap, header, opts)
     timings.update(compose=0.0, resample=0.0, write=0.0)
     stage("warping in strips")
     log.info("%s: warping in strips of %d rows, %d x %d -> %d x %d", name, TILE, header.width, header.height, width, height)
@@ -133,55 +131,40 @@ def warp_file_tiled(
 
 
 class _Sampler:
-    """The strips of one warp: pull-back, coverage and resampling, chunk by chunk."""
+    """The strips of one warp: each strip's sampling plan, resampled chunk by chunk from parts of the input."""
 
-    def __init__(self, fmap: BijectiveMap, header: ImageHeader, opts: WarpOptions, bg: NDArray) -> None:
-        self.fmap, self.header, self.opts, self.bg = fmap, header, opts, bg
-        self.antialias = opts.antialias and opts.interp != "nearest"
+    def __init__(self, fmap: BijectiveMap, header: ImageHeader, opts: WarpOptions) -> None:
+        self.fmap, self.header, self.opts = fmap, header, opts
         self.margin = 1 + (CUBIC_MARGIN if opts.interp == "cubic" else 0)
-        # What a pixel without a pre-image gets, rounded as the resampler writes it.
-        self.empty = self._resample(np.zeros((1, 1, header.channels), dtype=header.dtype), np.full((1, 1, 2), np.nan),
-                                    None, None, (0, 0, 1, 1))[0, 0]  # fmt: skip
-
-    def _resample(self, pixels, points, jacobian, coverage, part):
-        return resample(
-            pixels, points, interp=self.opts.interp, background=self.bg, alpha_channel=self.header.alpha_channel,
-            associated_alpha=self.header.associated_alpha, jacobian=jacobian, coverage=coverage, part=part,
-        )  # fmt: skip
+        self.alpha = {"alpha_channel": header.alpha_channel, "associated_alpha": header.associated_alpha}
 
     def strip(self, reader: PartReader, width: int, height: int, y0: int, y1: int, timings: dict) -> NDArray:
         """Output rows ``y0 <= y < y1``: (rows, width, C) in the input's pixel type."""
-        out = np.empty((y1 - y0, width, self.header.channels), dtype=self.header.dtype)
-        out[:] = self.empty
         t0 = time.perf_counter()
-        pull = self.fmap.pull_back(width, height, jacobian=self.antialias, rows=(y0, y1))
+        plan = plan_for(self.fmap, width, height, self.opts, rows=(y0, y1))
         timings["compose"] += time.perf_counter() - t0
-        if pull.points.size == 0:
+        out = np.empty((y1 - y0, width, self.header.channels), dtype=self.header.dtype)
+        out[:] = plan.empty_pixel(self.header.dtype, self.header.channels, **self.alpha)
+        if plan.pull.points.size == 0:
             return out
         t0 = time.perf_counter()
-        r0, c0 = pull.origin
-        inside = np.isfinite(pull.points[..., 0])
-        rows, cols = inside.shape
+        rows, cols = plan.pull.points.shape[:2]
         for cx in range(0, cols, CHUNK):
-            self._chunk(reader, pull, inside, (0, rows, cx, min(cols, cx + CHUNK)), out, r0 - y0, c0)
+            self._chunk(reader, plan, (0, rows, cx, min(cols, cx + CHUNK)), out, y0)
         timings["resample"] += time.perf_counter() - t0
         return out
 
-    def _chunk(self, reader, pull, inside, box, out, row_offset: int, c0: int) -> None:
-        """Resample the window's rows ``box[0]:box[1]`` and columns ``box[2]:box[3]`` into ``out``."""
+    def _chunk(self, reader: PartReader, plan: SamplingPlan, box, out: NDArray, y0: int) -> None:
+        """Resample the window's rows ``box[0]:box[1]`` and columns ``box[2]:box[3]`` into ``out`` (from row y0)."""
         a, b, c, d = box
-        points = pull.points[a:b, c:d]
-        jac = None if pull.jacobian is None else pull.jacobian[a:b, c:d]
-        origin = (pull.origin[0] + a, c0 + c)
-        coverage = None
-        if self.antialias:
-            coverage = edge_coverage(self.fmap.dst.points, inside[a:b, c:d], origin)
-            coverage = dataclasses.replace(coverage, source_points=self.fmap.inverse_boundary(coverage.edge, coverage.t))
-        if not inside[a:b, c:d].any() and (coverage is None or coverage.pixels.size == 0):
+        part_plan = plan.crop((a, b), (c, d))
+        if part_plan.is_empty():
             return  # no pixel has a pre-image or covers the target's edge: the background already there
-        part = _reach(points, jac, None if coverage is None else coverage.source_points, self.header, self.margin)
-        x0, y0, x1, y1 = part
-        nbytes = (x1 - x0) * (y1 - y0) * self.header.channels * self.header.dtype.itemsize
+        pull, coverage = part_plan.pull, part_plan.coverage
+        part = _reach(pull.points, pull.jacobian, None if coverage is None else coverage.source_points, self.header,
+                      self.margin)  # fmt: skip
+        x0, py0, x1, py1 = part
+        nbytes = (x1 - x0) * (py1 - py0) * self.header.channels * self.header.dtype.itemsize
         if nbytes > PART_BYTES and (b - a) * (d - c) > 1:
             # Too much input for one read (the map shrinks a lot here): halves.
             if b - a >= d - c:
@@ -191,12 +174,12 @@ class _Sampler:
                 m = (c + d) // 2
                 halves = ((a, b, c, m), (a, b, m, d))
             for half in halves:
-                self._chunk(reader, pull, inside, half, out, row_offset, c0)
+                self._chunk(reader, plan, half, out, y0)
             return
-        pixels = reader.read(x0, y0, x1, y1)
-        whole = (x0, y0, self.header.width, self.header.height)
-        done = self._resample(pixels, points, jac, coverage, whole)
-        out[row_offset + a : row_offset + b, c0 + c : c0 + d] = done
+        pixels = reader.read(x0, py0, x1, py1)
+        done = part_plan.sample_window(pixels, part=(x0, py0, self.header.width, self.header.height), **self.alpha)
+        r, q = pull.origin
+        out[r - y0 : r - y0 + (b - a), q : q + (d - c)] = done
 
 
 def _reach(points: NDArray, jac: NDArray | None, extra: NDArray | None, header: ImageHeader, margin: int):
@@ -263,6 +246,38 @@ def check_plausible(path: str | os.PathLike[str], header: ImageHeader) -> None:
         )
 
 
+def in_parts(
+    input_path: str | os.PathLike[str], header: ImageHeader | None, size: tuple[int, int] | None, tiled: bool | None
+) -> bool:
+    """Whether a warp of this input goes strip by strip: asked to (``tiled`` True), or, with
+    ``tiled`` None, a whole warp would not fit in memory (and the file is plausible).
+
+    Parameters
+    ----------
+    input_path : path-like
+    header : ImageHeader or None
+        The input's header (None: unread; then not in parts, and the read says why).
+    size : (int, int) or None
+        The output's size (None: the input's).
+    tiled : bool or None
+
+    Raises
+    ------
+    ImageInputError
+        If the image would go in parts unasked but its header declares more
+        than its file could hold (`check_plausible`).
+    """
+    if tiled is not None:
+        return bool(tiled)
+    if header is None:
+        return False
+    width, height = size if size is not None else (header.width, header.height)
+    if not tiled_needed(header, width, height):
+        return False
+    check_plausible(input_path, header)
+    return True
+
+
 def tiled_needed(header: ImageHeader, width: int, height: int) -> bool:
     """Whether a whole warp would not fit in memory: the input's pixels, or the
     output with its per-pixel map (the limits `warpcli.pipeline.warp_image` checks)."""
@@ -277,4 +292,7 @@ def tiled_needed(header: ImageHeader, width: int, height: int) -> bool:
     return False
 
 
-__all__ = ["CHUNK", "CUBIC_MARGIN", "MAX_COMPRESSION", "PART_BYTES", "TiledResult", "check_plausible", "tiled_needed", "warp_file_tiled"]
+__all__ = [
+    "CHUNK", "CUBIC_MARGIN", "MAX_COMPRESSION", "PART_BYTES", "TiledResult", "check_plausible", "in_parts", "tiled_needed",
+    "warp_file_tiled",
+]  # fmt: skip
