@@ -27,8 +27,8 @@ import time
 
 import numpy as np
 
-from warpcli import polygon as polymod
 from warpcli.polygon import Polygon, read_polygon
+from warpcli.polygon.validate import check_edges
 
 
 def wavy_star(n: int, radius: float) -> np.ndarray:
@@ -68,7 +68,7 @@ def main() -> None:
             print(f"n = {n:,} ...", file=sys.stderr, flush=True)
             pts = wavy_star(n, args.radius)
             t_val = median_time(lambda: Polygon(pts, name="star"), args.repeat)
-            pairs = polymod._check_edges(pts, "star", clearance=True)
+            pairs = check_edges(pts, "star", clearance=True)
             row = f"| {n:,} | {t_val:.3f} s | {t_val / n * 1e6:.2f} us | {pairs:,} |"
             if args.read:
                 path = os.path.join(tmp, f"star{n}.json")

@@ -12,9 +12,11 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from warpcli import polygon as polymod
+from warpcli.polygon import validate as polymod  # its work limits are patched below
 from warpcli.errors import PolygonError
 from warpcli.polygon import MIN_CLEARANCE, MIN_CLEARANCE_RELATIVE, Polygon, clearance_floor, read_polygon
+from warpcli.polygon.predicates import orient_sign, segments_touch
+from warpcli.polygon.validate import check_edges
 
 # --- helpers -----------------------------------------------------------------
 
@@ -22,7 +24,7 @@ from warpcli.polygon import MIN_CLEARANCE, MIN_CLEARANCE_RELATIVE, Polygon, clea
 def verdict(points, *, grid: bool) -> str | None:
     """The message of the simplicity and clearance checks, through the grid or all pairs; None if valid."""
     try:
-        polymod._check_edges(np.asarray(points, dtype=float), "p", clearance=True, grid=grid)
+        check_edges(np.asarray(points, dtype=float), "p", clearance=True, grid=grid)
     except PolygonError as err:
         return str(err)
     return None
@@ -144,7 +146,7 @@ def test_grid_and_all_pairs_agree_on_lattice_polygons(pts):
         keep = ~((i == 0) & (j == n - 1))
         i, j = i[keep], j[keep]
         b = np.roll(pts, -1, axis=0)
-        hit = polymod._segments_touch(pts[i], b[i], pts[j], b[j])
+        hit = segments_touch(pts[i], b[i], pts[j], b[j])
         k = int(np.flatnonzero(hit)[0])
         assert f"edges {i[k]} and {j[k]} cross at " in expected
 
@@ -225,7 +227,7 @@ def near_collinear_triples(draw):
 @settings(max_examples=60)
 def test_orientation_signs_are_exact(triples):
     cols = [np.array(c) for c in zip(*triples)]
-    got = polymod._orient_sign(*cols)
+    got = orient_sign(*cols)
     assert got.tolist() == [exact_sign(*t) for t in triples]
 
 
@@ -234,7 +236,7 @@ def test_collinear_edges_far_apart_do_not_touch():
     # said they cross (found by comparing the grid with all pairs).
     p1, p2 = np.array([[176.76952724970698, 13.19954485973171]]), np.array([[178.8883598217389, 16.499431074664635]])
     q1, q2 = np.array([[229.740341550505, 95.6967002330549]]), np.array([[231.85917412253693, 98.99658644798782]])
-    assert not polymod._segments_touch(p1, p2, q1, q2)[0]
+    assert not segments_touch(p1, p2, q1, q2)[0]
     naive = [(b[0, 0] - a[0, 0]) * (c[0, 1] - a[0, 1]) - (b[0, 1] - a[0, 1]) * (c[0, 0] - a[0, 0]) for a, b, c in [(p1, p2, q1), (p1, p2, q2), (q1, q2, p1), (q1, q2, p2)]]
     assert naive[0] * naive[1] < 0 and naive[2] * naive[3] < 0  # what the old test saw
 
@@ -456,7 +458,7 @@ def test_truncated_and_overlong_tokens(tmp_path, head, count, char):
 
 def test_wavy_star_tests_a_linear_number_of_pairs():
     pts = wavy_star(20_000)
-    tested = polymod._check_edges(pts, "w", clearance=True)
+    tested = check_edges(pts, "w", clearance=True)
     assert tested < 2 * len(pts)
 
 
@@ -466,7 +468,7 @@ def test_detail_next_to_long_edges_tests_a_linear_number_of_pairs():
     x = np.linspace(0.0, 10_000.0, 20_001)
     bottom = np.stack([x, 3.0 * np.sin(x / 7.0)], axis=1)
     pts = np.concatenate([bottom, [[10_000.0, 5_000.0], [0.0, 5_000.0]]])
-    tested = polymod._check_edges(pts, "d", clearance=True)
+    tested = check_edges(pts, "d", clearance=True)
     assert tested < 4 * len(pts)
 
 
@@ -474,7 +476,7 @@ def test_comb_with_crowded_cells_is_split_and_accepted():
     # 1000 teeth 0.5 px wide and apart, 40 px long: the first cells hold
     # dozens of teeth and are split down to a pixel or so.
     pts = place(comb(1000, 0.5, 0.5, 40.0), 0.3, 10.0)
-    tested = polymod._check_edges(pts, "c", clearance=True)
+    tested = check_edges(pts, "c", clearance=True)
     assert tested < 64 * len(pts)  # all pairs would be 2000 n
 
 

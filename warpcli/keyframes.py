@@ -17,7 +17,9 @@ from numpy.typing import NDArray
 
 from .errors import InputError, PolygonError
 from .files import read_small_file
-from .polygon import MAX_FILE_BYTES, Polygon, _parse_int, _parse_json, _points_of, _short
+from .polygon import MAX_FILE_BYTES, Polygon
+from .polygon.formats import parse_int as _parse_int, parse_json as _parse_json, points_of as _points_of
+from .polygon.messages import short_value as _short
 from .sequence import FRAME_LIMIT
 
 __all__ = ["Keyframes", "read_animated", "read_keyframes"]
