@@ -18,8 +18,8 @@ from numpy.typing import NDArray
 from .errors import InputError, PolygonError
 from .files import read_small_file
 from .polygon import MAX_FILE_BYTES, Polygon
-from .polygon.formats import parse_int as _parse_int, parse_json as _parse_json, points_of as _points_of
-from .polygon.messages import short_value as _short
+from .polygon.formats import parse_int, parse_json, points_of
+from .polygon.messages import short_value
 from .sequence import FRAME_LIMIT
 
 __all__ = ["Keyframes", "read_animated", "read_keyframes"]
@@ -29,7 +29,7 @@ __all__ = ["Keyframes", "read_animated", "read_keyframes"]
 _KEY = re.compile(r"-?[0-9]+")
 
 # What makes a JSON object a plain, labelme or GeoJSON polygon file (as
-# polygon._points_of decides); beside "frames" it would leave it ambiguous.
+# polygon.formats.points_of decides); beside "frames" it would leave it ambiguous.
 _POLYGON_MEMBERS = ("points", "shapes")
 _GEOJSON_TYPES = ("Polygon", "Feature", "FeatureCollection", "MultiPolygon")
 
@@ -333,12 +333,12 @@ def _load(name: str) -> tuple[object, str]:
         text = raw.decode("utf-8-sig")  # as read_polygon: a BOM is allowed
     except UnicodeDecodeError as err:
         raise PolygonError(f"{name}: not a JSON text file (invalid UTF-8 at byte {err.start})") from err
-    return _parse_json(text, name), text
+    return parse_json(text, name), text
 
 
 def _polygon(doc: object, name: str, label: str | None) -> Polygon:
     try:
-        return Polygon(_points_of(doc, name, label), name=name)
+        return Polygon(points_of(doc, name, label), name=name)
     except RecursionError as err:  # as read_polygon: arrays nested ~1000 deep
         raise PolygonError(f"{name}: invalid polygon file: arrays nested too deeply") from err
 
@@ -346,13 +346,13 @@ def _polygon(doc: object, name: str, label: str | None) -> Polygon:
 def _keyframes(doc: dict, text: str, name: str, label: str | None) -> Keyframes:
     clash = [k for k in _POLYGON_MEMBERS if k in doc]
     if clash or doc.get("type") in _GEOJSON_TYPES:
-        what = f'"{clash[0]}"' if clash else f'GeoJSON "type" {_short(doc.get("type"))}'
+        what = f'"{clash[0]}"' if clash else f'GeoJSON "type" {short_value(doc.get("type"))}'
         raise PolygonError(f'{name}: has both "frames" (keyframes) and {what} (a single polygon); keep one')
     table = doc["frames"]
     if not isinstance(table, dict):
         raise PolygonError(
             f'{name}: "frames" must be an object mapping frame numbers to polygons, '
-            f'e.g. {{"1001": [[x, y], ...]}}, not {_short(table)}'
+            f'e.g. {{"1001": [[x, y], ...]}}, not {short_value(table)}'
         )
     if not table:
         raise PolygonError(f'{name}: "frames" holds no keyframes')
@@ -361,7 +361,7 @@ def _keyframes(doc: dict, text: str, name: str, label: str | None) -> Keyframes:
     for key in table:
         frame = _frame_of(key, name)
         if frame in keyed:
-            raise PolygonError(f"{name}: keyframes {_short(keyed[frame])} and {_short(key)} are both frame {frame}")
+            raise PolygonError(f"{name}: keyframes {short_value(keyed[frame])} and {short_value(key)} are both frame {frame}")
         keyed[frame] = key
     frames = sorted(keyed)
     polygons = [_polygon(table[keyed[f]], f"{name} (keyframe {f})", label) for f in frames]
@@ -371,13 +371,13 @@ def _keyframes(doc: dict, text: str, name: str, label: str | None) -> Keyframes:
 def _frame_of(key: str, name: str) -> int:
     if _KEY.fullmatch(key) is None:
         raise PolygonError(
-            f'{name}: keyframe {_short(key)} is not a whole frame number; the keys of "frames" must be '
+            f'{name}: keyframe {short_value(key)} is not a whole frame number; the keys of "frames" must be '
             'integers such as "1001" or "-5"'
         )
     # Length first: int() of thousands of digits is slow, then refused.
     if len(key.lstrip("-")) > 10 or abs(int(key)) > FRAME_LIMIT:
         raise PolygonError(
-            f"{name}: keyframe {_short(key)} is out of range (frame numbers must be within +-{FRAME_LIMIT})"
+            f"{name}: keyframe {short_value(key)} is out of range (frame numbers must be within +-{FRAME_LIMIT})"
         )
     return int(key)
 
@@ -406,9 +406,9 @@ def _check_repeated_keys(text: str, name: str) -> None:
     A second parse, of a text the first one accepted, made only for keyframed
     files: json.loads has no other way to tell.
     """
-    doc = json.loads(text, object_pairs_hook=_members, parse_int=_parse_int)
+    doc = json.loads(text, object_pairs_hook=_members, parse_int=parse_int)
     if doc.repeated == "frames":
         raise PolygonError(f'{name}: "frames" appears twice')
     repeated = doc["frames"].repeated
     if repeated is not None:
-        raise PolygonError(f'{name}: keyframe {_short(repeated)} appears twice in "frames"')
+        raise PolygonError(f'{name}: keyframe {short_value(repeated)} appears twice in "frames"')
