@@ -106,6 +106,9 @@ def test_warp_image_renders_through_its_plan():
     res = warp_image(img, src, dst, interp="cubic", background=0.5)
     plan = plan_for(res.map, 128, 128, WarpOptions(interp="cubic", background=0.5))
     assert np.array_equal(plan.render(img), res.pixels)
+    # The result's own plan warps another image of that size the same way.
+    other = _image(128, 128, 3, seed=7)
+    assert np.array_equal(res.plan.render(other), warp_image(other, src, dst, interp="cubic", background=0.5).pixels)
 
 
 def test_a_plan_from_points_is_plain_resampling():

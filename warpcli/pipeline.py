@@ -67,6 +67,9 @@ class WarpResult:
         Seconds per stage.
     report : dict or None
         The report of `build_report`, when `warp_file` was asked for one.
+    plan : SamplingPlan or None
+        The sampling plan the pixels were rendered with: render it again on
+        another image of the input's size and type for the same warp.
     """
 
     pixels: NDArray
@@ -74,6 +77,7 @@ class WarpResult:
     pull: PullBack = field(repr=False)
     timings: dict[str, float] = field(default_factory=dict)
     report: dict | None = None
+    plan: SamplingPlan | None = field(default=None, repr=False)
 
     @cached_property
     def inverse_map(self) -> NDArray[np.float64]:
@@ -232,7 +236,7 @@ def _warp(
     out = plan.render(img, alpha_channel=alpha_channel, associated_alpha=associated_alpha)
     timings["compose"] = t1 - t0
     timings["resample"] = clock() - t1
-    return WarpResult(out, fmap, plan.pull, timings)
+    return WarpResult(out, fmap, plan.pull, timings, plan=plan)
 
 
 def _same_polygon(a: Polygon, b: Polygon) -> bool:
