@@ -23,6 +23,7 @@ _EXPORTS = {
     "MapOptions": "options",
     "MeshingError": "errors",
     "Polygon": "polygon",
+    "PolygonTransform": "transform",
     "PolygonError": "errors",
     "PullBack": "maps.compose",
     "RasterImage": "raster.imageio",
@@ -73,6 +74,7 @@ if TYPE_CHECKING:
     from .plan import SamplingPlan
     from .sequence import parse_frames
     from .polygon import Polygon, read_polygon
+    from .transform import PolygonTransform
     from .raster.imageio import RasterImage, read_image, write_image
     from .raster.resample import resample
     from .raster.stmap import load_stmap, save_stmap
