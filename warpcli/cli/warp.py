@@ -6,7 +6,7 @@ import dataclasses
 import json
 import logging
 import sys
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import click
 
@@ -24,9 +24,10 @@ Also: warp apply-map MAP.exr INPUT OUTPUT applies a saved map; warp points maps 
 """
 
 
-@dataclass(frozen=True)
-class SingleOutputs:
+class SingleOutputs(NamedTuple):
     """What a single warp writes besides OUTPUT, and how: the options that apply to one image only.
+
+    A named tuple, as `warpcli.cli.options.PolygonFiles` is, for ``warp --help``'s speed.
 
     Parameters
     ----------
