@@ -69,7 +69,8 @@ def collected(name: str | None, build: Callable[..., Any], *options: Callable) -
         command.__click_params__ = list(below)  # type: ignore[attr-defined]
         for option in reversed(options):
             option(command)
-        keys = [param.name for param in command.__click_params__[len(below) :]]  # type: ignore[attr-defined]
+        # click keeps a function's options last-stacked first: read them back in the order of ``options``.
+        keys = [param.name for param in reversed(command.__click_params__[len(below) :])]  # type: ignore[attr-defined]
         return command
 
     return decorate
