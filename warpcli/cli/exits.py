@@ -1,0 +1,22 @@
+"""Exit statuses of the ``warp`` command: which error ends a run with which, and the help text that lists them."""
+
+from __future__ import annotations
+
+from ..errors import InputError, WarpError
+
+#: Exit statuses; decided here and nowhere else.
+EXIT_OK, EXIT_FAILURE, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
+
+#: The epilog of every command's help.
+EXIT_CODES = """\b
+Exit status:
+  0    success (in a batch: every input)
+  1    failure while processing (for example a write error)
+  2    bad input or usage (unreadable or invalid polygon, image or option)
+  130  interrupted (Ctrl-C); 143: terminated (SIGTERM); nothing is left behind
+"""
+
+
+def exit_code(err: WarpError) -> int:
+    """The exit status for an error: 2 for bad input, 1 for a failure while processing."""
+    return EXIT_BAD_INPUT if isinstance(err, InputError) else EXIT_FAILURE

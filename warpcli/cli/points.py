@@ -1,0 +1,36 @@
+"""The ``warp points`` command: points, CSV and OBJ texture coordinates carried through the map."""
+
+from __future__ import annotations
+
+import click
+
+from ..options import MapOptions
+from .exits import EXIT_CODES
+from .options import CONTEXT, collected, method_option, parse_size, polygon_options, quiet_option
+
+
+@click.command("points", context_settings=CONTEXT, epilog=EXIT_CODES)
+@click.argument("input_path", metavar="IN", type=click.Path())
+@click.argument("output_path", metavar="OUT", type=click.Path())
+@polygon_options("Source polygon file.", "Target polygon file.", "Which polygon of a --{side} file holding several (a label or #N).")
+@click.option("--inverse", is_flag=True, help="Map target points back to the source.")
+@collected("mapping", MapOptions, method_option("How the harmonic maps are computed (bem and mfs are smooth)."))
+@click.option("--texture-size", callback=parse_size, metavar="WxH", help="OBJ: the texture's size in pixels (the polygons' units).")
+@click.option("--outside", type=click.Choice(("keep", "error")), default="keep", show_default=True, help="Points outside the polygon: left as they are (with a warning), or an error.")
+@quiet_option
+def points(input_path, output_path, polygons, inverse, mapping, texture_size, outside):
+    """Map points (JSON, CSV x,y, or an OBJ's vt texture coordinates) from SRC's coordinates to DST's.
+
+    An OBJ keeps every line but its vt lines byte for byte: a mesh's UVs move
+    from one texture layout (polygon SRC) to another (DST), the paper's 4.2.
+
+    \b
+    Example:
+      warp points --src layout_a.json --dst layout_b.json --texture-size 2048x2048 head.obj head_b.obj
+    """
+    from ..points import map_points_file
+
+    map_points_file(
+        input_path, output_path, polygons.src_path, polygons.dst_path, mapping, inverse=inverse,
+        texture_size=texture_size, outside=outside, src_label=polygons.src_label, dst_label=polygons.dst_label,
+    )  # fmt: skip
