@@ -21,12 +21,12 @@ from .errors import InputError, WarpError
 from .maps.compose import BijectiveMap, PullBack
 from .options import WarpOptions
 from .polygon import Polygon, check_pair, read_polygon
-from .outputs import PendingOutputs, write_checked
+from .budget import check_fits
+from .outputs import PendingOutputs, check_output_path, write_checked
 from .raster.imageio import (
     ImageHeader,
     RasterImage,
-    check_fits,
-    check_output_path,
+    check_image_output,
     convert_pixels,
     read_header,
     read_image,
@@ -472,11 +472,11 @@ def warp_file(
     inputs = (input_path, src_path, dst_path)
     extra = [p for p in (grid_path, heatmap_path, save_map, save_forward_map) if p is not None]
     for path in (output_path, *extra):
-        check_output_path(path, inputs=inputs)
+        check_image_output(path, inputs=inputs)
     if report_path is not None and os.fspath(report_path) != "-":
-        check_output_path(report_path, inputs=inputs, image=False)
+        check_output_path(report_path, inputs=inputs)
     if save_theta is not None:
-        check_output_path(save_theta, inputs=inputs, image=False)
+        check_output_path(save_theta, inputs=inputs)
     from .raster.stmap import check_stmap_path
 
     for path in (save_map, save_forward_map):
@@ -733,7 +733,7 @@ def _batch_setup(input_paths, out_dir, src_path, dst_path, pattern, src_label, d
         if key in seen:
             raise InputError(f"{out}: both {seen[key]} and {os.fspath(inp)} would be written there")
         seen[key] = os.fspath(inp)
-        check_output_path(out, inputs=(*input_paths, src_path, dst_path))
+        check_image_output(out, inputs=(*input_paths, src_path, dst_path))
     src = read_polygon(src_path, src_label)
     dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
@@ -870,7 +870,7 @@ def warp_sequence(
     ins = expand(os.fspath(input_pattern), frames)
     outs = expand(os.fspath(output_pattern), frames)
     for (_, inp), (_, out) in zip(ins, outs):
-        check_output_path(out, inputs=(inp, src_path, dst_path))
+        check_image_output(out, inputs=(inp, src_path, dst_path))
     src_keys = read_animated(src_path, src_label)
     dst_keys = read_animated(dst_path, dst_label)
     # Every frame's polygons first (interpolation can self-intersect): errors before any work.
@@ -936,7 +936,7 @@ def apply_map_file(
     from .raster.stmap import load_stmap
 
     opts = _options(options, changes)
-    check_output_path(output_path, inputs=(input_path, map_path))
+    check_image_output(output_path, inputs=(input_path, map_path))
     image = read_image(input_path)
     points = load_stmap(map_path, (image.width, image.height), t_up=t_up)
     bg = _background(opts.background, image.pixels)
