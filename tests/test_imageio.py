@@ -409,3 +409,15 @@ def test_a_truncated_image_fails_on_one_line_and_prints_nothing_else(tmp_path, c
     msg = str(info.value)
     assert msg.startswith(f"{cut}: cannot read image: ") and "\n" not in msg
     assert capfd.readouterr() == ("", "")
+
+
+def test_image_io_reaches_neither_maps_nor_options():
+    """raster knows nothing of how maps are made, not even through options (which lists the methods)."""
+    import json
+    import subprocess
+    import sys
+
+    script = "import json, sys, warpcli.raster.imageio; print(json.dumps(sorted(sys.modules)))"
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    loaded = [m for m in json.loads(done.stdout) if m.startswith(("warpcli.maps", "warpcli.options", "warpcli.pipeline"))]
+    assert loaded == []

@@ -142,3 +142,16 @@ def test_a_failed_body_leaves_nothing_and_names_the_file(tmp_path, failure, erro
     if isinstance(failure, OSError) and not isinstance(failure, ImageIOError):
         assert str(info.value) == f"{out}: cannot write: {reason}"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"] and out.read_text() == "old"
+
+
+def test_outputs_budget_and_capture_are_base_modules():
+    """They import neither raster, maps, report nor pipeline (not even through another
+    module), nor numpy: anything may use them."""
+    script = (
+        "import sys, warpcli.outputs, warpcli.budget, warpcli.capture; "
+        "print(sorted(m for m in sys.modules if m.startswith(('warpcli.', 'numpy'))))"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == str(
+        sorted(["warpcli.budget", "warpcli.capture", "warpcli.errors", "warpcli.files", "warpcli.outputs"])
+    )
