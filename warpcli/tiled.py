@@ -268,8 +268,8 @@ def check_plausible(path: str | os.PathLike[str], header: ImageHeader) -> None:
 def tiled_needed(header: ImageHeader, width: int, height: int) -> bool:
     """Whether a whole warp would not fit in memory: the input's pixels, or the
     output with its per-pixel map (the limits `warpcli.pipeline.warp_image` checks)."""
-    from .errors import ImageInputError
     from .budget import check_fits
+    from .errors import ImageInputError
 
     try:
         check_fits(header.width, header.height, header.channels, header.dtype.itemsize, "input")

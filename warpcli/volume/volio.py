@@ -10,9 +10,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..budget import max_image_bytes
 from ..errors import ImageInputError, ImageIOError
 from ..files import check_regular_file
-from ..budget import max_image_bytes
 from ..outputs import atomic_path, check_output_path, write_checked
 from .compose import VoxelGrid
 
