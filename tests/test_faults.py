@@ -21,8 +21,9 @@ import pytest
 
 from helpers import write_png, write_polygon
 from warpcli.errors import ImageInputError, ImageIOError
+from warpcli.outputs import atomic_path
 from warpcli.raster import imageio
-from warpcli.raster.imageio import RasterImage, atomic_path, read_image, write_image
+from warpcli.raster.imageio import RasterImage, read_image, write_image
 from warpcli.raster.stmap import save_stmap
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -92,7 +93,7 @@ def test_a_full_disk_is_an_error_naming_the_file_and_leaves_nothing(full_disk, m
     # itself; libpng then truncates it silently and libjpeg would end the
     # process, so the file is checked afterwards and a JPEG is refused beforehand.
     if staging == "direct":
-        monkeypatch.setattr(imageio, "_memory_file", lambda name: None)
+        monkeypatch.setattr(imageio, "memory_file", lambda name: None)
     ext = case.split("-")[0]
     out = full_disk / f"out.{case.split('-')[1] if ext == 'stmap' else ext}"
     # A small file fits, and stays whole when a larger one then fails to replace it.

@@ -188,7 +188,6 @@ def test_straight_alpha_written_to_openexr_is_premultiplied(tmp_path):
 
 # --- Determinism, checked writes, hostile inputs -------------------------------------------
 
-import fnmatch  # noqa: E402
 import os  # noqa: E402
 import re  # noqa: E402
 import socket  # noqa: E402
@@ -198,19 +197,11 @@ import threading  # noqa: E402
 import time  # noqa: E402
 import zlib  # noqa: E402
 
+from warpcli import budget  # noqa: E402
+from warpcli.budget import MAX_IMAGE_BYTES_ENV, max_image_bytes  # noqa: E402
 from warpcli.errors import ImageInputError, ImageIOError  # noqa: E402
-from warpcli.raster import imageio  # noqa: E402
-from warpcli.raster.imageio import (  # noqa: E402
-    MAX_IMAGE_BYTES_ENV,
-    TEMP_NAME_GLOB,
-    TEMP_NAME_PATTERN,
-    RasterImage,
-    atomic_path,
-    check_fits,
-    check_output_path,
-    max_image_bytes,
-    write_image,
-)
+from warpcli.outputs import atomic_path, check_output_path  # noqa: E402
+from warpcli.raster.imageio import RasterImage, check_image_output, write_image  # noqa: E402
 from warpcli.raster.stmap import save_stmap  # noqa: E402
 
 # Every format and pixel type warpcli writes, as (extension, dtype, channels).
@@ -258,53 +249,6 @@ def test_an_input_datetime_is_kept_as_it_was(tmp_path, ext):
     back = read_image(tmp_path / f"a.{ext}")
     if ext in ("tif", "exr"):  # the formats that store it (OpenImageIO's PNG and JPEG writers do not)
         assert ("DateTime", "string", "2001:02:03 04:05:06") in back.attributes
-
-
-def temp_name_regex(stem, ext):
-    head, tail = TEMP_NAME_PATTERN.split("XXXXXXXX")
-    return re.escape(head.format(stem=stem)) + r"[a-z0-9_]{8}" + re.escape(tail.format(ext=ext))
-
-
-@pytest.mark.parametrize("name", ["out.png", "out.tar.exr", "noext", "ünï cödé.tif", "x" * 240 + ".png"])
-def test_temporary_files_are_hidden_recognisable_and_beside_the_output(tmp_path, name):
-    out = tmp_path / name
-    with atomic_path(str(out)) as tmp:
-        assert os.path.dirname(tmp) == str(tmp_path)  # same file system: an atomic rename
-        base = os.path.basename(tmp)
-        stem, ext = os.path.splitext(name)
-        assert base.startswith(".") and base.endswith(ext) and fnmatch.fnmatch(base, TEMP_NAME_GLOB)
-        if len(name) < 200:
-            assert re.fullmatch(temp_name_regex(stem, ext), base), base
-        else:  # shortened to fit the file system's limit, still recognisable
-            assert len(os.fsencode(base)) <= 255 and ".warpcli-tmp-" in base
-        with open(tmp, "w") as fh:
-            fh.write("data")
-    assert sorted(p.name for p in tmp_path.iterdir()) == [name]
-    assert out.read_text() == "data"
-
-
-@pytest.mark.parametrize(
-    "failure,error,reason",
-    [
-        (RuntimeError("a bug"), RuntimeError, "a bug"),
-        (OSError(28, os.strerror(28)), ImageIOError, "No space left on device"),
-        (OSError(5, os.strerror(5)), ImageIOError, "Input/output error"),
-        (OSError(13, os.strerror(13)), ImageInputError, "Permission denied"),
-        (ImageIOError("x.png: its own message"), ImageIOError, "its own message"),
-    ],
-)
-def test_a_failed_body_leaves_nothing_and_names_the_file(tmp_path, failure, error, reason):
-    out = tmp_path / "out.json"
-    out.write_text("old")
-    with pytest.raises(error) as info:
-        with atomic_path(str(out)) as tmp:
-            with open(tmp, "w") as fh:
-                fh.write("partial")
-            raise failure
-    assert reason in str(info.value)
-    if isinstance(failure, OSError) and not isinstance(failure, ImageIOError):
-        assert str(info.value) == f"{out}: cannot write: {reason}"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"] and out.read_text() == "old"
 
 
 def test_an_unwritable_pixel_type_leaves_nothing(tmp_path):
@@ -362,9 +306,9 @@ def test_an_output_that_is_not_a_regular_file_is_never_replaced(tmp_path):
     os.mkfifo(tmp_path / "out.png")
     os.mkfifo(tmp_path / "report.json")
     with pytest.raises(ImageInputError, match="is a FIFO .*an output must be a regular file"):
-        check_output_path(tmp_path / "out.png")
+        check_image_output(tmp_path / "out.png")
     with pytest.raises(ImageInputError, match="is a FIFO"):
-        check_output_path(tmp_path / "report.json", image=False)
+        check_output_path(tmp_path / "report.json")
     with pytest.raises(ImageInputError, match="is a FIFO"):
         write_image(tmp_path / "out.png", RasterImage(pattern(4, 4, 3, np.uint8)))
     with pytest.raises(ImageInputError, match="is a FIFO"):
@@ -438,53 +382,15 @@ def test_an_oriented_image_counts_twice(tmp_path, monkeypatch):
 
 def test_the_default_limit_is_a_share_of_the_available_memory(tmp_path, monkeypatch):
     monkeypatch.delenv(MAX_IMAGE_BYTES_ENV, raising=False)
-    monkeypatch.setattr(imageio, "_available_memory", lambda: 40_000)
-    assert max_image_bytes() == int(40_000 * imageio.MEMORY_FRACTION)
+    monkeypatch.setattr(budget, "_available_memory", lambda: 40_000)
+    assert max_image_bytes() == int(40_000 * budget.MEMORY_FRACTION)
     small = write(tmp_path / "small.png", pattern(64, 64, 3, np.uint8))  # 12 KiB
     large = write(tmp_path / "large.png", pattern(128, 128, 3, np.uint8))  # 48 KiB
     assert read_image(small).pixels.shape == (64, 64, 3)
     with pytest.raises(ImageInputError, match=f"of the available memory; set {MAX_IMAGE_BYTES_ENV}"):
         read_image(large)
-    monkeypatch.setattr(imageio, "_available_memory", lambda: None)  # unknown: no limit
+    monkeypatch.setattr(budget, "_available_memory", lambda: None)  # unknown: no limit
     assert max_image_bytes() > 2**60
-
-
-def test_the_real_memory_limit_is_sane(monkeypatch):
-    monkeypatch.delenv(MAX_IMAGE_BYTES_ENV, raising=False)
-    limit = max_image_bytes()
-    assert 2**20 < limit < 2**60  # at least 1 MiB, and bounded by this machine
-
-
-@pytest.mark.parametrize(
-    "dims,fits",
-    [((640, 480, 3, 1), True), ((1000, 1000, 1, 1), True), ((1000, 1000, 1, 2), False),
-     ((100000, 100000, 4, 4), False), ((0, 10, 3, 4), True), ((2**31, 2**31, 4, 8), False)],
-)  # fmt: skip
-def test_check_fits(monkeypatch, dims, fits):
-    monkeypatch.setenv(MAX_IMAGE_BYTES_ENV, "1000000")
-    what = "--size {}x{}".format(*dims[:2])
-    if fits:
-        check_fits(*dims, what)
-        return
-    with pytest.raises(ImageInputError) as info:
-        check_fits(*dims, what)
-    w, h, c, b = dims
-    msg = str(info.value)
-    assert msg.startswith(f"{what}: a {w} x {h} image of {c} channel(s) x {b} byte")
-    assert msg.endswith(f"more than the 977 KiB warpcli may use ({MAX_IMAGE_BYTES_ENV})") and "\n" not in msg
-
-
-def test_check_fits_names_the_size_it_needs(monkeypatch):
-    monkeypatch.setenv(MAX_IMAGE_BYTES_ENV, str(2**30))
-    with pytest.raises(ImageInputError, match=r"^--size 100000x100000: .* needs 149 GiB of memory, more than the 1.0 GiB"):
-        check_fits(100000, 100000, 4, 4, "--size 100000x100000")
-
-
-@pytest.mark.parametrize("value", ["abc", "0", "-5", "1.5e9"])
-def test_a_bad_limit_is_refused_by_name(monkeypatch, value):
-    monkeypatch.setenv(MAX_IMAGE_BYTES_ENV, value)
-    with pytest.raises(ImageInputError, match=f"^{MAX_IMAGE_BYTES_ENV}='{re.escape(value)}': not a positive whole number"):
-        check_fits(1, 1, 1, 1, "x.png")
 
 
 @pytest.mark.parametrize("ext,dtype,channels", WRITE_CASES, ids=WRITE_IDS)
@@ -503,3 +409,15 @@ def test_a_truncated_image_fails_on_one_line_and_prints_nothing_else(tmp_path, c
     msg = str(info.value)
     assert msg.startswith(f"{cut}: cannot read image: ") and "\n" not in msg
     assert capfd.readouterr() == ("", "")
+
+
+def test_image_io_reaches_neither_maps_nor_options():
+    """raster knows nothing of how maps are made, not even through options (which lists the methods)."""
+    import json
+    import subprocess
+    import sys
+
+    script = "import json, sys, warpcli.raster.imageio; print(json.dumps(sorted(sys.modules)))"
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    loaded = [m for m in json.loads(done.stdout) if m.startswith(("warpcli.maps", "warpcli.options", "warpcli.pipeline"))]
+    assert loaded == []

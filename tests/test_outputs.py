@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import fnmatch
 import os
+import re
 import subprocess
 import sys
 
@@ -10,8 +12,8 @@ import numpy as np
 import pytest
 
 from helpers import star, write_png, write_polygon
-from warpcli.errors import ImageIOError
-from warpcli.outputs import PENDING_MARKER, PendingOutputs
+from warpcli.errors import ImageInputError, ImageIOError
+from warpcli.outputs import PENDING_MARKER, TEMP_NAME_GLOB, TEMP_NAME_PATTERN, PendingOutputs, atomic_path
 
 
 def test_pending_outputs_are_renamed_together(tmp_path):
@@ -90,3 +92,66 @@ def test_a_checked_write_to_a_full_device_is_one_error():
         pytest.skip("no /dev/full here")
     with pytest.raises(ImageIOError, match=r"^out.json: cannot write: No space left on device$"):
         write_checked("/dev/full", b"{}\n" * 10000, "out.json")
+
+
+# --- One file written atomically ------------------------------------------------------------
+
+
+def temp_name_regex(stem, ext):
+    head, tail = TEMP_NAME_PATTERN.split("XXXXXXXX")
+    return re.escape(head.format(stem=stem)) + r"[a-z0-9_]{8}" + re.escape(tail.format(ext=ext))
+
+
+@pytest.mark.parametrize("name", ["out.png", "out.tar.exr", "noext", "ünï cödé.tif", "x" * 240 + ".png"])
+def test_temporary_files_are_hidden_recognisable_and_beside_the_output(tmp_path, name):
+    out = tmp_path / name
+    with atomic_path(str(out)) as tmp:
+        assert os.path.dirname(tmp) == str(tmp_path)  # same file system: an atomic rename
+        base = os.path.basename(tmp)
+        stem, ext = os.path.splitext(name)
+        assert base.startswith(".") and base.endswith(ext) and fnmatch.fnmatch(base, TEMP_NAME_GLOB)
+        if len(name) < 200:
+            assert re.fullmatch(temp_name_regex(stem, ext), base), base
+        else:  # shortened to fit the file system's limit, still recognisable
+            assert len(os.fsencode(base)) <= 255 and ".warpcli-tmp-" in base
+        with open(tmp, "w") as fh:
+            fh.write("data")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]
+    assert out.read_text() == "data"
+
+
+@pytest.mark.parametrize(
+    "failure,error,reason",
+    [
+        (RuntimeError("a bug"), RuntimeError, "a bug"),
+        (OSError(28, os.strerror(28)), ImageIOError, "No space left on device"),
+        (OSError(5, os.strerror(5)), ImageIOError, "Input/output error"),
+        (OSError(13, os.strerror(13)), ImageInputError, "Permission denied"),
+        (ImageIOError("x.png: its own message"), ImageIOError, "its own message"),
+    ],
+)
+def test_a_failed_body_leaves_nothing_and_names_the_file(tmp_path, failure, error, reason):
+    out = tmp_path / "out.json"
+    out.write_text("old")
+    with pytest.raises(error) as info:
+        with atomic_path(str(out)) as tmp:
+            with open(tmp, "w") as fh:
+                fh.write("partial")
+            raise failure
+    assert reason in str(info.value)
+    if isinstance(failure, OSError) and not isinstance(failure, ImageIOError):
+        assert str(info.value) == f"{out}: cannot write: {reason}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"] and out.read_text() == "old"
+
+
+def test_outputs_budget_and_capture_are_base_modules():
+    """They import neither raster, maps, report nor pipeline (not even through another
+    module), nor numpy: anything may use them."""
+    script = (
+        "import sys, warpcli.outputs, warpcli.budget, warpcli.capture; "
+        "print(sorted(m for m in sys.modules if m.startswith(('warpcli.', 'numpy'))))"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == str(
+        sorted(["warpcli.budget", "warpcli.capture", "warpcli.errors", "warpcli.files", "warpcli.outputs"])
+    )

@@ -21,7 +21,7 @@ from .options import WarpOptions, resolve_options
 from .pipeline import read_header_or_none, write_like
 from .plan import SamplingPlan, check_paste, plan_for
 from .polygon import check_pair, read_polygon
-from .raster.imageio import check_output_path, read_image
+from .raster.imageio import check_image_output, read_image
 from .tiled import in_parts, warp_file_tiled
 
 __all__ = ["BatchItem", "PlanCache", "output_name", "prepare_batch", "warp_batch", "warp_one", "warp_sequence"]
@@ -158,7 +158,7 @@ def prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, 
         if key in seen:
             raise InputError(f"{out}: both {seen[key]} and {os.fspath(inp)} would be written there")
         seen[key] = os.fspath(inp)
-        check_output_path(out, inputs=(*input_paths, src_path, dst_path))
+        check_image_output(out, inputs=(*input_paths, src_path, dst_path))
     src = read_polygon(src_path, src_label)
     dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
@@ -329,7 +329,7 @@ def warp_sequence(
     ins = expand(os.fspath(input_pattern), frames)
     outs = expand(os.fspath(output_pattern), frames)
     for (_, inp), (_, out) in zip(ins, outs):
-        check_output_path(out, inputs=(inp, src_path, dst_path))
+        check_image_output(out, inputs=(inp, src_path, dst_path))
     src_keys = read_animated(src_path, src_label)
     dst_keys = read_animated(dst_path, dst_label)
     # Every frame's polygons first (interpolation can self-intersect): errors before any work.

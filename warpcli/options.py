@@ -12,11 +12,10 @@ from typing import Any
 
 from .errors import InputError
 from .maps.registry import METHODS, THETAS
+from .raster.dtypes import DTYPES
 
 #: Resampling filters (see `warpcli.raster.resample.resample`).
 INTERPOLATIONS = ("nearest", "linear", "cubic")
-#: Output pixel types, by name.
-DTYPES = ("uint8", "uint16", "half", "float")
 #: Edge weights of the FEM Laplacian.
 WEIGHTS = ("cotan", "positive")
 #: What a distortion heatmap shows.

@@ -1,23 +1,377 @@
-"""Outputs of one run: written under hidden pending names, renamed into place together.
+"""Safe output files: paths checked before any work, atomic renames, and a run's outputs renamed together.
 
-A run that writes an image, a report, pictures and maps either leaves all of
-them or none: each is written to a temporary file beside its destination
-(``.NAME.warpcli-pending-XXXXXXXX.EXT``, hidden, on the same file system so the
-rename is atomic), and only when every one has been written are they renamed
-into place. A failure, Ctrl-C or SIGTERM removes them; after a SIGKILL, files
-matching that pattern are leftovers and can be deleted.
+Nothing is ever left half written at an output's path. One file is written
+under a hidden temporary name beside it (`TEMP_NAME_PATTERN`, `atomic_path`),
+flushed to the disk and renamed over it. A run that writes an image, a
+report, pictures and maps either leaves all of them or none: each is written
+under a pending name (``.NAME.warpcli-pending-XXXXXXXX.EXT``, `PendingOutputs`),
+and only when every one has been written are they renamed into place. Both
+names are on the output's file system, so the rename is atomic; a failure,
+Ctrl-C or SIGTERM removes them, and only a SIGKILL or a power cut leaves
+one behind, harmless and safe to delete.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
+import stat
 import tempfile
+from collections.abc import Iterator
 from types import TracebackType
 
-from .errors import ImageIOError, WarpError
+from .errors import ImageInputError, ImageIOError, WarpError
+from .files import file_kind, format_bytes
 
+__all__ = [
+    "PENDING_MARKER", "TEMP_NAME_GLOB", "TEMP_NAME_PATTERN", "PendingOutputs", "atomic_path", "check_output_path",
+    "check_room", "copy_from_memory", "file_size_limit", "memory_file", "write_checked", "write_failure_message",
+]  # fmt: skip
+
+#: Name of the temporary file an output is written to before it is renamed over
+#: the output: hidden, in the output's directory (the same file system, so the
+#: rename is atomic), with the output's stem and extension (which picks the
+#: format); XXXXXXXX is random. Only a run killed outright (SIGKILL, a power
+#: cut) leaves one behind; it is harmless and can be deleted.
+TEMP_NAME_PATTERN = ".{stem}.warpcli-tmp-XXXXXXXX{ext}"
+#: A shell pattern matching the leftovers: ``find DIR -name '.*.warpcli-tmp-*' -delete``.
+TEMP_NAME_GLOB = ".*.warpcli-tmp-*"
 #: The marker in the names of pending outputs.
 PENDING_MARKER = ".warpcli-pending-"
+
+
+def check_output_path(path: str | os.PathLike[str], inputs: tuple[str | os.PathLike[str], ...] = ()) -> None:
+    """Check before any work that an output can be written at ``path``.
+
+    Whether its format is one the writer knows is the writer's to check
+    (`warpcli.raster.imageio.check_image_output` for images).
+
+    Parameters
+    ----------
+    path : path-like
+    inputs : tuple of path-like
+        Paths that must not be overwritten.
+
+    Raises
+    ------
+    ImageInputError
+        If the directory is missing or cannot be written in (read-only, no
+        permission), ``path`` exists and is not a regular file (a device, a
+        FIFO: it would be replaced), or ``path`` is one of ``inputs`` (an
+        input is never overwritten).
+    """
+    name = os.fspath(path)
+    for other in inputs:
+        if _same_file(name, os.fspath(other)):
+            raise ImageInputError(f"{name}: output would overwrite the input {os.fspath(other)}")
+    directory = os.path.dirname(os.path.abspath(name))
+    if not os.path.isdir(directory):
+        raise ImageInputError(f"{name}: output directory {directory} does not exist")
+    if os.path.isdir(name):
+        raise ImageInputError(f"{name}: is a directory")
+    _check_replaceable(name)
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise ImageInputError(f"{name}: cannot write in {directory}: {_why_unwritable(directory)}")
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[str]:
+    """Yield a temporary path beside ``path`` (same extension); on success rename it
+    over ``path``, on any failure remove it. Readers never see a partial file.
+
+    The temporary file is named after `TEMP_NAME_PATTERN`. What the body wrote is
+    flushed to the disk (fsync) before the rename, and an `OSError` raised by the
+    body or by these steps becomes an `ImageIOError` naming ``path`` and the OS's
+    reason (an `ImageInputError` when ``path`` cannot be written at all: no
+    permission, a read-only file system).
+
+    Parameters
+    ----------
+    path : path-like
+        The output.
+
+    Yields
+    ------
+    str
+        The temporary path to write to, created empty with mode 0600 (given
+        the umask's permissions when renamed).
+
+    Raises
+    ------
+    ImageInputError
+        If ``path`` exists and is not a regular file, or cannot be written at all.
+    ImageIOError
+        If writing, flushing or renaming fails.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> out = os.path.join(tempfile.mkdtemp(), "a.txt")
+    >>> with atomic_path(out) as tmp:
+    ...     with open(tmp, "w") as fh:
+    ...         _ = fh.write("done")
+    >>> open(out).read()
+    'done'
+    """
+    path = os.fspath(path)
+    directory = os.path.dirname(os.path.abspath(path))
+    _check_replaceable(path)
+    prefix, suffix = _temp_affixes(path, directory)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=directory)
+        os.close(fd)
+    except OSError as err:
+        raise _write_error(path, err) from err
+    try:
+        yield tmp
+        _sync_file(tmp)
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except BaseException as err:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if isinstance(err, OSError) and not isinstance(err, WarpError):
+            raise _write_error(path, err) from err
+        raise
+    _sync_directory(directory)
+
+
+def _temp_affixes(path: str, directory: str) -> tuple[str, str]:
+    """mkstemp's prefix and suffix for `TEMP_NAME_PATTERN`, the stem shortened if
+    the name would be too long for the file system."""
+    stem, ext = os.path.splitext(os.path.basename(path))
+    head, tail = TEMP_NAME_PATTERN.split("XXXXXXXX")
+    try:
+        name_max = os.pathconf(directory, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        name_max = 255
+    spare = name_max - len(os.fsencode(head.format(stem="") + "XXXXXXXX" + tail.format(ext=ext)))
+    raw = os.fsencode(stem)
+    if len(raw) > spare:
+        stem = os.fsdecode(raw[: max(spare, 0)]).rstrip("\udcff")  # never half a UTF-8 character
+        while len(os.fsencode(stem)) > spare:
+            stem = stem[:-1]
+    return head.format(stem=stem), tail.format(ext=ext)
+
+
+def _check_replaceable(name: str) -> None:
+    """The output is replaced by a new file: refuse to replace anything but a file."""
+    try:
+        st = os.stat(name)
+    except OSError:
+        return
+    if stat.S_ISDIR(st.st_mode):
+        raise ImageInputError(f"{name}: is a directory")
+    if not stat.S_ISREG(st.st_mode):
+        raise ImageInputError(f"{name}: is {file_kind(st.st_mode)}; an output must be a regular file")
+
+
+def _why_unwritable(directory: str) -> str:
+    try:
+        if os.statvfs(directory).f_flag & os.ST_RDONLY:
+            return os.strerror(errno.EROFS)
+    except (OSError, AttributeError):
+        pass
+    return os.strerror(errno.EACCES)
+
+
+# OS errors that mean the output path is unusable (exit 2), not a failure
+# while writing (exit 1).
+_PATH_ERRNOS = {errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.ENAMETOOLONG}
+
+
+def _write_error(path: str, err: OSError) -> ImageIOError:
+    cls = ImageInputError if err.errno in _PATH_ERRNOS else ImageIOError
+    return cls(f"{path}: cannot write: {err.strerror or err}")
+
+
+def _sync_file(name: str) -> None:
+    """Flush a written file to the disk: errors deferred by the kernel (a full
+    disk on NFS, an I/O error) are reported here, before the rename."""
+    fd = os.open(name, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _sync_directory(directory: str) -> None:
+    """Make the rename durable; best effort (not every file system can)."""
+    with contextlib.suppress(OSError):
+        fd = os.open(directory, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _same_file(a: str, b: str) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def file_size_limit() -> int | None:
+    """The largest file this process may write (``ulimit -f``), in bytes, or None if unlimited."""
+    try:
+        import resource
+    except ImportError:
+        return None
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    return None if soft == resource.RLIM_INFINITY else soft
+
+
+def check_room(filename: str, shown_name: str, nbytes: int, what: str, *, disk: bool = True) -> None:
+    """Refuse beforehand a file of up to ``nbytes`` that there may be no room for.
+
+    For writers that cannot report a full disk themselves (libjpeg ends the
+    process instead).
+
+    Parameters
+    ----------
+    filename : str
+        Where the file will be written (its file system's free space counts).
+    shown_name : str
+        The name given in messages (the user's path).
+    nbytes : int
+        The most the file may take.
+    what : str
+        The file and its bound, for the message ("a JPEG of 640 x 480 may take up to 1.2 MiB").
+    disk : bool
+        Whether to check the free space too (not when the file is first
+        written to memory, whose copy to the disk reports a full disk).
+
+    Raises
+    ------
+    ImageIOError
+        If ``nbytes`` is over the file size limit (`file_size_limit`) or, with
+        ``disk``, over the free space.
+    """
+    soft = file_size_limit()
+    if soft is not None and nbytes > soft:
+        raise ImageIOError(
+            f"{shown_name}: cannot write: {os.strerror(errno.EFBIG)}: {what}, "
+            f"the file size limit (ulimit -f) is {format_bytes(soft)}"
+        )
+    if not disk:
+        return
+    try:
+        vfs = os.statvfs(os.path.dirname(os.path.abspath(filename)))
+    except OSError:
+        return
+    free = vfs.f_bavail * vfs.f_frsize
+    if free < nbytes:
+        raise ImageIOError(f"{shown_name}: cannot write: {os.strerror(errno.ENOSPC)}: {what}, {format_bytes(free)} free")
+
+
+def write_failure_message(shown_name: str, text: str, written: str, filename: str, on_disk: bool) -> str:
+    """The message for a failed write: temporary names replaced by the output's,
+    and the OS's likely reason added when the library that failed did not give
+    one (libpng, libtiff and OpenEXR report no errno).
+
+    Parameters
+    ----------
+    shown_name : str
+        The output's name for the user.
+    text : str
+        What the writer said.
+    written : str
+        The file the library wrote (the temporary file, or the in-memory one).
+    filename : str
+        The temporary file on the output's file system.
+    on_disk : bool
+        Whether ``written`` is on the output's file system (else in memory).
+
+    Returns
+    -------
+    str
+        ``"{shown_name}: cannot write: ..."``.
+    """
+    text = text.replace(written, shown_name).replace(filename, shown_name)
+    cause = ""
+    try:
+        limit = file_size_limit()
+        if limit is not None and os.stat(written).st_size >= limit:
+            cause = os.strerror(errno.EFBIG)
+        elif on_disk:
+            vfs = os.statvfs(os.path.dirname(os.path.abspath(filename)))
+            if vfs.f_bavail * vfs.f_frsize < 2 * max(vfs.f_bsize, 4096):
+                cause = os.strerror(errno.ENOSPC)
+    except OSError:
+        pass
+    if cause and cause.lower() not in text.lower():
+        text = f"{cause}: {text}"
+    return f"{shown_name}: cannot write: {text}"
+
+
+def memory_file(name: str) -> int | None:
+    """An anonymous in-memory file that a C library can open by a path
+    (``/proc/self/fd/N``), or None where the system has none.
+
+    Parameters
+    ----------
+    name : str
+        A name for debugging (``/proc/self/fd/N`` links to ``/memfd:NAME``).
+
+    Returns
+    -------
+    int or None
+        Its file descriptor (close-on-exec), for the caller to close.
+    """
+    if not hasattr(os, "memfd_create"):
+        return None
+    try:
+        fd = os.memfd_create(name, os.MFD_CLOEXEC)
+    except OSError:
+        return None
+    if not os.path.exists(f"/proc/self/fd/{fd}"):
+        os.close(fd)
+        return None
+    return fd
+
+
+def copy_from_memory(src_fd: int, filename: str, shown_name: str) -> int:
+    """Copy a file encoded in memory (`memory_file`) to ``filename``, flushed to the disk.
+
+    Written by Python rather than by the C library that encoded it, so that
+    every OS error ("No space left on device" first) is an exception.
+
+    Returns
+    -------
+    int
+        The bytes copied.
+
+    Raises
+    ------
+    ImageIOError
+        Naming ``shown_name`` and the OS's reason.
+    """
+    size = os.fstat(src_fd).st_size
+    try:
+        fd = os.open(filename, os.O_WRONLY | os.O_TRUNC | getattr(os, "O_CLOEXEC", 0))
+        try:
+            offset = 0
+            while offset < size:
+                chunk = memoryview(os.pread(src_fd, min(1 << 20, size - offset), offset))
+                if not chunk:
+                    break
+                offset += len(chunk)
+                while chunk:
+                    chunk = chunk[os.write(fd, chunk) :]
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except OSError as err:
+        raise ImageIOError(f"{shown_name}: cannot write: {err.strerror or err}") from err
+    return size
 
 
 class PendingOutputs:

@@ -24,15 +24,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import InputError, WarpError
 from .maps.compose import BijectiveMap, PullBack
+from .budget import check_fits
 from .options import WarpOptions, resolve_options
-from .outputs import PendingOutputs, write_checked
+from .outputs import PendingOutputs, check_output_path, write_checked
 from .plan import SamplingPlan, background_values, check_paste, plan_for, warn_if_outside
 from .polygon import Polygon, check_pair, read_polygon
 from .raster.imageio import (
     ImageHeader,
     RasterImage,
-    check_fits,
-    check_output_path,
+    check_image_output,
     convert_pixels,
     read_header,
     read_image,
@@ -413,11 +413,11 @@ def warp_file(
     inputs = (input_path, src_path, dst_path)
     extra = [p for p in (grid_path, heatmap_path, save_map, save_forward_map) if p is not None]
     for path in (output_path, *extra):
-        check_output_path(path, inputs=inputs)
+        check_image_output(path, inputs=inputs)
     if report_path is not None and os.fspath(report_path) != "-":
-        check_output_path(report_path, inputs=inputs, image=False)
+        check_output_path(report_path, inputs=inputs)
     if save_theta is not None:
-        check_output_path(save_theta, inputs=inputs, image=False)
+        check_output_path(save_theta, inputs=inputs)
     from .raster.stmap import check_stmap_path
 
     for path in (save_map, save_forward_map):
@@ -565,7 +565,7 @@ def apply_map_file(
     from .raster.stmap import load_stmap
 
     opts = resolve_options(options, changes)
-    check_output_path(output_path, inputs=(input_path, map_path))
+    check_image_output(output_path, inputs=(input_path, map_path))
     image = read_image(input_path)
     points = load_stmap(map_path, (image.width, image.height), t_up=t_up)
     plan = SamplingPlan.from_points(points, interp=opts.interp, background=opts.background)

@@ -1,7 +1,7 @@
 """Images larger than memory: the warp computed, read and written strip by strip.
 
 `warp_file` takes this route when a whole warp would not fit in memory (the
-limit of `warpcli.raster.imageio.max_image_bytes`), or when asked
+limit of `warpcli.budget.max_image_bytes`), or when asked
 (``warp --tiled``). Memory is then bounded by a strip of the output, the
 parts of the input it reaches, OpenImageIO's tile cache and the map, not by
 the image:
@@ -88,7 +88,9 @@ def warp_file_tiled(
     WarpError
         If reading or writing fails.
     """
-    from .raster.imageio import DTYPES, atomic_path, convert_pixels
+    from .outputs import atomic_path
+    from .raster.dtypes import DTYPES
+    from .raster.imageio import convert_pixels
 
     stage = progress or (lambda name: None)
     clock = time.perf_counter
@@ -281,8 +283,8 @@ def in_parts(
 def tiled_needed(header: ImageHeader, width: int, height: int) -> bool:
     """Whether a whole warp would not fit in memory: the input's pixels, or the
     output with its per-pixel map (the limits `warpcli.pipeline.warp_image` checks)."""
+    from .budget import check_fits
     from .errors import ImageInputError
-    from .raster.imageio import check_fits
 
     try:
         check_fits(header.width, header.height, header.channels, header.dtype.itemsize, "input")

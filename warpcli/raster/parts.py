@@ -6,7 +6,7 @@ decoded on demand and kept up to a memory budget, so reading a part costs
 memory in proportion to the part, not to the image. `StripWriter` writes an
 image strip after strip, tiled where the format stores tiles (TIFF, OpenEXR),
 in scanlines otherwise, under a temporary name renamed into place when the
-last strip is written and the file reads back whole (`atomic_path`).
+last strip is written and the file reads back whole (`warpcli.outputs.atomic_path`).
 
 Both keep what `warpcli.raster.imageio` keeps: the file's own pixel type,
 channel names, alpha and its convention, and metadata.
@@ -19,17 +19,11 @@ import os
 import numpy as np
 from numpy.typing import NDArray
 
+from ..capture import c_stderr, one_line
 from ..errors import ImageInputError, ImageIOError
-from .imageio import (
-    _OIIO_TYPES,
-    ImageHeader,
-    _c_stderr,
-    _one_line,
-    _output_spec,
-    _premultiplied,
-    _verify,
-    _write_failure,
-)
+from ..outputs import write_failure_message
+from .imageio import OIIO_TYPES, ImageHeader, output_spec, verify_written
+from .pixels import premultiplied
 
 #: Rows of a strip, and the side of a tile in tiled outputs.
 TILE = 256
@@ -57,7 +51,7 @@ class PartReader:
         self._cache.attribute("max_memory_MB", CACHE_MB)
         self._cache.attribute("autotile", TILE)  # scanline files in strips, not whole
         self._cache.attribute("unassociatedalpha", 1)
-        self._type = oiio.TypeDesc(_OIIO_TYPES[header.dtype])
+        self._type = oiio.TypeDesc(OIIO_TYPES[header.dtype])
 
     def read(self, x0: int, y0: int, x1: int, y1: int) -> NDArray:
         """Pixels of columns ``x0 <= x < x1`` and rows ``y0 <= y < y1``: (rows, columns, C).
@@ -67,11 +61,11 @@ class PartReader:
         ImageInputError
             If the file cannot be decoded there (cut short, damaged).
         """
-        with _c_stderr() as said:
+        with c_stderr() as said:
             px = self._cache.get_pixels(self.name, 0, 0, x0, x1, y0, y1, 0, 1, self._type)
         problem = self._cache.geterror()
         if px is None or problem:
-            raise ImageInputError(f"{self.name}: cannot read image: {_one_line(problem, said.text)}")
+            raise ImageInputError(f"{self.name}: cannot read image: {one_line(problem, said.text)}")
         px = np.asarray(px)
         if px.ndim == 2:
             px = px[:, :, None]
@@ -108,7 +102,7 @@ def output_format(path: str) -> str:
 class StripWriter:
     """An image file written strip after strip, top to bottom.
 
-    Open it on the temporary path of `atomic_path`; `write` each strip of
+    Open it on the temporary path of `warpcli.outputs.atomic_path`; `write` each strip of
     `TILE` rows (the last may be shorter), then `close`, which checks that the
     file reads back with its size. Every write is checked: a full disk is an
     `ImageIOError` naming ``shown_name``.
@@ -131,12 +125,12 @@ class StripWriter:
         self.filename, self.shown_name = filename, shown_name
         out = oiio.ImageOutput.create(filename)
         if out is None:
-            raise ImageIOError(f"{shown_name}: cannot write: {_one_line(oiio.geterror())}")
+            raise ImageIOError(f"{shown_name}: cannot write: {one_line(oiio.geterror())}")
         self._out = out
         self.format = out.format_name()
         check_writable_in_parts(self.format, shown_name)
-        spec, self._premultiply = _output_spec(
-            oiio, self.format, (width, height, header.channels), _OIIO_TYPES[header.dtype], header.channel_names,
+        spec, self._premultiply = output_spec(
+            oiio, self.format, (width, height, header.channels), OIIO_TYPES[header.dtype], header.channel_names,
             header.alpha_channel, header.associated_alpha, header.attributes,
         )  # fmt: skip
         self.tiled = bool(out.supports("tiles"))
@@ -144,10 +138,10 @@ class StripWriter:
             spec.tile_width = spec.tile_height = TILE
         self._spec = spec
         self._next = 0
-        with _c_stderr() as said:
+        with c_stderr() as said:
             ok = bool(out.open(filename, spec))
         if not ok:
-            self._fail(_one_line(out.geterror(), oiio.geterror(), said.text))
+            self._fail(one_line(out.geterror(), oiio.geterror(), said.text))
 
     def write(self, pixels: NDArray) -> None:
         """Write the next strip, (rows, width, C) in the header's pixel type."""
@@ -155,35 +149,35 @@ class StripWriter:
         y0, y1 = self._next, self._next + rows
         if y1 > self._spec.height or (rows != TILE and y1 != self._spec.height):
             raise ValueError(f"strip of rows {y0}-{y1} does not fit a {self._spec.height}-row image in strips of {TILE}")
-        px = pixels if self._premultiply is None else _premultiplied(pixels, self._premultiply)
+        px = pixels if self._premultiply is None else premultiplied(pixels, self._premultiply)
         px = np.ascontiguousarray(px)
-        with _c_stderr() as said:
+        with c_stderr() as said:
             if self.tiled:
                 ok = self._out.write_tiles(0, self._spec.width, y0, y1, 0, 1, px)
             else:
                 ok = self._out.write_scanlines(y0, y1, 0, px)
         if not ok:
-            self._fail(_one_line(self._out.geterror(), said.text))
+            self._fail(one_line(self._out.geterror(), said.text))
         self._next = y1
 
     def _fail(self, text: str) -> None:
         # The temporary name replaced by the output's, and the OS's likely
         # reason (a full disk, a file size limit) added where the library gave none.
-        raise ImageIOError(_write_failure(self.shown_name, text, self.filename, self.filename, True))
+        raise ImageIOError(write_failure_message(self.shown_name, text, self.filename, self.filename, True))
 
     def close(self) -> None:
         """Finish the file and check that it reads back whole."""
         if self._next != self._spec.height:
             raise ValueError(f"{self._next} of {self._spec.height} rows written")
-        with _c_stderr() as said:
+        with c_stderr() as said:
             ok = bool(self._out.close())
-        problem = _one_line(self._out.geterror(), said.text, default="")
+        problem = one_line(self._out.geterror(), said.text, default="")
         if not ok:
             self._fail(problem or "unknown error")
-        _verify(self._oiio, self.filename, self.format, self._spec, None, self.shown_name, problem)
+        verify_written(self._oiio, self.filename, self.format, self._spec, None, self.shown_name, problem)
 
     def abandon(self) -> None:
-        """Give up the file (its temporary path is removed by `atomic_path`)."""
-        with _c_stderr():
+        """Give up the file (its temporary path is removed by `warpcli.outputs.atomic_path`)."""
+        with c_stderr():
             self._out.close()
         self._out.geterror()

@@ -37,3 +37,30 @@ def from_unit(values: NDArray[np.float64], dtype: DTypeLike) -> NDArray:
         top = unit(dt)
         return np.clip(np.rint(values * top), 0, top).astype(dt)
     return values.astype(dt)
+
+
+def premultiplied(pixels: NDArray, alpha_channel: int) -> NDArray:
+    """Colour multiplied by alpha (0..1), in the pixels' own type.
+
+    For straight colour written to a format whose colour is premultiplied by
+    definition (OpenEXR).
+
+    Parameters
+    ----------
+    pixels : (H, W, C) ndarray
+    alpha_channel : int
+
+    Returns
+    -------
+    (H, W, C) ndarray
+        Of ``pixels``' type; alpha unchanged.
+
+    Examples
+    --------
+    >>> premultiplied(np.array([[[200, 100, 128]]], dtype=np.uint8), 2).tolist()
+    [[[100, 50, 128]]]
+    """
+    x = to_unit(pixels)
+    colour = [c for c in range(pixels.shape[2]) if c != alpha_channel]
+    x[:, :, colour] *= x[:, :, alpha_channel : alpha_channel + 1]
+    return from_unit(x, pixels.dtype)

@@ -270,11 +270,11 @@ def warp_volume_file(
     if not (isinstance(theta, str) and theta in ("auto", "source", "target", "sphere")):
         inputs += (theta,)
     check_volume_output(output, inputs)
-    from ..raster.imageio import check_output_path
+    from ..outputs import check_output_path
 
     for extra in (report, picture):
         if extra is not None:
-            check_output_path(extra, inputs + (output,), image=False)
+            check_output_path(extra, inputs + (output,))
     a = read_surface(src)
     b = read_surface(dst)
     check_pair(a, b)

@@ -10,10 +10,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..budget import max_image_bytes
 from ..errors import ImageInputError, ImageIOError
 from ..files import check_regular_file
-from ..outputs import write_checked
-from ..raster.imageio import atomic_path, check_output_path, max_image_bytes
+from ..outputs import atomic_path, check_output_path, write_checked
 from .compose import VoxelGrid
 
 #: Extensions by format.
@@ -150,7 +150,7 @@ def _read_tiff(name: str) -> Volume:
 def check_volume_output(path: str | os.PathLike[str], inputs: tuple = ()) -> None:
     """Check before any work that a volume can be written at ``path`` (format known, not an input)."""
     volume_format(path)
-    check_output_path(path, inputs, image=False)
+    check_output_path(path, inputs)
 
 
 def encode_volume(volume: Volume, path: str | os.PathLike[str]) -> bytes:
