@@ -98,6 +98,17 @@ def test_cli_choices_come_from_the_registry():
         assert name in params["theta"].metavar and name in params["theta"].help
 
 
+def test_the_registry_implements_exactly_the_names_options_accept():
+    """`options` (base layer) lists the names; `maps.registry` (above the maps it names) implements them."""
+    from warpcli import options
+    from warpcli.maps import registry
+
+    assert tuple(registry.METHODS) == options.METHODS
+    assert tuple(registry.THETAS) == options.THETAS
+    for entry in (*registry.METHODS.values(), *registry.THETAS.values()):
+        assert callable(getattr(entry.load(), "build", None)) or callable(entry.load())
+
+
 def test_one_copy_is_tested_in_process_and_in_subprocesses(tmp_path):
     """In-process imports and the CLI's subprocesses use this checkout's warpcli."""
     assert os.path.dirname(os.path.abspath(warpcli.__file__)) == os.path.join(REPO, "warpcli")
