@@ -40,21 +40,23 @@ ROOT = os.path.join(REPO, "warpcli")
 #: module may import its own component and anything in a lower layer; the
 #: components of one layer know nothing of each other.
 LAYERS = [
-    # Values, files and conventions that know nothing of maps or pixels.
-    # `options` is here, not above the maps: maps (MapOptions, WEIGHTS),
-    # raster (INTERPOLATIONS, DTYPES) and pipelines all read it, so it reads
-    # only `errors`; the registry of implementations sits in `maps`.
+    # Values, files, conventions and the seam shared by 2D and 3D (mapping,
+    # simplicial, distortion): nothing here knows how a map is made or an image
+    # is read. `options` is here, not above the maps: maps (MapOptions,
+    # WEIGHTS), raster (INTERPOLATIONS) and pipelines all read it, so it reads
+    # only name tables (`raster.dtypes`, free of numpy, is one); the registry
+    # of implementations sits in `maps`.
     ("base", {
         "base": (
-            "errors", "files", "budget", "outputs", "grid", "boundary", "polygon", "distortion", "options",
-            "_native", "_fork",
+            "errors", "files", "budget", "capture", "outputs", "grid", "boundary", "polygon", "mapping",
+            "simplicial", "distortion", "options", "raster.dtypes", "_native", "_fork",
         ),
     }),
     # Maps see points and Jacobians, raster sees pixels: neither knows the other.
     ("core", {"maps": ("maps",), "raster": ("raster",)}),
     # Measuring and drawing a map: through raster, and maps only by duck typing (see NEVER).
     ("report", {"report": ("report",)}),
-    # What runs a warp from files: 2D pipelines beside the 3D one, neither knowing the other.
+    # What runs a warp from files: 2D pipelines beside 3D, neither knowing the other (see NEVER).
     ("pipelines", {
         "pipelines": (
             "plan", "pipeline", "tiled", "batch", "distributed", "sequence", "keyframes", "points", "composite",
@@ -69,10 +71,12 @@ LAYERS = [
 #: Components of different layers that must still not reach each other: (from, to, why).
 NEVER = [
     ("report", "maps", "a report reads a map through a Protocol (warpcli/report/__init__.py), never its classes"),
+    ("volume", "maps", "3D builds on the seam it shares with 2D (mapping, simplicial, distortion), not on 2D's maps"),
+    ("volume", "report", "3D reports its own maps (volume/report.py)"),
 ]
 
 #: Names LAYERS lists before the module exists (issue 20's branches create them).
-COMING = {"budget", "distortion", "plan", "batch"}
+COMING = {"budget", "capture", "mapping", "simplicial", "distortion", "raster.dtypes", "plan", "batch"}
 
 #: Cycles tolerated for now, each the set of its modules (below ``warpcli``);
 #: an entry that is no longer a cycle fails too, so that it is removed. Empty at the end.
