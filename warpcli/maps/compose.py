@@ -391,7 +391,29 @@ class Task:
 
 
 def theta_for(src: Polygon, dst: Polygon, options) -> Theta:
-    """The Theta ``options.theta`` asks for: a registered strategy's, or a file's."""
+    """The Theta ``options.theta`` asks for: a registered strategy's, or a file's.
+
+    Part of the policy, here rather than in `warpcli.maps.theta`: it looks the
+    strategy up in `warpcli.maps.registry`, which names ``theta``'s strategies,
+    so ``theta`` must not import it.
+
+    Parameters
+    ----------
+    src, dst : Polygon
+    options : MapOptions
+        ``theta`` (a name in `warpcli.maps.registry.THETAS` or a JSON file)
+        and ``conditions`` (``"mixed"`` takes the unit square).
+
+    Returns
+    -------
+    Theta
+
+    Raises
+    ------
+    InputError
+        If the file cannot be read, or mixed conditions meet another Theta
+        or polygons that are not quadrilaterals.
+    """
     if getattr(options, "conditions", "dirichlet") == "mixed":
         # §5.2: natural boundary conditions need Theta to be the unit square.
         if src.n != 4:

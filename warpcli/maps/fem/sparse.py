@@ -117,7 +117,7 @@ def cotan_stiffness(
 
     Raises
     ------
-    NotManifold
+    warpcli.maps.fem.topology.NotManifold
         Without ``edges``: if some edge has more than two triangles (the terms'
         order would matter).
     """
