@@ -101,14 +101,14 @@ def _short(module: str) -> str:
 
 
 @functools.cache
-def _module_files() -> dict[str, str]:
+def _module_files(root: str = ROOT) -> dict[str, str]:
     """Every module under warpcli/, by dotted name (a package by its own name), to its file."""
     out = {}
-    for dirpath, dirnames, files in os.walk(ROOT):
+    for dirpath, dirnames, files in os.walk(root):
         dirnames[:] = sorted(d for d in dirnames if d != "__pycache__")
         for f in sorted(files):
             if f.endswith(".py"):
-                parts = os.path.relpath(os.path.join(dirpath, f[:-3]), REPO).split(os.sep)
+                parts = os.path.relpath(os.path.join(dirpath, f[:-3]), os.path.dirname(root)).split(os.sep)
                 if parts[-1] == "__init__":
                     parts.pop()
                 out[".".join(parts)] = os.path.join(dirpath, f)
@@ -143,13 +143,12 @@ def _imports_by_relative_name(tree: ast.AST) -> bool:
     return False
 
 
-def _edges(module: str, path: str) -> dict[str, str]:
-    """The warpcli modules ``module`` imports or loads by name, each with where and how (for messages)."""
-    modules = _module_files()
+def _edges(module: str, path: str, modules: dict[str, str], top: str) -> dict[str, str]:
+    """The ``modules`` that ``module`` imports or loads by name, each with where and how (for messages)."""
     with open(path, encoding="utf-8") as f:
         tree = ast.parse(f.read(), path)
     package = module if path.endswith("__init__.py") else module.rpartition(".")[0]
-    where = os.path.relpath(path, REPO)
+    where = os.path.relpath(path, top)
     out: dict[str, str] = {}
 
     def add(target: str, line: int, how: str) -> None:
@@ -179,16 +178,17 @@ def _edges(module: str, path: str) -> dict[str, str]:
         elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
             text = node.value
             if _ABSOLUTE_NAME.match(text):
-                add(text.partition(":")[0], node.lineno, f"loads {text!r} by name")
+                add(deepest(text.partition(":")[0]), node.lineno, f"loads {text!r} by name")
             elif relative_names and _RELATIVE_NAME.match(text):
                 add(f"{package}.{text}", node.lineno, f"loads {text!r} by relative name")
     return out
 
 
 @functools.cache
-def import_graph() -> dict[str, dict[str, str]]:
+def import_graph(root: str = ROOT) -> dict[str, dict[str, str]]:
     """warpcli's import graph: module -> {imported module: "file:line how"}."""
-    return {m: _edges(m, p) for m, p in _module_files().items()}
+    modules = _module_files(root)
+    return {m: _edges(m, p, modules, os.path.dirname(root)) for m, p in modules.items()}
 
 
 def _component(module: str) -> tuple[int, str] | None:
@@ -283,17 +283,60 @@ def _describe_cycle(graph: dict[str, dict[str, str]], component: set[str]) -> st
     return f"cycle between {', '.join(sorted(_short(m) for m in component))}:\n    " + "\n    ".join(chain)
 
 
-def test_the_graph_sees_every_kind_of_import():
-    """The reader itself: relative, absolute, in functions, under TYPE_CHECKING, and by name."""
+_SAMPLE = {
+    "__init__.py": """
+import importlib
+_EXPORTS = {"thing": "a.lazy"}
+def __getattr__(name):
+    return getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
+""",
+    "base.py": '''"""Docstrings name nothing: "warpcli.top"."""''',
+    "top.py": "import warpcli.a.b as b\nfrom warpcli import base\n",
+    "a/__init__.py": "",
+    "a/b.py": """
+from typing import TYPE_CHECKING
+from . import c
+from .. import base
+if TYPE_CHECKING:
+    from .typed import T
+def later():
+    from .inner.deep import f
+""",
+    "a/c.py": "TABLE = {'x': 'warpcli.a.plugin:build', 'y': 'warpcli.a.inner.deep.f'}\n",
+    "a/lazy.py": "",
+    "a/plugin.py": "",
+    "a/typed.py": "",
+    "a/inner/__init__.py": "",
+    "a/inner/deep.py": "from ...base import X\nfrom ..c import TABLE\n",
+}
+
+
+def test_the_graph_sees_every_kind_of_import(tmp_path):
+    """The reader itself, on a package made for it: every way to import, and loading by name."""
+    for name, text in _SAMPLE.items():
+        (tmp_path / "warpcli" / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / "warpcli" / name).write_text(text)
+    graph = {m: set(t) for m, t in import_graph(str(tmp_path / "warpcli")).items()}
+    assert graph == {
+        "warpcli": {"warpcli.a.lazy"},  # relative names, in a module that imports by them
+        "warpcli.base": set(),  # a docstring is not a name
+        "warpcli.top": {"warpcli.a.b", "warpcli.base"},  # import a.b.c; from package import module
+        "warpcli.a": set(),
+        "warpcli.a.b": {"warpcli.a.c", "warpcli.base", "warpcli.a.typed", "warpcli.a.inner.deep"},
+        "warpcli.a.c": {"warpcli.a.plugin", "warpcli.a.inner.deep"},  # registry strings, module:attr or dotted
+        "warpcli.a.lazy": set(),
+        "warpcli.a.plugin": set(),
+        "warpcli.a.typed": set(),
+        "warpcli.a.inner": set(),
+        "warpcli.a.inner.deep": {"warpcli.base", "warpcli.a.c"},  # from ...base import X: the module
+    }
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [{"a", "b", "c"}]
+
+
+def test_the_graph_of_warpcli_holds_its_registries():
     graph = import_graph()
-    assert "warpcli.errors" in graph["warpcli.options"]  # from .errors import ...
-    assert "warpcli.maps.fem.mesh" in graph["warpcli.maps.meshless"]  # from .fem.mesh import ..., in a function
     assert "warpcli.maps.optimize" in graph["warpcli.maps.registry"]  # "warpcli.maps.optimize:optimized"
-    assert "warpcli.maps._kernels" in graph["warpcli.maps.compose"]  # Kernels("warpcli.maps._kernels")
-    assert "warpcli.raster.imageio" in graph["warpcli.report.figures"]  # under TYPE_CHECKING
-    assert "warpcli.pipeline" in graph["warpcli"]  # the lazy exports' relative names
-    assert "warpcli.maps.fem.sparse" in graph["warpcli.maps.fem.solve"]  # from . import sparse
-    assert "warpcli.raster._kernels" not in graph["warpcli._native"]  # named in a docstring only
+    assert "warpcli.pipeline" in graph["warpcli"]  # the lazy exports
 
 
 def test_every_module_has_a_layer():
