@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse.linalg as sla
 
 from helpers import comb, l_shape, regular, spiral, star
-from warpcli.maps.fem import sparse, solve
+from warpcli.maps.fem import solve, sparse, topology
 from warpcli.maps.fem.locate import triangle_neighbours
 from warpcli.maps.fem.mesh import TriMesh, mesh_polygon
 from warpcli.maps.theta import regular_polygon
@@ -70,7 +70,7 @@ def test_the_solver_gives_the_scipy_routes_values(monkeypatch):
 
 def test_neighbours_from_the_edges_are_triangle_neighbours():
     for _, mesh in _meshes():
-        got = sparse.neighbours(mesh.edges, mesh.n_triangles)
+        got = topology.neighbours(mesh.edges, mesh.n_triangles)
         assert np.array_equal(got, triangle_neighbours(mesh.triangles))
 
 
@@ -79,9 +79,9 @@ def test_a_mesh_with_an_edge_of_three_triangles_takes_the_scipy_route():
     v = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 1.0], [0.5, -1.0], [0.6, 2.0], [2.0, 2.0]])
     t = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4], [2, 4, 5]], dtype=np.int32)
     mesh = TriMesh(v, t, np.array([0, 1, 3, 4, 5]), np.array([0, 1, 2, 3, 4]), np.zeros(5))
-    with pytest.raises(sparse.Unsupported, match="more than two"):
-        sparse.mesh_edges(t, len(v))
-    with pytest.raises(sparse.Unsupported):
+    with pytest.raises(topology.NotManifold, match="more than two"):
+        topology.mesh_edges(t, len(v))
+    with pytest.raises(topology.NotManifold):
         mesh.edges
     values = solve.DirichletSolver(mesh).solve(regular_polygon(5))  # through scipy.sparse
     assert np.isfinite(values).all()

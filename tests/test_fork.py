@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from warpcli import _fork
 from warpcli.errors import InputError, MeshingError
 from warpcli.maps import fem
-from warpcli.maps.theta import theta_for
+from warpcli.maps.compose import theta_for
 from warpcli.options import MapOptions
 from warpcli.polygon import Polygon
 

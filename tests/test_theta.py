@@ -158,7 +158,7 @@ def test_save_theta_round_trips_through_the_cli(tmp_path):
 
 @pytest.mark.parametrize("energy", ["conformal", "isometric"])
 def test_optimized_theta_lowers_the_energy_and_stays_strictly_convex(energy):
-    from warpcli.optimize import optimized
+    from warpcli.maps.optimize import optimized
 
     src = Polygon(l_shape())
     dst = Polygon(np.array([[10, 20], [40, 10], [120, 30], [110, 110], [60, 118], [15, 90]], dtype=float))

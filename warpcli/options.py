@@ -1,6 +1,7 @@
 """Options: the typed objects that carry a run's choices, and the one list of each choice.
 
-This module is imported by the CLI to build ``--help``, so it imports nothing heavy.
+This module is imported by the CLI to build ``--help``, so it imports nothing heavy; and it
+is read by maps, raster and pipelines alike, so it imports nothing of warpcli but errors.
 """
 
 from __future__ import annotations
@@ -11,9 +12,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .errors import InputError
-from .maps.registry import METHODS, THETAS
 from .raster.dtypes import DTYPES
 
+#: Methods that approximate the harmonic maps onto Theta; `warpcli.maps.registry.METHODS`
+#: says which module implements each (the same names, in the same order: tested).
+METHODS = ("fem", "bem", "mfs")
+#: Named strategies that choose Theta; `warpcli.maps.registry.THETAS` implements them.
+THETAS = ("regular", "cyclic", "optimized")
 #: Resampling filters (see `warpcli.raster.resample.resample`).
 INTERPOLATIONS = ("nearest", "linear", "cubic")
 #: Edge weights of the FEM Laplacian.
@@ -56,11 +61,11 @@ class MapOptions:
     Parameters
     ----------
     method : str
-        Name of the method that approximates the harmonic maps onto Theta, a key
-        of `warpcli.maps.registry.METHODS` (``"fem"``).
+        Name of the method that approximates the harmonic maps onto Theta, one
+        of `METHODS` (``"fem"``).
     theta : str
         Name of the strategy that chooses the convex intermediate polygon Theta,
-        a key of `warpcli.maps.registry.THETAS` (``"regular"``, ``"cyclic"``),
+        one of `THETAS` (``"regular"``, ``"cyclic"``, ``"optimized"``),
         or a JSON file holding one (n ``[x, y]`` vertices, strictly convex).
     max_area : float, (float, float) or None
         FEM: largest triangle area in square pixels, for both meshes or

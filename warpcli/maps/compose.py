@@ -17,8 +17,8 @@ from ..grid import window
 from ..options import MapOptions
 from ..polygon import Polygon, check_pair
 from .base import ThetaMap, as_points, matmul2
-from .registry import METHODS
-from .theta import theta_for
+from .registry import METHODS, THETAS
+from .theta import Theta, from_file
 
 #: The compiled helpers of the composition (`warpcli.maps._kernels`), loaded without numba.
 _compiled = Kernels("warpcli.maps._kernels")
@@ -388,6 +388,42 @@ class Task:
         if self._error is not None:
             raise self._error
         return self._value
+
+
+def theta_for(src: Polygon, dst: Polygon, options) -> Theta:
+    """The Theta ``options.theta`` asks for: a registered strategy's, or a file's.
+
+    Part of the policy, here rather than in `warpcli.maps.theta`: it looks the
+    strategy up in `warpcli.maps.registry`, which names ``theta``'s strategies,
+    so ``theta`` must not import it.
+
+    Parameters
+    ----------
+    src, dst : Polygon
+    options : MapOptions
+        ``theta`` (a name in `warpcli.maps.registry.THETAS` or a JSON file)
+        and ``conditions`` (``"mixed"`` takes the unit square).
+
+    Returns
+    -------
+    Theta
+
+    Raises
+    ------
+    InputError
+        If the file cannot be read, or mixed conditions meet another Theta
+        or polygons that are not quadrilaterals.
+    """
+    if getattr(options, "conditions", "dirichlet") == "mixed":
+        # §5.2: natural boundary conditions need Theta to be the unit square.
+        if src.n != 4:
+            raise InputError(f"{src.name}: mixed boundary conditions need quadrilaterals (4 vertices), got {src.n}")
+        if options.theta != "regular":
+            raise InputError(f"mixed boundary conditions use the unit square as Theta, not {options.theta!r}")
+        return Theta(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]), name="unit square")
+    if options.theta in THETAS:
+        return THETAS[options.theta].load()(src, dst, options)
+    return from_file(options.theta, src.n)
 
 
 def build_map(

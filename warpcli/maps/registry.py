@@ -2,9 +2,13 @@
 
 Light on purpose: the CLI builds its choices from it without importing numpy.
 Each entry names the module (and attribute) that implements it; the module is
-imported only when the method is used. To add a method, add an entry here and
-a module under ``warpcli/maps/`` with a ``build`` function (see
-`warpcli.maps.base.ThetaMap`).
+imported only when the method is used. To add a method, add its name to
+`warpcli.options.METHODS`, an entry here and a module under ``warpcli/maps/``
+with a ``build`` function (see `warpcli.maps.base.ThetaMap`).
+
+The registry sits above what it names: ``compose`` reads it to build a map,
+and the modules it names never import it (tests/test_layers.py treats the
+names as imports).
 """
 
 from __future__ import annotations
@@ -42,5 +46,5 @@ METHODS = {
 THETAS = {
     "regular": Entry("warpcli.maps.theta:regular", "the regular n-gon"),
     "cyclic": Entry("warpcli.maps.theta:cyclic", "inscribed in a circle, edges as long as the mean of the polygons' edges"),
-    "optimized": Entry("warpcli.optimize:optimized", "moved vertex by vertex to lower the distortion (--energy)"),
+    "optimized": Entry("warpcli.maps.optimize:optimized", "moved vertex by vertex to lower the distortion (--energy)"),
 }

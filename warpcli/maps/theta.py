@@ -279,21 +279,3 @@ def from_file(path: str, n: int) -> Theta:
     if len(arr) != n:
         raise InputError(f"{path}: Theta has {len(arr)} vertices but the polygons have {n}")
     return Theta(arr, name=path)
-
-
-def theta_for(src: Polygon, dst: Polygon, options) -> Theta:
-    """The Theta ``options.theta`` asks for: a registered strategy's, or a file's."""
-    from .registry import THETAS
-
-    if getattr(options, "conditions", "dirichlet") == "mixed":
-        # §5.2: natural boundary conditions need Theta to be the unit square.
-        if src.n != 4:
-            raise InputError(f"{src.name}: mixed boundary conditions need quadrilaterals (4 vertices), got {src.n}")
-        if options.theta != "regular":
-            raise InputError(f"mixed boundary conditions use the unit square as Theta, not {options.theta!r}")
-        return Theta(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]), name="unit square")
-    if options.theta in THETAS:
-        return THETAS[options.theta].load()(src, dst, options)
-    return from_file(options.theta, src.n)
-
-

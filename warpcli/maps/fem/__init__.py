@@ -1,6 +1,7 @@
 """FEM (the paper's §3.1.1): piecewise-linear harmonic maps on graded constrained Delaunay meshes.
 
 - `mesh`: graded quality meshes over `triangle`;
+- `topology`: the mesh's edges and the triangles across them;
 - `solve`: cotangent / mean-value Laplacians and the Dirichlet solve;
 - `sparse`: the default Dirichlet system in numpy and SuperLU, without scipy.sparse;
 - `locate`: point location (bucket grid, triangle neighbours);
@@ -25,7 +26,7 @@ from ...options import MapOptions
 from ...polygon import Polygon
 from ..base import Certificate, GridSample, Mapped, ThetaMap, as_points, inv2
 from ..theta import Theta
-from . import sparse
+from . import sparse, topology
 from .locate import TriangleLocator, affine_coefficients, barycentric_combine, triangle_neighbours
 from .mesh import TriMesh, auto_max_area, mesh_polygon
 from .solve import DirichletSolver, flipped_triangles, solve_dirichlet
@@ -219,8 +220,8 @@ class FEMMap(ThetaMap):
     @cached_property
     def _neighbours(self) -> NDArray[np.int64]:
         try:  # from the edges the Laplacian found (the same table)
-            return sparse.neighbours(self.mesh.edges, self.mesh.n_triangles)
-        except sparse.Unsupported:
+            return topology.neighbours(self.mesh.edges, self.mesh.n_triangles)
+        except topology.NotManifold:
             return triangle_neighbours(self._triangles)
 
     def _inverse_located(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:

@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from ...errors import InputError, MeshingError, PolygonError
 from ...polygon import Polygon
+from .topology import mesh_edges
 
 #: Refuse to build a mesh of more than this many triangles when the user sets
 #: the density: its direct solve would take many minutes and several GB.
@@ -109,16 +110,14 @@ class TriMesh:
 
     @cached_property
     def edges(self):
-        """The mesh's edges and the half-edges on them (`warpcli.maps.fem.sparse.Edges`), found once
+        """The mesh's edges and the half-edges on them (`warpcli.maps.fem.topology.Edges`), found once
         for the Laplacian and the triangles' neighbours.
 
         Raises
         ------
-        warpcli.maps.fem.sparse.Unsupported
+        warpcli.maps.fem.topology.NotManifold
             For a mesh with an edge of more than two triangles (never made here).
         """
-        from .sparse import mesh_edges
-
         return mesh_edges(self.triangles, self.n_vertices)
 
 

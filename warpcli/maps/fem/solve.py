@@ -12,6 +12,7 @@ from ...polygon import signed_area
 from . import sparse
 from .mesh import TriMesh, triangle_areas
 from .sparse import cotan_terms
+from .topology import NotManifold
 
 
 def flipped_triangles(
@@ -166,7 +167,7 @@ class DirichletSolver:
                 try:
                     parts.append((coords, unknown, known, *_cotan_system(mesh, unknown, known)))
                     continue
-                except sparse.Unsupported:
+                except (sparse.Unsupported, NotManifold):
                     pass
             if k is None:
                 k = cotan_laplacian(mesh.vertices, mesh.triangles) if weights == "cotan" else mean_value_laplacian(
@@ -195,7 +196,7 @@ def _cotan_system(mesh: TriMesh, unknown: NDArray[np.intp], known: NDArray[np.in
 
     Raises
     ------
-    sparse.Unsupported
+    sparse.Unsupported, NotManifold
         When the scipy route must be taken instead.
     """
     k = sparse.cotan_stiffness(mesh.vertices, mesh.triangles, mesh.edges)

@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .mesh import triangle_areas
+from .topology import Edges, mesh_edges
 
 
 class Unsupported(Exception):
@@ -102,61 +103,6 @@ def cotan_terms(
     return np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
 
 
-class Edges(NamedTuple):
-    """The edges of a triangle mesh, each with the one or two half-edges on it.
-
-    Half-edge ``h = k * M + t`` is the side of triangle t opposite its corner
-    k. Edges are sorted by (lo, hi), their vertices lo < hi; ``second`` is -1
-    on the boundary.
-    """
-
-    lo: NDArray[np.int64]
-    hi: NDArray[np.int64]
-    first: NDArray[np.int64]
-    second: NDArray[np.int64]
-
-
-def mesh_edges(triangles: NDArray[np.integer], n_vertices: int) -> Edges:
-    """The `Edges` of a mesh: one sort of its half-edges.
-
-    Raises
-    ------
-    Unsupported
-        If an edge has more than two triangles, or a triangle a repeated vertex.
-    """
-    tri = np.asarray(triangles, dtype=np.int64)
-    a = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
-    b = np.concatenate([tri[:, 2], tri[:, 0], tri[:, 1]])
-    if (a == b).any():
-        raise Unsupported("a triangle with a repeated vertex")
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key = lo * n_vertices + hi
-    order = np.argsort(key)
-    key = key[order]
-    head = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    runs = np.diff(np.r_[head, len(key)])
-    if runs.size and runs.max() > 2:
-        raise Unsupported("an edge with more than two triangles")
-    second = np.full(len(head), -1, dtype=np.int64)
-    pair = runs == 2
-    second[pair] = order[head[pair] + 1]
-    first = order[head]
-    return Edges(lo[first], hi[first], first, second)
-
-
-def neighbours(edges: Edges, n_triangles: int) -> NDArray[np.int64]:
-    """For each triangle and corner k, the triangle across the side opposite k (-1 on the boundary).
-
-    The same table as `warpcli.maps.fem.locate.triangle_neighbours`, from edges already found.
-    """
-    out = np.full(3 * n_triangles, -1, dtype=np.int64)
-    inner = edges.second >= 0
-    h1, h2 = edges.first[inner], edges.second[inner]
-    out[h1] = h2 % n_triangles
-    out[h2] = h1 % n_triangles
-    return out.reshape(3, n_triangles).T.copy()
-
-
 def cotan_stiffness(
     vertices: NDArray[np.float64], triangles: NDArray[np.integer], edges: Edges | None = None
 ) -> CSR:
@@ -171,8 +117,9 @@ def cotan_stiffness(
 
     Raises
     ------
-    Unsupported
-        If some edge has more than two triangles (the terms' order would matter).
+    warpcli.maps.fem.topology.NotManifold
+        Without ``edges``: if some edge has more than two triangles (the terms'
+        order would matter).
     """
     n = len(vertices)
     e = mesh_edges(triangles, n) if edges is None else edges

@@ -22,13 +22,14 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import InputError
-from .grid import inside_polygon
-from .maps.base import ThetaMap, matmul2
-from .maps.registry import METHODS
-from .maps.theta import Theta, cyclic, regular
-from .polygon import Polygon
-from .report.metrics import summarize
+from ..errors import InputError
+from ..grid import inside_polygon
+from ..polygon import Polygon
+from ..report.metrics import summarize
+from . import fem
+from .base import ThetaMap, matmul2
+from .fem.mesh import auto_max_area
+from .theta import Theta, cyclic, regular
 
 log = logging.getLogger("warpcli")
 
@@ -67,7 +68,7 @@ def optimized(src: Polygon, dst: Polygon, options) -> Theta:
     Schneider & Hormann, CAGD 2015, §5.1 and Table 2.
     """
     start = (cyclic if options.theta_start == "cyclic" else regular)(src, dst, options)
-    method = METHODS["fem"].load()
+    method = fem  # whatever the method: the energy is measured on coarse FEM maps
     coarse = dataclasses.replace(
         options, method="fem", theta="regular", max_area=_coarse_areas(src, dst, options), check=False
     )
@@ -134,8 +135,6 @@ def _onto(phi: ThetaMap, theta: Theta, method, polygon: Polygon, options, role: 
 
 def _coarse_areas(src: Polygon, dst: Polygon, options):
     """FEM triangle areas COARSENING times the automatic ones (or the user's, for FEM)."""
-    from .maps.fem.mesh import auto_max_area
-
     areas = options.areas() if options.method == "fem" else (None, None)
     return tuple(
         COARSENING * (auto_max_area(p) if a is None else a) for p, a in zip((src, dst), areas)
