@@ -463,15 +463,14 @@ def _far_to_local(tr, ti, lg, a0, a1, b0r, b0i, b1r, b1i, pe, n, invk, want_val,
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _add_local_expansion(
-    px, py, s0, nb, cx, cy, c0r, c0i, c1r, c1i, want_val, want_jac, want_hess,
-    v0, v1, f0r, f0i, f1r, f1i, h0r, h0i, h1r, h1i,
-):  # fmt: skip
+def _add_local_expansion(px, py, s0, nb, cx, cy, coef, want_val, want_jac, want_hess, acc):
     """Add Phi = sum_k a_k w^k (w = z - c) and its derivatives at a block of points.
 
     Horner's scheme with the coefficient loop outside and the loop over points
     inside (independent per point, so it vectorises).
     """
+    c0r, c0i, c1r, c1i = coef
+    v0, v1, f0r, f0i, f1r, f1i, h0r, h0i, h1r, h1i = acc
     P = c0r.shape[0] - 1
     for which in range(3):
         if (which == 0 and not want_val) or (which == 1 and not want_jac) or (which == 2 and not want_hess):
@@ -531,19 +530,23 @@ def _evaluate(
     and element, by distance:
 
     - far (``_FAR`` block radii): the element's Gauss charges and dipoles go
-      into one local (Taylor) expansion of the block, evaluated at its points
-      at the end (`_add_local_expansion`), so the cost per far element is per
-      block, not per point;
+      into one local (Taylor) expansion of the block (`_gather_far`,
+      `_far_to_local`), evaluated at its points at the end
+      (`_add_local_expansion`), so the cost per far element is per block,
+      not per point;
     - every point farther than ``NEAR/2`` element lengths from the element's
-      midpoint: the Gauss rule for the closest point, for the whole block (a
-      loop over points that LLVM vectorises);
-    - otherwise each point gets the closed form (`near_integrals`) or the
-      Gauss rule for its own distance.
+      midpoint: the Gauss rule for the closest point, for the whole block
+      (`_add_gauss_block`);
+    - otherwise each point gets the closed form or the Gauss rule for its own
+      distance (`_add_near_element`).
 
     The Gauss nodes of each element are precomputed as charges and dipoles,
     Phi(z) = sum_j alpha_j log(z - y_j) + beta_j / (z - y_j), with
     phi = Re Phi, grad phi = (Re Phi', -Im Phi'), phi_xx = -phi_yy = Re Phi'',
-    phi_xy = -Im Phi''.
+    phi_xy = -Im Phi''.  Each block sums value, Phi' and Phi'' of both
+    components into ten accumulators (``acc``: v0, v1, Re/Im Phi'_0,
+    Re/Im Phi'_1, Re/Im Phi''_0, Re/Im Phi''_1) and stores them at the end
+    (`_store_block`).
     """
     nblocks = bstart.shape[0] - 1
     E = ax.shape[0]
@@ -553,230 +556,291 @@ def _evaluate(
     for k in range(1, P + 1):
         invk[k] = 1.0 / k
     # local expansion coefficients of the two components (complex, split)
-    c0r = np.zeros(P + 1)
-    c0i = np.zeros(P + 1)
-    c1r = np.zeros(P + 1)
-    c1i = np.zeros(P + 1)
+    coef = (np.zeros(P + 1), np.zeros(P + 1), np.zeros(P + 1), np.zeros(P + 1))
     # Gauss nodes of the far elements of a block (gathered, then summed into
-    # the local expansion by `_far_to_local`)
+    # the local expansion by `_far_to_local`): 1/D, log|D|, alpha, beta
     G = E * orders[top]
-    g_tr = np.empty(G)
-    g_ti = np.empty(G)
-    g_lg = np.empty(G)
-    g_a0 = np.empty(G)
-    g_a1 = np.empty(G)
-    g_b0r = np.empty(G)
-    g_b0i = np.empty(G)
-    g_b1r = np.empty(G)
-    g_b1i = np.empty(G)
-    g_pe = np.empty(G, dtype=np.int64)
+    far = (
+        np.empty(G), np.empty(G), np.empty(G), np.empty(G), np.empty(G),
+        np.empty(G), np.empty(G), np.empty(G), np.empty(G),
+    )  # fmt: skip
+    far_pe = np.empty(G, dtype=np.int64)
     B = 0
     for b in range(nblocks):
         B = max(B, bstart[b + 1] - bstart[b])
-    # per-block accumulators: value (2), Phi' (2 complex), Phi'' (2 complex)
-    v0 = np.zeros(B)
-    v1 = np.zeros(B)
-    f0r = np.zeros(B)
-    f0i = np.zeros(B)
-    f1r = np.zeros(B)
-    f1i = np.zeros(B)
-    h0r = np.zeros(B)
-    h0i = np.zeros(B)
-    h1r = np.zeros(B)
-    h1i = np.zeros(B)
+    acc = (
+        np.zeros(B), np.zeros(B), np.zeros(B), np.zeros(B), np.zeros(B),
+        np.zeros(B), np.zeros(B), np.zeros(B), np.zeros(B), np.zeros(B),
+    )  # fmt: skip
     for b in range(nblocks):
         s0 = bstart[b]
         nb = bstart[b + 1] - s0
-        v0[:] = 0.0
-        v1[:] = 0.0
-        f0r[:] = 0.0
-        f0i[:] = 0.0
-        f1r[:] = 0.0
-        f1i[:] = 0.0
-        h0r[:] = 0.0
-        h0i[:] = 0.0
-        h1r[:] = 0.0
-        h1i[:] = 0.0
-        c0r[:] = 0.0
-        c0i[:] = 0.0
-        c1r[:] = 0.0
-        c1i[:] = 0.0
+        for a in acc:
+            a[:] = 0.0
+        for c in coef:
+            c[:] = 0.0
         nfar = 0
         ng = 0
         for e in range(E):
             L = elen[e]
             dc = np.hypot(ecx[e] - bcx[b], ecy[e] - bcy[b])
             Rmin = 2.0 * (dc - brad[b]) / L
-            if Rmin >= NEAR and dc - 0.5 * L >= _FAR * brad[b]:
-                # Far element: add its Gauss charges and dipoles to the block's
-                # local expansion Phi(z) = sum_k a_k (z - c)^k.  With D = y - c,
-                # t = 1/D:  log(z - y) = log(-D) - sum_k (t w)^k / k and
-                # 1/(z - y) = -sum_k t^(k+1) w^k  (w = z - c, |w| <= |D| / _FAR).
+            if Rmin >= NEAR and dc - 0.5 * L >= _FAR * brad[b]:  # far: into the local expansion
                 nfar += 1
-                r = _gauss_order_index(Rmin, orders)
-                # terms needed for ~1e-16: ratio^(p+1) with ratio = |w| / |D| <= 1/_FAR
                 ratio = brad[b] / (dc - 0.5 * L)
-                pe = 2  # a single point: a_0, a_1, a_2 are value, gradient, Hessian
-                if ratio > 0.0:
-                    pe = min(P, max(2, int(37.0 / -np.log(ratio)) + 2))
-                for j in range(offsets[r], offsets[r] + orders[r]):  # gather the nodes
-                    Dx = sx[e, j] - bcx[b]
-                    Dy = sy[e, j] - bcy[b]
-                    iD = 1.0 / (Dx * Dx + Dy * Dy)
-                    g_tr[ng] = Dx * iD
-                    g_ti[ng] = -Dy * iD
-                    g_lg[ng] = -0.5 * np.log(iD)
-                    g_a0[ng] = alpha[e, j, 0]
-                    g_a1[ng] = alpha[e, j, 1]
-                    g_b0r[ng] = beta_re[e, j, 0]
-                    g_b0i[ng] = beta_im[e, j, 0]
-                    g_b1r[ng] = beta_re[e, j, 1]
-                    g_b1i[ng] = beta_im[e, j, 1]
-                    g_pe[ng] = pe
-                    ng += 1
-                continue
-            if Rmin >= NEAR:
-                r = _gauss_order_index(Rmin, orders)
-                for j in range(offsets[r], offsets[r] + orders[r]):
-                    yx = sx[e, j]
-                    yy = sy[e, j]
-                    a0 = alpha[e, j, 0]
-                    a1 = alpha[e, j, 1]
-                    b0r = beta_re[e, j, 0]
-                    b0i = beta_im[e, j, 0]
-                    b1r = beta_re[e, j, 1]
-                    b1i = beta_im[e, j, 1]
-                    # one branch-free loop per quantity, so that each vectorises
-                    if want_val:
-                        for k in range(nb):
-                            wx = px[s0 + k] - yx
-                            wy = py[s0 + k] - yy
-                            r2 = wx * wx + wy * wy
-                            inv = 1.0 / r2
-                            ur = wx * inv  # u = 1/(z - y) = conj(w)/|w|^2
-                            ui = -wy * inv
-                            lg = 0.5 * fast_log(r2)
-                            v0[k] += a0 * lg + (b0r * ur - b0i * ui)
-                            v1[k] += a1 * lg + (b1r * ur - b1i * ui)
-                    if want_jac:
-                        for k in range(nb):
-                            wx = px[s0 + k] - yx
-                            wy = py[s0 + k] - yy
-                            inv = 1.0 / (wx * wx + wy * wy)
-                            ur = wx * inv
-                            ui = -wy * inv
-                            u2r = ur * ur - ui * ui
-                            u2i = 2.0 * ur * ui
-                            # Phi' += alpha u - beta u^2
-                            f0r[k] += a0 * ur - (b0r * u2r - b0i * u2i)
-                            f0i[k] += a0 * ui - (b0r * u2i + b0i * u2r)
-                            f1r[k] += a1 * ur - (b1r * u2r - b1i * u2i)
-                            f1i[k] += a1 * ui - (b1r * u2i + b1i * u2r)
-                    if want_hess:
-                        for k in range(nb):
-                            wx = px[s0 + k] - yx
-                            wy = py[s0 + k] - yy
-                            inv = 1.0 / (wx * wx + wy * wy)
-                            ur = wx * inv
-                            ui = -wy * inv
-                            u2r = ur * ur - ui * ui
-                            u2i = 2.0 * ur * ui
-                            u3r = u2r * ur - u2i * ui
-                            u3i = u2r * ui + u2i * ur
-                            # Phi'' += -alpha u^2 + 2 beta u^3
-                            h0r[k] += -a0 * u2r + 2.0 * (b0r * u3r - b0i * u3i)
-                            h0i[k] += -a0 * u2i + 2.0 * (b0r * u3i + b0i * u3r)
-                            h1r[k] += -a1 * u2r + 2.0 * (b1r * u3r - b1i * u3i)
-                            h1i[k] += -a1 * u2i + 2.0 * (b1r * u3i + b1i * u3r)
-                continue
-            # some points of the block are near this element: decide per point
-            delta = complex(bx[e] - ax[e], by[e] - ay[e])
-            idelta = crecip(delta)
-            logL = np.log(L)
-            for k in range(nb):
-                zeta, zm = local_pair(px[s0 + k], py[s0 + k], ax[e], ay[e], bx[e], by[e], idelta)
-                R = abs(2.0 * zeta - 1.0)
-                if R >= NEAR:  # this point is far enough: the Gauss rule for it
-                    r = _gauss_order_index(R, orders)
-                    x = px[s0 + k]
-                    y = py[s0 + k]
-                    for j in range(offsets[r], offsets[r] + orders[r]):
-                        wx = x - sx[e, j]
-                        wy = y - sy[e, j]
-                        r2 = wx * wx + wy * wy
-                        inv = 1.0 / r2
-                        ur = wx * inv
-                        ui = -wy * inv
-                        a0 = alpha[e, j, 0]
-                        a1 = alpha[e, j, 1]
-                        b0r = beta_re[e, j, 0]
-                        b0i = beta_im[e, j, 0]
-                        b1r = beta_re[e, j, 1]
-                        b1i = beta_im[e, j, 1]
-                        if want_val:
-                            lg = 0.5 * fast_log(r2)
-                            v0[k] += a0 * lg + (b0r * ur - b0i * ui)
-                            v1[k] += a1 * lg + (b1r * ur - b1i * ui)
-                        u2r = ur * ur - ui * ui
-                        u2i = 2.0 * ur * ui
-                        if want_jac:
-                            f0r[k] += a0 * ur - (b0r * u2r - b0i * u2i)
-                            f0i[k] += a0 * ui - (b0r * u2i + b0i * u2r)
-                            f1r[k] += a1 * ur - (b1r * u2r - b1i * u2i)
-                            f1i[k] += a1 * ui - (b1r * u2i + b1i * u2r)
-                        if want_hess:
-                            u3r = u2r * ur - u2i * ui
-                            u3i = u2r * ui + u2i * ur
-                            h0r[k] += -a0 * u2r + 2.0 * (b0r * u3r - b0i * u3i)
-                            h0i[k] += -a0 * u2i + 2.0 * (b0r * u3i + b0i * u3r)
-                            h1r[k] += -a1 * u2r + 2.0 * (b1r * u3r - b1i * u3i)
-                            h1i[k] += -a1 * u2i + 2.0 * (b1r * u3i + b1i * u3r)
-                    continue
-                lam0, lam1, i10, i11, i20, i21, i30, i31 = near_integrals(zeta, zm)
-                for a in range(2):
-                    q0 = qc[e, 0, a]
-                    q1 = qc[e, 1, a]
-                    c0 = cc[e, 0, a]
-                    c1 = cc[e, 1, a]
-                    vv = -L / TWO_PI * (0.5 * (q0 + q1) * logL + q0 * lam0 + q1 * lam1) - (
-                        c0 * i10.imag + c1 * i11.imag
-                    ) / TWO_PI
-                    ff = idelta * (-L / TWO_PI * (q0 * i10 + q1 * i11) - 1j / TWO_PI * (c0 * i20 + c1 * i21))
-                    hh = idelta * idelta * (L / TWO_PI * (q0 * i20 + q1 * i21) + 1j / np.pi * (c0 * i30 + c1 * i31))
-                    if a == 0:
-                        v0[k] += vv
-                        f0r[k] += ff.real
-                        f0i[k] += ff.imag
-                        h0r[k] += hh.real
-                        h0i[k] += hh.imag
-                    else:
-                        v1[k] += vv
-                        f1r[k] += ff.real
-                        f1i[k] += ff.imag
-                        h1r[k] += hh.real
-                        h1i[k] += hh.imag
+                ng = _gather_far(e, _gauss_order_index(Rmin, orders), ratio, bcx[b], bcy[b],
+                                 orders, offsets, sx, sy, alpha, beta_re, beta_im, far, far_pe, ng)  # fmt: skip
+            elif Rmin >= NEAR:  # one Gauss rule for the whole block
+                _add_gauss_block(px, py, s0, nb, e, _gauss_order_index(Rmin, orders),
+                                 orders, offsets, sx, sy, alpha, beta_re, beta_im,
+                                 want_val, want_jac, want_hess, acc)  # fmt: skip
+            else:  # some points are near: decide per point
+                _add_near_element(px, py, s0, nb, e, ax, ay, bx, by, L, qc, cc,
+                                  orders, offsets, sx, sy, alpha, beta_re, beta_im,
+                                  want_val, want_jac, want_hess, acc)  # fmt: skip
         if nfar:
-            _far_to_local(g_tr, g_ti, g_lg, g_a0, g_a1, g_b0r, g_b0i, g_b1r, g_b1i, g_pe, ng,
+            g_tr, g_ti, g_lg, g_a0, g_a1, g_b0r, g_b0i, g_b1r, g_b1i = far
+            c0r, c0i, c1r, c1i = coef
+            _far_to_local(g_tr, g_ti, g_lg, g_a0, g_a1, g_b0r, g_b0i, g_b1r, g_b1i, far_pe, ng,
                           invk, want_val, c0r, c0i, c1r, c1i)  # fmt: skip
-            _add_local_expansion(px, py, s0, nb, bcx[b], bcy[b], c0r, c0i, c1r, c1i,
-                                 want_val, want_jac, want_hess,
-                                 v0, v1, f0r, f0i, f1r, f1i, h0r, h0i, h1r, h1i)  # fmt: skip
-        for k in range(nb):
-            i = s0 + k
-            if want_val:
-                val[i, 0] = v0[k]
-                val[i, 1] = v1[k]
-            if want_jac:
-                jac[i, 0, 0] = f0r[k]
-                jac[i, 0, 1] = -f0i[k]
-                jac[i, 1, 0] = f1r[k]
-                jac[i, 1, 1] = -f1i[k]
-            if want_hess:
-                hess[i, 0, 0, 0] = h0r[k]
-                hess[i, 0, 0, 1] = -h0i[k]
-                hess[i, 0, 1, 0] = -h0i[k]
-                hess[i, 0, 1, 1] = -h0r[k]
-                hess[i, 1, 0, 0] = h1r[k]
-                hess[i, 1, 0, 1] = -h1i[k]
-                hess[i, 1, 1, 0] = -h1i[k]
-                hess[i, 1, 1, 1] = -h1r[k]
+            _add_local_expansion(px, py, s0, nb, bcx[b], bcy[b], coef, want_val, want_jac, want_hess, acc)
+        _store_block(s0, nb, acc, want_val, want_jac, want_hess, val, jac, hess)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _gather_far(e, r, ratio, cx, cy, orders, offsets, sx, sy, alpha, beta_re, beta_im, far, far_pe, ng):
+    """Append the nodes of element e's Gauss rule r to a block's far nodes; the new count of nodes.
+
+    With D = y - c (c the block's centre), t = 1/D:  log(z - y) = log(-D) -
+    sum_k (t w)^k / k and 1/(z - y) = -sum_k t^(k+1) w^k  (w = z - c,
+    |w| <= |D| / _FAR); a node keeps the terms needed for ~1e-16, ratio^(p+1)
+    with ``ratio`` = |w| / |D| <= 1/_FAR.
+    """
+    tr, ti, lg, a0, a1, b0r, b0i, b1r, b1i = far
+    pe = 2  # a single point: a_0, a_1, a_2 are value, gradient, Hessian
+    if ratio > 0.0:
+        pe = min(_ORDER, max(2, int(37.0 / -np.log(ratio)) + 2))
+    for j in range(offsets[r], offsets[r] + orders[r]):  # gather the nodes
+        Dx = sx[e, j] - cx
+        Dy = sy[e, j] - cy
+        iD = 1.0 / (Dx * Dx + Dy * Dy)
+        tr[ng] = Dx * iD
+        ti[ng] = -Dy * iD
+        lg[ng] = -0.5 * np.log(iD)
+        a0[ng] = alpha[e, j, 0]
+        a1[ng] = alpha[e, j, 1]
+        b0r[ng] = beta_re[e, j, 0]
+        b0i[ng] = beta_im[e, j, 0]
+        b1r[ng] = beta_re[e, j, 1]
+        b1i[ng] = beta_im[e, j, 1]
+        far_pe[ng] = pe
+        ng += 1
+    return ng
+
+
+# One Gauss node y with charge alpha and dipole beta adds alpha log(z - y) +
+# beta / (z - y) to Phi.  With w = z - y and u = 1/w, the terms below are its
+# parts of phi, Phi' and Phi'' (real and imaginary parts of one component).
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _value_term(a, br, bi, lg, ur, ui):
+    """Re(alpha log w + beta u), with lg = log|w|."""
+    return a * lg + (br * ur - bi * ui)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _gradient_term(a, br, bi, ur, ui, u2r, u2i):
+    """alpha u - beta u^2 (Phi'), as (real, imaginary)."""
+    return a * ur - (br * u2r - bi * u2i), a * ui - (br * u2i + bi * u2r)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _hessian_term(a, br, bi, u2r, u2i, u3r, u3i):
+    """-alpha u^2 + 2 beta u^3 (Phi''), as (real, imaginary)."""
+    return -a * u2r + 2.0 * (br * u3r - bi * u3i), -a * u2i + 2.0 * (br * u3i + bi * u3r)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _add_gauss_block(
+    px, py, s0, nb, e, r, orders, offsets, sx, sy, alpha, beta_re, beta_im, want_val, want_jac, want_hess, acc
+):  # fmt: skip
+    """Add element e's Gauss rule r at every point of a block.
+
+    One branch-free loop over the block's points per node and quantity, so
+    that each vectorises.
+    """
+    v0, v1, f0r, f0i, f1r, f1i, h0r, h0i, h1r, h1i = acc
+    for j in range(offsets[r], offsets[r] + orders[r]):
+        yx = sx[e, j]
+        yy = sy[e, j]
+        a0 = alpha[e, j, 0]
+        a1 = alpha[e, j, 1]
+        b0r = beta_re[e, j, 0]
+        b0i = beta_im[e, j, 0]
+        b1r = beta_re[e, j, 1]
+        b1i = beta_im[e, j, 1]
+        if want_val:
+            for k in range(nb):
+                wx = px[s0 + k] - yx
+                wy = py[s0 + k] - yy
+                r2 = wx * wx + wy * wy
+                inv = 1.0 / r2
+                ur = wx * inv  # u = 1/(z - y) = conj(w)/|w|^2
+                ui = -wy * inv
+                lg = 0.5 * fast_log(r2)
+                v0[k] += _value_term(a0, b0r, b0i, lg, ur, ui)
+                v1[k] += _value_term(a1, b1r, b1i, lg, ur, ui)
+        if want_jac:
+            for k in range(nb):
+                wx = px[s0 + k] - yx
+                wy = py[s0 + k] - yy
+                inv = 1.0 / (wx * wx + wy * wy)
+                ur = wx * inv
+                ui = -wy * inv
+                u2r = ur * ur - ui * ui
+                u2i = 2.0 * ur * ui
+                gr, gi = _gradient_term(a0, b0r, b0i, ur, ui, u2r, u2i)
+                f0r[k] += gr
+                f0i[k] += gi
+                gr, gi = _gradient_term(a1, b1r, b1i, ur, ui, u2r, u2i)
+                f1r[k] += gr
+                f1i[k] += gi
+        if want_hess:
+            for k in range(nb):
+                wx = px[s0 + k] - yx
+                wy = py[s0 + k] - yy
+                inv = 1.0 / (wx * wx + wy * wy)
+                ur = wx * inv
+                ui = -wy * inv
+                u2r = ur * ur - ui * ui
+                u2i = 2.0 * ur * ui
+                u3r = u2r * ur - u2i * ui
+                u3i = u2r * ui + u2i * ur
+                hr, hi = _hessian_term(a0, b0r, b0i, u2r, u2i, u3r, u3i)
+                h0r[k] += hr
+                h0i[k] += hi
+                hr, hi = _hessian_term(a1, b1r, b1i, u2r, u2i, u3r, u3i)
+                h1r[k] += hr
+                h1i[k] += hi
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _add_near_element(
+    px, py, s0, nb, e, ax, ay, bx, by, L, qc, cc,
+    orders, offsets, sx, sy, alpha, beta_re, beta_im, want_val, want_jac, want_hess, acc,
+):  # fmt: skip
+    """Add element e at a block some of whose points are near it: per point, a Gauss rule or the closed form."""
+    delta = complex(bx[e] - ax[e], by[e] - ay[e])
+    idelta = crecip(delta)
+    logL = np.log(L)
+    for k in range(nb):
+        zeta, zm = local_pair(px[s0 + k], py[s0 + k], ax[e], ay[e], bx[e], by[e], idelta)
+        R = abs(2.0 * zeta - 1.0)
+        if R >= NEAR:  # this point is far enough: the Gauss rule for it
+            _add_gauss_point(k, px[s0 + k], py[s0 + k], e, _gauss_order_index(R, orders),
+                             orders, offsets, sx, sy, alpha, beta_re, beta_im,
+                             want_val, want_jac, want_hess, acc)  # fmt: skip
+        else:
+            _add_closed_form(k, e, zeta, zm, idelta, L, logL, qc, cc, acc)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _add_gauss_point(
+    k, x, y, e, r, orders, offsets, sx, sy, alpha, beta_re, beta_im, want_val, want_jac, want_hess, acc
+):  # fmt: skip
+    """Add element e's Gauss rule r at the block's point k, (x, y)."""
+    v0, v1, f0r, f0i, f1r, f1i, h0r, h0i, h1r, h1i = acc
+    for j in range(offsets[r], offsets[r] + orders[r]):
+        wx = x - sx[e, j]
+        wy = y - sy[e, j]
+        r2 = wx * wx + wy * wy
+        inv = 1.0 / r2
+        ur = wx * inv
+        ui = -wy * inv
+        a0 = alpha[e, j, 0]
+        a1 = alpha[e, j, 1]
+        b0r = beta_re[e, j, 0]
+        b0i = beta_im[e, j, 0]
+        b1r = beta_re[e, j, 1]
+        b1i = beta_im[e, j, 1]
+        if want_val:
+            lg = 0.5 * fast_log(r2)
+            v0[k] += _value_term(a0, b0r, b0i, lg, ur, ui)
+            v1[k] += _value_term(a1, b1r, b1i, lg, ur, ui)
+        u2r = ur * ur - ui * ui
+        u2i = 2.0 * ur * ui
+        if want_jac:
+            gr, gi = _gradient_term(a0, b0r, b0i, ur, ui, u2r, u2i)
+            f0r[k] += gr
+            f0i[k] += gi
+            gr, gi = _gradient_term(a1, b1r, b1i, ur, ui, u2r, u2i)
+            f1r[k] += gr
+            f1i[k] += gi
+        if want_hess:
+            u3r = u2r * ur - u2i * ui
+            u3i = u2r * ui + u2i * ur
+            hr, hi = _hessian_term(a0, b0r, b0i, u2r, u2i, u3r, u3i)
+            h0r[k] += hr
+            h0i[k] += hi
+            hr, hi = _hessian_term(a1, b1r, b1i, u2r, u2i, u3r, u3i)
+            h1r[k] += hr
+            h1i[k] += hi
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _add_closed_form(k, e, zeta, zm, idelta, L, logL, qc, cc, acc):
+    """Add element e at the block's point k in closed form (`near_integrals`), value and both derivatives.
+
+    phi = -L/2pi (q log|z - y| integrated) - 1/2pi Im(c I1); Phi' and Phi''
+    from I1, I2 and I2, I3, divided by (b - a) and (b - a)^2.
+    """
+    v0, v1, f0r, f0i, f1r, f1i, h0r, h0i, h1r, h1i = acc
+    lam0, lam1, i10, i11, i20, i21, i30, i31 = near_integrals(zeta, zm)
+    for a in range(2):
+        q0 = qc[e, 0, a]
+        q1 = qc[e, 1, a]
+        c0 = cc[e, 0, a]
+        c1 = cc[e, 1, a]
+        vv = -L / TWO_PI * (0.5 * (q0 + q1) * logL + q0 * lam0 + q1 * lam1) - (
+            c0 * i10.imag + c1 * i11.imag
+        ) / TWO_PI
+        ff = idelta * (-L / TWO_PI * (q0 * i10 + q1 * i11) - 1j / TWO_PI * (c0 * i20 + c1 * i21))
+        hh = idelta * idelta * (L / TWO_PI * (q0 * i20 + q1 * i21) + 1j / np.pi * (c0 * i30 + c1 * i31))
+        if a == 0:
+            v0[k] += vv
+            f0r[k] += ff.real
+            f0i[k] += ff.imag
+            h0r[k] += hh.real
+            h0i[k] += hh.imag
+        else:
+            v1[k] += vv
+            f1r[k] += ff.real
+            f1i[k] += ff.imag
+            h1r[k] += hh.real
+            h1i[k] += hh.imag
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _store_block(s0, nb, acc, want_val, want_jac, want_hess, val, jac, hess):
+    """Store a block's sums as value, Jacobian (Re Phi', -Im Phi') and Hessian (Re Phi'', -Im Phi'')."""
+    v0, v1, f0r, f0i, f1r, f1i, h0r, h0i, h1r, h1i = acc
+    for k in range(nb):
+        i = s0 + k
+        if want_val:
+            val[i, 0] = v0[k]
+            val[i, 1] = v1[k]
+        if want_jac:
+            jac[i, 0, 0] = f0r[k]
+            jac[i, 0, 1] = -f0i[k]
+            jac[i, 1, 0] = f1r[k]
+            jac[i, 1, 1] = -f1i[k]
+        if want_hess:
+            hess[i, 0, 0, 0] = h0r[k]
+            hess[i, 0, 0, 1] = -h0i[k]
+            hess[i, 0, 1, 0] = -h0i[k]
+            hess[i, 0, 1, 1] = -h0r[k]
+            hess[i, 1, 0, 0] = h1r[k]
+            hess[i, 1, 0, 1] = -h1i[k]
+            hess[i, 1, 1, 0] = -h1i[k]
+            hess[i, 1, 1, 1] = -h1r[k]
