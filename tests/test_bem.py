@@ -8,17 +8,10 @@ import scipy.sparse
 import scipy.sparse.linalg
 from scipy.spatial import Delaunay
 
-from warpcli.maps.bem import (
-    _GAUSS_ORDERS,
-    _assemble,
-    _distance_to_boundary,
-    _gauss01,
-    _gauss_order_index,
-    _near_integrals,
-    fit_bem,
-    interior_angles,
-    points_in_polygon,
-)
+from warpcli.grid import inside_polygon as points_in_polygon
+from warpcli.maps.bem import _assemble, fit_bem
+from warpcli.maps.bem_eval import _GAUSS_ORDERS, _gauss_order_index, gauss01, near_integrals
+from warpcli.maps.closed_form import distance_to_boundary, interior_angles
 from warpcli.maps.mfs import fit_mfs
 
 # -- shapes -----------------------------------------------------------------
@@ -59,7 +52,7 @@ def grid_inside(vertices: np.ndarray, n: int, margin: float = 0.0) -> np.ndarray
     q = np.stack([X.ravel(), Y.ravel()], axis=1)
     q = q[points_in_polygon(q, vertices)]
     size = np.max(hi - lo)
-    return q[_distance_to_boundary(q, vertices) > max(margin, 1e-9) * size]
+    return q[distance_to_boundary(q, vertices) > max(margin, 1e-9) * size]
 
 
 def near_boundary_points(vertices: np.ndarray, dists: np.ndarray, per_edge: int = 7) -> np.ndarray:
@@ -150,7 +143,7 @@ def test_omega_is_the_interior_angle():
     vert = np.arange(0, E, 3)
     inc_e = np.stack([(vert - 1) % E, vert], axis=1)
     inc_t = np.tile([1.0, 0.0], (5, 1))
-    g = _gauss01(16)
+    g = gauss01(16)
     _, D = _assemble(P[:, 0].copy(), P[:, 1].copy(), inc_e, inc_t, a[:, 0].copy(), a[:, 1].copy(),
                      b[:, 0].copy(), b[:, 1].copy(), *g)  # fmt: skip
     np.testing.assert_allclose(D.sum(axis=(1, 2)), alpha / (2 * np.pi), atol=1e-13)
@@ -184,7 +177,7 @@ def test_near_integrals_closed_forms():
         (lambda z, t: (z - t) ** -3, 6, 7),
     ]
     for zeta in [0.3 + 1e-3j, 0.999 - 2e-4j, -0.01 + 0.02j, 1.5 - 0.7j, 0.5 + 1.9j, -1.2 + 0.1j, 2.0 + 0.0j]:
-        got = _near_integrals(zeta, zeta - 1)
+        got = near_integrals(zeta, zeta - 1)
         for f, i0, i1 in kernels:
             for i, hat in ((i0, lambda t: 1 - t), (i1, lambda t: t)):
                 ref = graded_quadrature(lambda t: hat(t) * f(zeta, t), zeta)
@@ -198,10 +191,10 @@ def test_near_integrals_closed_forms():
 
 def test_gauss_rules_are_accurate_where_used():
     """The Gauss rule chosen for a point at R = 2|zeta - 1/2| >= 4 matches a 40-point rule."""
-    tr, wr = _gauss01(40)
+    tr, wr = gauss01(40)
     for R in [4.0, 5.0, 7.0, 12.0, 30.0, 90.0, 400.0, 3000.0]:
         n = int(_GAUSS_ORDERS[_gauss_order_index(R, _GAUSS_ORDERS)])
-        t, w = _gauss01(n)
+        t, w = gauss01(n)
         for th in np.linspace(0.0, 2 * np.pi, 13):
             zeta = 0.5 + 0.5 * R * np.exp(1j * th)
             for k in (1, 2, 3):
@@ -259,12 +252,12 @@ def test_against_an_independent_fem_reference():
     T = ngon_targets(P)
     nodes, ref = p1_fem(P, T, 120)
     size = np.ptp(P, axis=0).max()
-    far = _distance_to_boundary(nodes, P) > 0.05 * size
+    far = distance_to_boundary(nodes, P) > 0.05 * size
     sol = fit_bem(P, T, m=128)
     err = np.abs(sol.value(nodes[far]) - ref[far]).max()
     assert err < 2e-4  # the FEM's own error, O(h^2)
     coarse_nodes, coarse = p1_fem(P, T, 60)
-    far_c = _distance_to_boundary(coarse_nodes, P) > 0.05 * size
+    far_c = distance_to_boundary(coarse_nodes, P) > 0.05 * size
     assert np.abs(sol.value(coarse_nodes[far_c]) - coarse[far_c]).max() > 2 * err  # and it is the FEM's
 
 

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warpcli.maps.bem import _distance_to_boundary, fit_bem, points_in_polygon
+from warpcli.grid import inside_polygon as points_in_polygon
+from warpcli.maps.bem import fit_bem
+from warpcli.maps.closed_form import distance_to_boundary
 from warpcli.maps.mfs import fit_mfs
 
 # -- shapes -----------------------------------------------------------------
@@ -49,7 +51,7 @@ def grid_inside(vertices: np.ndarray, n: int, margin: float = 0.0) -> np.ndarray
     X, Y = np.meshgrid(lo[0] + g * (hi[0] - lo[0]), lo[1] + g * (hi[1] - lo[1]))
     q = np.stack([X.ravel(), Y.ravel()], axis=1)
     q = q[points_in_polygon(q, vertices)]
-    return q[_distance_to_boundary(q, vertices) > max(margin, 1e-9) * np.max(hi - lo)]
+    return q[distance_to_boundary(q, vertices) > max(margin, 1e-9) * np.max(hi - lo)]
 
 
 def boundary_samples(vertices: np.ndarray, targets: np.ndarray, per_edge: int):
@@ -102,7 +104,7 @@ def test_sites_lie_outside_and_clear_of_the_polygon(name, orientation):
     local = (P - sol.frame.centre) / sol.frame.scale
     assert sol.sites.shape == (200, 2) and sol.m == 200 and sol.k >= 4 * 200
     assert not points_in_polygon(sol.sites, local).any()
-    assert _distance_to_boundary(sol.sites, local).min() > 0
+    assert distance_to_boundary(sol.sites, local).min() > 0
 
 
 # -- agreement and accuracy ---------------------------------------------------

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from warpcli.maps.bem import _distance_to_boundary, points_in_polygon
+from warpcli.grid import inside_polygon as points_in_polygon
+from warpcli.maps.closed_form import distance_to_boundary
 from warpcli.maps.mfs import fit_mfs
 from warpcli.maps.newton import invert
 
@@ -25,7 +26,7 @@ def test_inverse_of_forward_is_identity_for_the_mfs_map_on_a_star():
     g = (np.arange(40) + 0.5) / 40
     X, Y = np.meshgrid(lo[0] + g * (hi[0] - lo[0]), lo[1] + g * (hi[1] - lo[1]))
     p = np.stack([X.ravel(), Y.ravel()], axis=1)
-    p = p[points_in_polygon(p, P) & (_distance_to_boundary(p, P) > 0.02 * size)]
+    p = p[points_in_polygon(p, P) & (distance_to_boundary(p, P) > 0.02 * size)]
     x = sol.value(p)
     # first guesses: the points moved by up to 2% of the size, kept inside
     shift = 0.02 * size * np.stack([np.cos(7.0 * np.arange(len(p))), np.sin(7.0 * np.arange(len(p)))], axis=1)

@@ -36,7 +36,7 @@ converged BEM solution on L-, C- and star-shaped polygons and a convex
 pentagon: a larger offset converges faster for smooth data (sites far from
 the boundary) but the corner sites are what makes reflex corners converge.
 
-All of this happens in the normalised frame of `warpcli.maps.bem._Frame`.
+All of this happens in the normalised frame of `warpcli.maps.closed_form.Frame`.
 Evaluation is a compiled, vectorised sum over sites per point (`_evaluate`).
 """
 
@@ -49,20 +49,20 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from .bem import (
+from ..grid import inside_polygon
+from .closed_form import (
     ClosedForm,
-    _boundary_nodes,
-    _caller_parameters,
-    _distance_to_boundary,
-    _fast_log,
-    _Frame,
-    _local_edges,
-    _node_data,
-    _on_edges,
-    _prepare_polygon,
+    Frame,
+    boundary_nodes,
+    caller_parameters,
+    distance_to_boundary,
+    fast_log,
     interior_angles,
+    local_edges,
     lstsq,
-    points_in_polygon,
+    node_data,
+    on_edges,
+    prepare_polygon,
 )
 
 __all__ = ["MFSSolution", "fit_mfs", "default_mfs_sites"]
@@ -71,7 +71,7 @@ __all__ = ["MFSSolution", "fit_mfs", "default_mfs_sites"]
 _CORNER_SIGMA = 4.0
 #: Farthest corner site, as a fraction of the shorter edge at the vertex.
 _CORNER_REACH = 0.5
-#: Grading strength (see `warpcli.maps.bem._graded_edge_parameters`) of the
+#: Grading strength (see `warpcli.maps.closed_form.boundary_nodes`) of the
 #: offset sites and fitting nodes towards reflex vertices.
 _GRADING = 0.5
 
@@ -88,7 +88,7 @@ def _evaluate(px, py, sx, sy, w0, w1, want_val, want_jac, want_hess, val, jac, h
     """Sum w_i log|z - s_i| and its derivatives over the sites, for every point.
 
     One loop over points, and inside it a branch-free loop over sites per
-    requested quantity, which LLVM vectorises (the log is `_fast_log` for
+    requested quantity, which LLVM vectorises (the log is `fast_log` for
     that reason).  With F(z) = sum_i w_i log(z - s_i): value = Re F,
     gradient = (Re F', -Im F') with F' = sum w_i / (z - s_i), and
     phi_xx = -phi_yy = Re F'', phi_xy = -Im F'' with F'' = -sum w_i / (z - s_i)^2.
@@ -109,7 +109,7 @@ def _evaluate(px, py, sx, sy, w0, w1, want_val, want_jac, want_hess, val, jac, h
                 dx = x - sx[i]
                 dy = y - sy[i]
                 r2 = dx * dx + dy * dy
-                lg = _fast_log(r2)
+                lg = fast_log(r2)
                 inv = 1.0 / r2
                 gx = dx * inv
                 gy = dy * inv
@@ -131,7 +131,7 @@ def _evaluate(px, py, sx, sy, w0, w1, want_val, want_jac, want_hess, val, jac, h
             for i in range(m):
                 dx = x - sx[i]
                 dy = y - sy[i]
-                lg = _fast_log(dx * dx + dy * dy)
+                lg = fast_log(dx * dx + dy * dy)
                 v0 += w0[i] * lg
                 v1 += w1[i] * lg
             val[k, 0] = 0.5 * v0
@@ -194,7 +194,7 @@ class MFSSolution(ClosedForm):
         Number of sites.
     k : int
         Number of boundary nodes the fit used.
-    frame : _Frame
+    frame : Frame
         Normalisation of coordinates and data.
     sites : (m, 2) ndarray of float
         The sites s_i (local coordinates), all outside the polygon.
@@ -212,7 +212,7 @@ class MFSSolution(ClosedForm):
 
     m: int
     k: int
-    frame: _Frame
+    frame: Frame
     sites: NDArray[np.float64]
     weights: NDArray[np.float64]
     affine: NDArray[np.float64]
@@ -282,7 +282,7 @@ def _pull_back(
     dist = dist.copy()
     for _ in range(40):  # bounded number of passes, vectorised over sites
         s = base + dist[:, None] * direction
-        bad = points_in_polygon(s, V) | (_distance_to_boundary(s, V) < 0.5 * clearance * dist)
+        bad = inside_polygon(s, V) | (distance_to_boundary(s, V) < 0.5 * clearance * dist)
         if not bad.any():
             return s
         dist[bad] *= 0.5
@@ -352,7 +352,7 @@ def fit_mfs(
     -------
     MFSSolution
     """
-    frame, V, T = _prepare_polygon(vertices, targets)
+    frame, V, T = prepare_polygon(vertices, targets)
     n = len(V)
     m = default_mfs_sites(n) if m is None else int(m)
     k = 4 * m if k is None else int(k)
@@ -374,8 +374,8 @@ def fit_mfs(
 
     # Offset-curve sites (graded mildly towards reflex vertices).
     gamma = np.where(angles > np.pi + 1e-9, _GRADING, 0.0)
-    edge, t = _boundary_nodes(V, m_off, gamma)
-    base = _on_edges(V, edge, t)
+    edge, t = boundary_nodes(V, m_off, gamma)
+    base = on_edges(V, edge, t)
     spacing = 0.5 * (
         np.hypot(*(np.roll(base, -1, axis=0) - base).T) + np.hypot(*(base - np.roll(base, 1, axis=0)).T)
     )
@@ -407,8 +407,8 @@ def fit_mfs(
     # Fitting nodes: k_main by arclength (mild grading) + clustered corner nodes.
     n_extra = 4 * nc * len(reflex)
     k_main = max(k - n_extra, m + 3)
-    e_k, t_k = _boundary_nodes(V, k_main, gamma)
-    X = [_on_edges(V, e_k, t_k)]
+    e_k, t_k = boundary_nodes(V, k_main, gamma)
+    X = [on_edges(V, e_k, t_k)]
     x_edge, x_t = [e_k], [t_k]
     for v, d in zip(cx_list, cd_list):  # loop over reflex vertices
         for other, length in (((v + 1) % n, lengths[v]), ((v - 1) % n, lengths[v - 1])):  # its two edges
@@ -421,7 +421,7 @@ def fit_mfs(
     X = np.concatenate(X)
     x_edge = np.concatenate(x_edge)
     x_t = np.concatenate(x_t)
-    bdata = _node_data(T, x_edge, x_t, boundary, frame.flipped)
+    bdata = node_data(T, x_edge, x_t, boundary, frame.flipped)
 
     # Least squares with scaled columns: [log|x_j - s_i|, 1, x, y].
     dxs = X[:, None, :] - S[None, :, :]
@@ -432,7 +432,7 @@ def fit_mfs(
     if any(len(f) for f in free):
         coef, residual = _fit_natural(A, X, S, bdata, x_edge, x_t, V, free, rcond, frame)
         solution = _solution(S, X, coef, residual, frame)
-        ce, ct = _caller_parameters(e_k, t_k, n, frame.flipped)
+        ce, ct = caller_parameters(e_k, t_k, n, frame.flipped)
         trace = (ce, ct, solution.value(frame.centre + frame.scale * X[: len(e_k)]))
         return dataclasses.replace(solution, trace=trace)
     cscale = np.linalg.norm(A, axis=0)
@@ -478,7 +478,7 @@ def _fit_natural(A, X, S, bdata, x_edge, x_t, V, free, rcond, frame):
     coef = np.empty((A.shape[1], 2))
     residual = 0.0
     for comp in range(2):  # the components have different conditions
-        neumann = np.isin(x_edge, _local_edges(free[comp], n, frame.flipped)) & (x_t > 0.0)
+        neumann = np.isin(x_edge, local_edges(free[comp], n, frame.flipped)) & (x_t > 0.0)
         M = np.where(neumann[:, None], dn, A)
         rhs = np.where(neumann, 0.0, bdata[:, comp])
         cscale = np.linalg.norm(M, axis=0)
