@@ -116,13 +116,15 @@ def test_one_copy_is_tested_in_process_and_in_subprocesses(tmp_path):
 
 def test_modules_never_reach_back_up():
     """Layering: raster and report never import maps internals, pipeline or cli;
-    maps never import raster, report, pipeline or cli."""
+    maps never import raster, report, pipeline, cli or volume; volume never imports
+    the 2D maps (both import the shared seam, `warpcli.mapping`)."""
     import ast
 
     rules = {
-        "maps": ("raster", "report", "pipeline", "cli"),
+        "maps": ("raster", "report", "pipeline", "cli", "volume"),
         "raster": ("maps", "report", "pipeline", "cli"),
         "report": ("maps", "pipeline", "cli"),
+        "volume": ("maps", "report", "pipeline", "cli"),
     }
     root = os.path.join(REPO, "warpcli")
     for package, forbidden in rules.items():
@@ -138,3 +140,17 @@ def test_modules_never_reach_back_up():
                         if node.level == 1 and os.path.basename(dirpath) != "warpcli":
                             continue  # a sibling within the same package
                         assert mod not in forbidden, f"{package}/{f} imports {node.module}"
+
+
+def test_the_shared_seam_is_base_layer():
+    """What 2D and 3D share (the map seam, P1 maps, distortion) imports numpy and warpcli.errors, nothing more."""
+    import ast
+
+    allowed = {"__future__", "dataclasses", "typing", "numpy", "numpy.typing", "errors"}
+    for name in ("mapping.py", "simplicial.py", "distortion.py"):
+        tree = ast.parse(open(os.path.join(REPO, "warpcli", name)).read())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                assert {a.name for a in node.names} <= allowed, (name, [a.name for a in node.names])
+            elif isinstance(node, ast.ImportFrom):
+                assert (node.module or "") in allowed, (name, node.module)

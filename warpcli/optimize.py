@@ -22,13 +22,14 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from .distortion import distortion
 from .errors import InputError
 from .grid import inside_polygon
-from .maps.base import ThetaMap, matmul2
+from .mapping import matmul2
+from .maps.base import ThetaMap
 from .maps.registry import METHODS
 from .maps.theta import Theta, cyclic, regular
 from .polygon import Polygon
-from .report.metrics import summarize
 
 log = logging.getLogger("warpcli")
 
@@ -87,7 +88,8 @@ def optimized(src: Polygon, dst: Polygon, options) -> Theta:
         b = _onto(phi0, theta, method, src, coarse, "source")
         m1 = a.evaluate(samples, jacobian=True)
         m0 = b.inverse(m1.points, jacobian=True, coherent=True)  # samples in grid order: walk, no locator
-        value = summarize(matmul2(m0.jacobian, m1.jacobian))[options.energy]["mean"]
+        # The report's number (`warpcli.report.metrics.summarize`, which is this for so few samples).
+        value = distortion(matmul2(m0.jacobian, m1.jacobian)).summary()[options.energy]["mean"]
         return math.inf if value is None else value
 
     w = start.points.copy()
