@@ -14,7 +14,7 @@ imports numpy and `warpcli.errors` only.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -73,6 +73,26 @@ class Certificate:
     def ok(self) -> bool:
         """True when nothing flipped."""
         return self.flipped == 0
+
+
+class OntoTheta(Protocol):
+    """What the composition needs of a map phi onto Theta, in any dimension.
+
+    `warpcli.maps.base.ThetaMap` (polygons; its ``inverse`` also takes a
+    ``coherent`` hint) and `warpcli.volume.compose.VolumeThetaMap`
+    (polyhedra) are such maps.
+    """
+
+    theta: Any
+
+    def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
+        """phi at points of the domain (NaN outside it)."""
+
+    def inverse(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
+        """phi^-1 at points of Theta (NaN outside it)."""
+
+    def certify(self) -> Certificate:
+        """Count the elements where the map flips."""
 
 
 def as_points(points: ArrayLike, dim: int = 2, *, contiguous: bool = False) -> NDArray[np.float64]:
@@ -135,18 +155,16 @@ class ComposedMap:
 
     ``forward`` takes source points to the target, ``inverse`` takes target
     points back to the source: f = phi1^-1 o phi0 and f^-1 = phi0^-1 o
-    phi1. The maps phi0 and phi1 may be anything with ``evaluate(points,
-    jacobian=)`` and ``inverse(points, jacobian=)`` returning `Mapped`,
-    ``certify()`` returning a `Certificate`, and a ``theta``.
+    phi1, for any two maps onto one Theta (`OntoTheta`).
     `warpcli.maps.compose.BijectiveMap` (polygons) and
     `warpcli.volume.compose.VolumeMap` (polyhedra) are this with what only
     their dimension knows (pixel grids, voxel slabs, how they are built).
 
     Parameters
     ----------
-    phi0 : map onto Theta
+    phi0 : OntoTheta
         The source domain onto Theta.
-    phi1 : map onto Theta
+    phi1 : OntoTheta
         The target domain onto the same Theta (compared by value: two equal
         Thetas are one).
 
@@ -159,7 +177,7 @@ class ComposedMap:
     #: The dimension of the domains.
     dim: ClassVar[int] = 2
 
-    def __init__(self, phi0: Any, phi1: Any) -> None:
+    def __init__(self, phi0: OntoTheta, phi1: OntoTheta) -> None:
         self.phi0 = phi0
         self.phi1 = phi1
         self.timings: dict[str, float] = {}
