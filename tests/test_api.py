@@ -123,3 +123,17 @@ def test_one_copy_is_tested_in_process_and_in_subprocesses(tmp_path):
         and not (m == "warpcli" or m.startswith("warpcli."))
     ]  # fmt: skip
     assert duplicates == []
+
+
+def test_the_shared_seam_is_base_layer():
+    """What 2D and 3D share (the map seam, P1 maps, distortion) imports numpy and warpcli.errors, nothing more."""
+    import ast
+
+    allowed = {"__future__", "dataclasses", "typing", "numpy", "numpy.typing", "errors"}
+    for name in ("mapping.py", "simplicial.py", "distortion.py"):
+        tree = ast.parse(open(os.path.join(REPO, "warpcli", name)).read())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                assert {a.name for a in node.names} <= allowed, (name, [a.name for a in node.names])
+            elif isinstance(node, ast.ImportFrom):
+                assert (node.module or "") in allowed, (name, node.module)

@@ -261,3 +261,173 @@ def test_two_maps_onto_different_thetas_are_refused(impl):
     g1 = dataclasses.replace(f.phi1, theta=other)
     with pytest.raises(InputError, match="different Thetas"):
         BijectiveMap(f.phi0, g1)
+
+
+# --- The seam in any dimension: the 3D map keeps the generic part of the contract --------------
+#
+# `warpcli.mapping.ComposedMap` is the composition of both dimensions; the
+# generic clauses (identity, round trips, the Jacobian against finite
+# differences, certificates, the one `inverse_jacobian` convention) hold for
+# every 2D method above and for the 3D map (TetMap on both sides, through a
+# spherical Theta). Tolerances are in the domain's units: pixels for the
+# polygons (about 120 px across), cage units for the blobs (about 2 across).
+
+
+@dataclass(frozen=True)
+class Seam:
+    """A dimension's way to build maps for the generic contract, and its tolerances.
+
+    exact: the error bound of identities and round trips. jacobian: the
+    largest relative error of the Jacobian against central differences (step
+    ``step``), met by at least 98 % of the points (a piecewise-linear map's
+    stencil may straddle an element boundary).
+    """
+
+    dim: int
+    build: object  # (name) -> (map of the pair, map of the domain onto itself, points in src, points in dst)
+    kinds: tuple[str, ...]
+    exact: float
+    jacobian: float
+    step: float
+
+
+def _planar(impl: Implementation):
+    def build():
+        src, dst = CONCAVE["star"], regular(len(CONCAVE["star"]), r=50.0, phase=0.3)
+        return between(src, dst, impl), between(src, src, impl), inside(src, 300), inside(dst, 300)
+
+    return build
+
+
+def _blob(level: int = 2, lobes: int = 3, depth: float = 0.35):
+    from warpcli.volume.examples import icosphere, star as star3
+    from warpcli.volume.surface import surface_from_arrays
+
+    v, f = icosphere(level)
+    return surface_from_arrays(star3(v, lobes, depth), f, "blob.obj")
+
+
+def _inside_cage(surface, n: int, seed: int = 0, margin: float = 0.05) -> np.ndarray:
+    """Points inside a cage, at least ``margin`` from its boundary (seeded rejection sampling)."""
+    from warpcli.volume._kernels import winding
+
+    rng = np.random.default_rng(seed)
+    lo, hi = surface.bounds
+    p = lo + (hi - lo) * rng.random((20 * n, 3))
+    p = p[winding(p, surface.vertices, surface.triangles) > 0.5]
+    # Away from the boundary: the points moved by the margin are inside too, in every direction.
+    for d in np.vstack([np.eye(3), -np.eye(3)]):
+        p = p[winding(p + margin * d, surface.vertices, surface.triangles) > 0.5]
+    return p[:n]
+
+
+def _spatial():
+    from warpcli.volume import build_map as build_volume_map
+
+    src = _blob()
+    a = np.array([[1.2, 0.2, 0.0], [-0.1, 0.9, 0.3], [0.1, 0.0, 1.1]])
+    moved = src.vertices @ a.T + 0.15 * np.sin(src.vertices[:, [1, 2, 0]]) + [3.0, -1.0, 2.0]
+    dst = src.with_vertices(moved, "moved.obj")
+    f = build_volume_map(src, dst, "sphere", edge=0.3)
+    same = build_volume_map(src, src.with_vertices(src.vertices, "copy.obj"), "sphere", edge=0.3)
+    return f, same, _inside_cage(src, 300), _inside_cage(dst, 300, seed=1)
+
+
+SEAMS = {
+    # P1 maps (FEM) are differentiated with a tiny step (few stencils straddle
+    # an edge of either mesh); smooth ones (BEM, MFS: inverted by Newton to
+    # about 1e-10 px) with a larger one.
+    **{name: Seam(2, _planar(impl), ("triangles", "samples"), 100 * impl.exact + 1e-7, 1e-4,
+                  1e-7 if impl.options.method == "fem" else 1e-5)
+       for name, impl in IMPLEMENTATIONS.items()},
+    "tet-3d": Seam(3, _spatial, ("tetrahedra",), 1e-9, 1e-4, 1e-6),
+}  # fmt: skip
+
+_BUILT: dict = {}
+
+
+@pytest.fixture(params=sorted(SEAMS))
+def seam(request):
+    """(Seam, (f, identity, points in src, points in dst)), each pair built once per session."""
+    name = request.param
+    if name not in _BUILT:
+        _BUILT[name] = SEAMS[name].build()
+    return SEAMS[name], _BUILT[name]
+
+
+def test_seam_identity(seam):
+    s, (_, same, p, _) = seam
+    np.testing.assert_allclose(same.forward(p), p, atol=s.exact)
+    np.testing.assert_allclose(same.inverse(p), p, atol=s.exact)
+    np.testing.assert_allclose(same.inverse_jacobian(p), np.broadcast_to(np.eye(s.dim), (len(p), s.dim, s.dim)), atol=1e3 * s.exact)
+
+
+def test_seam_round_trips(seam):
+    s, (f, _, p, q) = seam
+    fp = f.forward(p)
+    assert fp.shape == p.shape and np.isfinite(fp).all()
+    np.testing.assert_allclose(f.inverse(fp), p, atol=s.exact)
+    np.testing.assert_allclose(f.forward(f.inverse(q)), q, atol=s.exact)
+
+
+def test_seam_jacobian_is_the_derivative(seam):
+    """forward_jacobian against central differences of forward; inverse_jacobian the same for inverse,
+    and the inverse of forward_jacobian at the image point."""
+    s, (f, _, p, q) = seam
+    for fn, jac, pts in ((f.forward, f.forward_jacobian, p), (f.inverse, f.inverse_jacobian, q)):
+        j = jac(pts)
+        assert j.shape == (len(pts), s.dim, s.dim)
+        scale = np.abs(pts).max()
+        fd = np.stack([(fn(pts + s.step * scale * e) - fn(pts - s.step * scale * e)) / (2 * s.step * scale) for e in np.eye(s.dim)], axis=2)
+        err = np.abs(fd - j).max(axis=(1, 2)) / np.abs(j).max(axis=(1, 2))
+        assert np.mean(err < s.jacobian) >= 0.98, np.sort(err)[-10:]
+    m = f.forward_mapped(p)
+    np.testing.assert_array_equal(m.points, f.forward(p))
+    back = f.inverse_mapped(m.points)
+    np.testing.assert_allclose(back.points, p, atol=s.exact)
+    eye = np.einsum("kab,kbc->kac", back.jacobian, m.jacobian)
+    # Exact where both points lie in the elements that pair up (almost everywhere).
+    close = np.abs(eye - np.eye(s.dim)).max(axis=(1, 2)) < 1e-6
+    assert close.mean() >= 0.98
+
+
+def test_seam_certificates(seam):
+    s, (f, same, _, _) = seam
+    for g in (f, same):
+        certs = g.certificates()
+        assert len(certs) == 2
+        for c in certs:
+            assert c.ok and c.flipped == 0 and c.kind in s.kinds and c.checked > 0
+        g.check_bijective()
+
+
+def test_seam_certificate_kinds_are_checked():
+    from warpcli.mapping import Certificate
+
+    assert Certificate(0, 10, "tetrahedra").ok and not Certificate(1, 10, "triangles").ok
+    with pytest.raises(ValueError, match="tetrahedra"):
+        Certificate(0, 10, "cells")
+
+
+def test_seam_thetas_compare_by_value():
+    """Two maps onto equal (not identical) Thetas compose, in both dimensions."""
+    import dataclasses
+
+    from warpcli.mapping import ComposedMap
+    from warpcli.volume.compose import VolumeMap
+
+    f2 = _BUILT.get("fem-cotan") or SEAMS["fem-cotan"].build()
+    copy2 = dataclasses.replace(f2[0].theta, notes=dict(f2[0].theta.notes))
+    assert copy2 is not f2[0].theta
+    assert isinstance(BijectiveMap(f2[0].phi0, dataclasses.replace(f2[0].phi1, theta=copy2)), ComposedMap)
+    f3 = _BUILT.get("tet-3d") or SEAMS["tet-3d"].build()
+    theta3 = f3[0].theta
+    copy3 = dataclasses.replace(theta3, vertices=theta3.vertices.copy())
+    assert copy3 is not theta3
+    g = VolumeMap(f3[0].phi0, dataclasses.replace(f3[0].phi1, theta=copy3))
+    np.testing.assert_array_equal(g.inverse(f3[3]), f3[0].inverse(f3[3]))
+    from warpcli.errors import InputError
+
+    moved = dataclasses.replace(theta3, vertices=theta3.vertices * 2.0)
+    with pytest.raises(InputError, match="different Thetas"):
+        VolumeMap(f3[0].phi0, dataclasses.replace(f3[0].phi1, theta=moved))

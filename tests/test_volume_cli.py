@@ -76,8 +76,10 @@ def test_a_folded_volume_is_refused_unless_folds_are_allowed(tmp_path, monkeypat
     tifffile.imwrite(tmp_path / "in.tif", data, photometric="minisblack")
     v, f = box(1, (2.0, 2.0, 2.0), (14.0, 14.0, 14.0))
     write_obj(tmp_path / "cube.obj", v, f)
+    import dataclasses
+
     real = compose.TetMap.certify
-    monkeypatch.setattr(compose.TetMap, "certify", lambda self: type(real(self))(1, self.mesh.n_tets))
+    monkeypatch.setattr(compose.TetMap, "certify", lambda self: dataclasses.replace(real(self), flipped=1))
     w = v * 0.9 + 1.0
     write_obj(tmp_path / "small.obj", w, f)
     args = ["volume", tmp_path / "in.tif", tmp_path / "out.tif", "--src", tmp_path / "cube.obj", "--dst", tmp_path / "small.obj"]

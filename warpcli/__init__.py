@@ -15,7 +15,7 @@ __version__ = "0.2.0"
 _EXPORTS = {
     "BatchItem": "batch",
     "BijectiveMap": "maps.compose",
-    "Certificate": "maps.base",
+    "Certificate": "mapping",
     "FoldOverError": "errors",
     "ImageIOError": "errors",
     "ImageInputError": "errors",
@@ -64,7 +64,8 @@ if TYPE_CHECKING:
         WarpError,
     )
     from .grid import pixel_centres
-    from .maps.base import Certificate, ThetaMap
+    from .mapping import Certificate
+    from .maps.base import ThetaMap
     from .maps.compose import BijectiveMap, PullBack, build_map
     from .maps.theta import Theta
     from .options import MapOptions, WarpOptions

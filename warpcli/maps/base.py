@@ -3,7 +3,8 @@
 Every method of the paper's §3.1 (FEM, and later BEM and MFS) implements
 `ThetaMap`; `warpcli.maps.compose.BijectiveMap` composes two of them and never
 looks inside. What crosses the seam is points and Jacobians, never mesh
-triangles.
+triangles: `Mapped` and `Certificate` are `warpcli.mapping`'s, the same for
+polygons and polyhedra (imported here, where the methods find them).
 """
 
 from __future__ import annotations
@@ -16,25 +17,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..boundary import edge_points, from_theta_parameter, to_theta_parameter
-from ..errors import InputError
 from ..grid import inside_polygon, pixel_centres
+from ..mapping import Certificate, Mapped, as_points, matmul2
 from ..polygon import Polygon
 from .theta import Theta
-
-
-class Mapped(NamedTuple):
-    """Points carried through a map, with the map's Jacobian there if asked for.
-
-    Attributes
-    ----------
-    points : (K, 2) ndarray of float
-        NaN where the map is not defined (outside its domain).
-    jacobian : (K, 2, 2) ndarray of float or None
-        ``jacobian[k, a, b]`` = d out_a / d in_b at point k; NaN where unknown.
-    """
-
-    points: NDArray[np.float64]
-    jacobian: NDArray[np.float64] | None = None
 
 
 class GridSample(NamedTuple):
@@ -56,32 +42,6 @@ class GridSample(NamedTuple):
     pixels: NDArray[np.int64]
     values: NDArray[np.float64]
     jacobian: NDArray[np.float64] | None = None
-
-
-@dataclass(frozen=True)
-class Certificate:
-    """Evidence that a map is one-to-one.
-
-    Attributes
-    ----------
-    flipped : int
-        Elements (triangles, or sample points for a smooth map) where the
-        map's Jacobian vanishes or has the wrong sign.
-    checked : int
-        How many elements were checked.
-    kind : str
-        What an element is: ``"triangles"`` (exact for a piecewise-linear map)
-        or ``"samples"``.
-    """
-
-    flipped: int
-    checked: int
-    kind: str
-
-    @property
-    def ok(self) -> bool:
-        """True when nothing flipped."""
-        return self.flipped == 0
 
 
 @dataclass(eq=False)
@@ -216,23 +176,6 @@ class ThetaMap(ABC):
         """The map of the same polygon onto another Theta, if the method can reuse its work
         (FEM: the factorization); None otherwise (then it is built anew)."""
         return None
-
-
-def as_points(points: ArrayLike) -> NDArray[np.float64]:
-    """Points as a (K, 2) float array, or `InputError`."""
-    p = np.asarray(points, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 2:
-        raise InputError(f"points must be a (K, 2) array, got shape {p.shape}")
-    return p
-
-
-def matmul2(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``a @ b`` for stacks of 2x2 matrices, written out (the same rounding everywhere)."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    for i in range(2):
-        for j in range(2):
-            out[..., i, j] = a[..., i, 0] * b[..., 0, j] + a[..., i, 1] * b[..., 1, j]
-    return out
 
 
 def inv2(m: NDArray[np.float64]) -> NDArray[np.float64]:

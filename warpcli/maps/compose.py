@@ -12,11 +12,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._native import Kernels, parallel
-from ..errors import FoldOverError, InputError
+from ..errors import InputError
 from ..grid import window
 from ..options import MapOptions
 from ..polygon import Polygon, check_pair
-from .base import ThetaMap, as_points, matmul2
+from ..mapping import Certificate, ComposedMap
+from .base import ThetaMap
 from .registry import METHODS, THETAS
 from .theta import Theta, from_file
 
@@ -70,13 +71,16 @@ class PullBack:
         return out
 
 
-class BijectiveMap:
+class BijectiveMap(ComposedMap):
     """The smooth bijective map f between two polygons, as two maps onto one Theta.
 
     ``forward`` takes source points to the target, ``inverse`` takes target
     points back to the source: f = phi1^-1 o phi0 and f^-1 = phi0^-1 o phi1
     (the paper's eq. (2)), for any two `ThetaMap` of the same Theta, whatever
     the method that made them. Build one with `BijectiveMap.between`.
+    ``forward``, ``inverse``, their Jacobians and the certificates are
+    `warpcli.mapping.ComposedMap`'s, the same for polyhedra; what is here
+    knows pixel grids and polygons.
 
     Parameters
     ----------
@@ -103,9 +107,7 @@ class BijectiveMap:
                 f"{phi0.polygon.name} and {phi1.polygon.name} are mapped onto different Thetas "
                 f"({phi0.theta.name}, {phi1.theta.name}); f = phi1^-1 o phi0 needs one"
             )
-        self.phi0 = phi0
-        self.phi1 = phi1
-        self.timings: dict[str, float] = {}
+        super().__init__(phi0, phi1)
 
     @classmethod
     def between(
@@ -163,85 +165,20 @@ class BijectiveMap:
         return self.phi1.polygon
 
     @property
-    def theta(self):
-        """The intermediate convex polygon (`warpcli.maps.theta.Theta`)."""
-        return self.phi0.theta
-
-    @property
     def orientation_preserving(self) -> bool:
         """False when the polygons run in opposite directions: f is then a mirror image."""
         return (self.src.signed_area > 0) == (self.dst.signed_area > 0)
 
-    def certificates(self):
-        """The two maps' `warpcli.maps.base.Certificate`, (source, target)."""
-        return self.phi0.certify(), self.phi1.certify()
+    def fold_message(self, source: Certificate, target: Certificate) -> str:
+        """What `check_bijective` says when either map flips."""
+        return (
+            f"the maps flip {source.flipped} {source.kind} of {self.src.name} and {target.flipped} {target.kind} of "
+            f"{self.dst.name}; the warp would fold the image over itself"
+        )
 
     def flipped_triangles(self) -> int:
         """Elements (triangles, or samples) where either map flips: 0 for a bijection."""
         return sum(c.flipped for c in self.certificates())
-
-    def check_bijective(self) -> None:
-        """Raise `FoldOverError` unless both maps are certified one-to-one."""
-        c0, c1 = self.certificates()
-        if not (c0.ok and c1.ok):
-            raise FoldOverError(
-                f"the maps flip {c0.flipped} {c0.kind} of {self.src.name} and {c1.flipped} {c1.kind} of "
-                f"{self.dst.name}; the warp would fold the image over itself"
-            )
-
-    def forward(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Map source points to the target.
-
-        Parameters
-        ----------
-        points : (K, 2) array_like of float
-            Points in the source image's coordinates.
-
-        Returns
-        -------
-        (K, 2) ndarray of float
-            Their images in the target's coordinates; NaN outside the source polygon.
-        """
-        return self.phi1.inverse(self.phi0.evaluate(as_points(points)).points).points
-
-    def inverse(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Map target points back to the source.
-
-        Parameters
-        ----------
-        points : (K, 2) array_like of float
-            Points in the target (output) image's coordinates.
-
-        Returns
-        -------
-        (K, 2) ndarray of float
-            Their pre-images in the source's coordinates; NaN outside the target polygon.
-        """
-        return self.phi0.inverse(self.phi1.evaluate(as_points(points)).points).points
-
-    def forward_jacobian(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Jacobian of f at source points: ``J_phi1(f(x))^-1 J_phi0(x)``.
-
-        Returns
-        -------
-        (K, 2, 2) ndarray of float
-            NaN outside the source polygon.
-        """
-        a = self.phi0.evaluate(as_points(points), jacobian=True)
-        b = self.phi1.inverse(a.points, jacobian=True)
-        return matmul2(b.jacobian, a.jacobian)
-
-    def inverse_jacobian(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Jacobian of f^-1 at target points: ``J_phi0(x)^-1 J_phi1(y)``.
-
-        Returns
-        -------
-        (K, 2, 2) ndarray of float
-            NaN outside the target polygon.
-        """
-        a = self.phi1.evaluate(as_points(points), jacobian=True)
-        b = self.phi0.inverse(a.points, jacobian=True)
-        return matmul2(b.jacobian, a.jacobian)
 
     def inverse_boundary(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
         """The exact boundary map backwards: the source point of parameter t on target edge i."""

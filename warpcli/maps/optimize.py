@@ -22,12 +22,13 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from ..distortion import distortion
 from ..errors import InputError
 from ..grid import inside_polygon
+from ..mapping import matmul2
 from ..polygon import Polygon
-from ..report.metrics import summarize
 from . import fem
-from .base import ThetaMap, matmul2
+from .base import ThetaMap
 from .fem.mesh import auto_max_area
 from .theta import Theta, cyclic, regular
 
@@ -88,7 +89,8 @@ def optimized(src: Polygon, dst: Polygon, options) -> Theta:
         b = _onto(phi0, theta, method, src, coarse, "source")
         m1 = a.evaluate(samples, jacobian=True)
         m0 = b.inverse(m1.points, jacobian=True, coherent=True)  # samples in grid order: walk, no locator
-        value = summarize(matmul2(m0.jacobian, m1.jacobian))[options.energy]["mean"]
+        # The report's number (`warpcli.report.metrics.summarize`, which is this for so few samples).
+        value = distortion(matmul2(m0.jacobian, m1.jacobian)).summary()[options.energy]["mean"]
         return math.inf if value is None else value
 
     w = start.points.copy()

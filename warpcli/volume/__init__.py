@@ -2,8 +2,15 @@
 
 The 3D counterpart of the 2D pipeline, kept beside it: cages (closed genus-0
 surface meshes) -> Theta -> tetrahedral meshes -> harmonic maps -> the
-composed map's pull-back of voxel centres -> a resampled volume. Nothing here
-imports the 2D maps, and nothing there imports this.
+composed map's pull-back of voxel centres -> a resampled volume. What does
+not depend on the dimension is shared with the 2D maps and imported from the
+base layer: the map seam (`warpcli.mapping`: `Mapped`, `Certificate`, the
+composition's ``forward``/``inverse`` and Jacobians) and the distortion
+measures (`warpcli.distortion`); images (the report's picture, TIFF checks)
+go through `warpcli.raster.imageio`. What is here is what differs by
+dimension: meshing (TetGen), cage validation, how Theta is built,
+untangling, volume I/O and the voxel kernels. Nothing here imports the 2D
+maps (`warpcli.maps`), and nothing there imports this.
 
 Meshing needs ``tetgen`` and NIfTI needs ``nibabel`` (``pip install
 'warpcli[volume]'``); they are imported only when used.

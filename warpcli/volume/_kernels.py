@@ -421,12 +421,15 @@ def _interpolate(coef, tets, other, t, x, y, z, out, p, clamp):
 
 
 @njit(cache=True, nogil=True)
-def bucket_locate(points, start, items, lo, cell, dims, tets, coef, other, snap, out, where):
+def bucket_locate(points, start, items, lo, cell, dims, coef, snap, where, bary):
     """Locate points through a grid of buckets listing the tetrahedra that overlap each cell.
 
-    A point in no tetrahedron, but within ``snap`` (in barycentric terms) of
-    the best one in its cell (a rounding error outside the mesh), is snapped
-    onto that one's boundary; farther ones get ``where = -1``.
+    ``where[p]`` receives the tetrahedron and ``bary[p]`` the point's
+    barycentric coordinates in it. A point in no tetrahedron, but within
+    ``snap`` (in barycentric terms) of the best one in its cell (a rounding
+    error outside the mesh), is snapped onto that one's boundary (its
+    coordinates clamped to [0, 1] and normalized); farther ones get
+    ``where = -1``.
     """
     for p in range(points.shape[0]):
         x = points[p, 0]
@@ -454,7 +457,21 @@ def bucket_locate(points, start, items, lo, cell, dims, tets, coef, other, snap,
             where[p] = -1
             continue
         where[p] = best
-        _interpolate(coef, tets, other, best, x, y, z, out, p, best_min < -TOL)
+        l0, l1, l2, l3 = _lam(coef, best, x, y, z)
+        if best_min < -TOL:
+            l0 = max(l0, 0.0)
+            l1 = max(l1, 0.0)
+            l2 = max(l2, 0.0)
+            l3 = max(l3, 0.0)
+            s = l0 + l1 + l2 + l3
+            l0 /= s
+            l1 /= s
+            l2 /= s
+            l3 /= s
+        bary[p, 0] = l0
+        bary[p, 1] = l1
+        bary[p, 2] = l2
+        bary[p, 3] = l3
 
 
 @njit(cache=True, nogil=True)

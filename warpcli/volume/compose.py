@@ -6,12 +6,14 @@ import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import FoldOverError, InputError
+from .. import mapping
+from ..errors import InputError
+from ..mapping import Certificate, ComposedMap, Mapped
+from ..simplicial import PiecewiseLinear
 from . import _kernels
 from .surface import Surface
 from .tetmesh import TetMesh, tet_volumes
@@ -27,34 +29,6 @@ SLAB_VOXELS = 1 << 21
 #: still snapped onto it: both maps' images are subdivisions of Theta's faces,
 #: so only rounding separates them.
 SNAP = 1e-6
-
-
-class Mapped(NamedTuple):
-    """Points carried through a map, with its Jacobian there if asked for.
-
-    Attributes
-    ----------
-    points : (K, 3) ndarray of float
-        NaN where the map is not defined.
-    jacobian : (K, 3, 3) ndarray of float or None
-        ``jacobian[k, a, b]`` = d out_a / d in_b; NaN where unknown.
-    """
-
-    points: NDArray[np.float64]
-    jacobian: NDArray[np.float64] | None = None
-
-
-@dataclass(frozen=True)
-class Certificate:
-    """Tetrahedra where a map's Jacobian vanishes or has the wrong sign (``flipped``), of ``checked``."""
-
-    flipped: int
-    checked: int
-    kind: str = "tetrahedra"
-
-    @property
-    def ok(self) -> bool:
-        return self.flipped == 0
 
 
 @dataclass(eq=False)
@@ -106,7 +80,7 @@ class IdentityMap(VolumeThetaMap):
         return self.evaluate(points, jacobian=jacobian)
 
     def certify(self) -> Certificate:
-        return Certificate(0, 0)
+        return Certificate(0, 0, "tetrahedra")
 
     def describe(self) -> dict:
         return {"identity": True}
@@ -150,12 +124,12 @@ class TetMap(VolumeThetaMap):
         return tet_jacobians(self.mesh.vertices, self.values, self.mesh.tets)
 
     @cached_property
-    def _domain_buckets(self):
-        return _Buckets(self.mesh.vertices, self.mesh.tets)
+    def _domain_locator(self) -> TetLocator:
+        return TetLocator(self.mesh.vertices, self.mesh.tets, 0.0, self.domain_coefficients)
 
     @cached_property
-    def _image_buckets(self):
-        return _Buckets(self.values, self.mesh.tets)
+    def _image_locator(self) -> TetLocator:
+        return TetLocator(self.values, self.mesh.tets, SNAP, self.image_coefficients)
 
     def flipped(self) -> NDArray[np.bool_]:
         """Tetrahedra whose image is inverted, or flat though a free node could lift it.
@@ -184,7 +158,7 @@ class TetMap(VolumeThetaMap):
         return np.flatnonzero((self.values != self.harmonic).any(axis=1))
 
     def certify(self) -> Certificate:
-        return Certificate(int(self.flipped().sum()), self.mesh.n_tets)
+        return Certificate(int(self.flipped().sum()), self.mesh.n_tets, "tetrahedra")
 
     def describe(self) -> dict:
         return {
@@ -194,7 +168,7 @@ class TetMap(VolumeThetaMap):
 
     def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
         p = as_points(points)
-        out, where = self._domain_buckets.locate(p, self.domain_coefficients, self.mesh.tets, self.values, 0.0)
+        out, where = PiecewiseLinear(self.values, self.mesh.tets, self._domain_locator).evaluate(p)
         jac = None
         if jacobian:
             jac = np.full((len(p), 3, 3), np.nan)
@@ -204,7 +178,7 @@ class TetMap(VolumeThetaMap):
 
     def inverse(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
         p = as_points(points)
-        out, where = self._image_buckets.locate(p, self.image_coefficients, self.mesh.tets, self.mesh.vertices, SNAP)
+        out, where = PiecewiseLinear(self.mesh.vertices, self.mesh.tets, self._image_locator).evaluate(p)
         jac = None
         if jacobian:
             jac = np.full((len(p), 3, 3), np.nan)
@@ -222,18 +196,33 @@ class TetMap(VolumeThetaMap):
         )
         lost = np.flatnonzero(where < 0)
         if lost.size:
-            o, w = self._image_buckets.locate(
-                theta_points[lost], self.image_coefficients, self.mesh.tets, self.mesh.vertices, SNAP
-            )
+            o, w = PiecewiseLinear(self.mesh.vertices, self.mesh.tets, self._image_locator).evaluate(theta_points[lost])
             out[lost] = o
             where[lost] = w
         return out, where
 
 
-class _Buckets:
-    """A grid of cells over a mesh's bounding box, each listing the tetrahedra overlapping it."""
+class TetLocator:
+    """Point location in a tetrahedral mesh (a `warpcli.simplicial.Locator`): a grid of cells over
+    its bounding box, each listing the tetrahedra overlapping it, searched by a compiled kernel.
 
-    def __init__(self, v: NDArray[np.float64], tets: NDArray[np.int64]) -> None:
+    Parameters
+    ----------
+    vertices : (N, 3) ndarray of float
+    tets : (M, 4) ndarray of int
+    snap : float
+        A point outside every tetrahedron by at most this much (in
+        barycentric terms) is snapped onto the nearest one's boundary (see
+        `warpcli.volume._kernels.bucket_locate`).
+    coefficients : (M, 12) ndarray of float or None
+        `tet_coefficients` of the mesh, if already at hand.
+    """
+
+    def __init__(
+        self, vertices: NDArray[np.float64], tets: NDArray[np.int64], snap: float = 0.0,
+        coefficients: NDArray[np.float64] | None = None,
+    ) -> None:  # fmt: skip
+        v = vertices
         lo = v.min(axis=0)
         extent = np.maximum(v.max(axis=0) - lo, 1e-300)
         # About one tetrahedron per cell.
@@ -243,23 +232,23 @@ class _Buckets:
         self.cell = cell
         self.dims = np.maximum(np.ceil(extent / cell).astype(np.int64), 1)
         self.start, self.items = _kernels.build_buckets(v, tets, lo, cell, self.dims)
+        self.snap = float(snap)
+        self.coefficients = tet_coefficients(v, tets) if coefficients is None else coefficients
 
-    def locate(self, p, coef, tets, other, snap):
-        out = np.full((len(p), 3), np.nan)
+    def locate(self, points: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """The tetrahedron containing each point (-1 for none) and its barycentric coordinates (K, 4)."""
+        p = as_points(points)
         where = np.empty(len(p), dtype=np.int64)
+        bary = np.full((len(p), 4), np.nan)
         _kernels.bucket_locate(
-            np.ascontiguousarray(p), self.start, self.items, self.lo, self.cell, self.dims, tets, coef, other, snap,
-            out, where,
-        )  # fmt: skip
-        return out, where
+            p, self.start, self.items, self.lo, self.cell, self.dims, self.coefficients, self.snap, where, bary
+        )
+        return where, bary
 
 
 def as_points(points: ArrayLike) -> NDArray[np.float64]:
-    """Points as a contiguous (K, 3) float array, or `InputError`."""
-    p = np.ascontiguousarray(points, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise InputError(f"points must be a (K, 3) array, got shape {p.shape}")
-    return p
+    """Points as a contiguous (K, 3) float array (for the kernels), or `InputError`."""
+    return mapping.as_points(points, 3, contiguous=True)
 
 
 def safe_inverse(m: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -361,7 +350,7 @@ class VoxelGrid:
         return self.to_world(np.column_stack([i, j, k]).astype(np.float64))
 
 
-class VolumeMap:
+class VolumeMap(ComposedMap):
     """The map f between two polyhedra, as two maps onto one Theta (eq. (2) in 3D).
 
     ``forward`` takes source points to the target, ``inverse`` target points
@@ -375,12 +364,12 @@ class VolumeMap:
         The source and the target cage onto the same Theta.
     """
 
+    dim = 3
+
     def __init__(self, phi0: VolumeThetaMap, phi1: VolumeThetaMap) -> None:
-        if phi0.theta is not phi1.theta:
+        if not phi0.theta.same_as(phi1.theta):
             raise InputError("the two maps go onto different Thetas; f = phi1^-1 o phi0 needs one")
-        self.phi0 = phi0
-        self.phi1 = phi1
-        self.timings: dict[str, float] = {}
+        super().__init__(phi0, phi1)
 
     @property
     def src(self) -> Surface:
@@ -390,21 +379,12 @@ class VolumeMap:
     def dst(self) -> Surface:
         return self.phi1.surface
 
-    @property
-    def theta(self) -> Theta:
-        return self.phi0.theta
-
-    def certificates(self) -> tuple[Certificate, Certificate]:
-        return self.phi0.certify(), self.phi1.certify()
-
-    def check_bijective(self) -> None:
-        """Raise `FoldOverError` if either map flips a tetrahedron."""
-        c0, c1 = self.certificates()
-        if not (c0.ok and c1.ok):
-            raise FoldOverError(
-                f"the maps flip {c0.flipped} tetrahedra of {self.src.name} and {c1.flipped} of {self.dst.name}; "
-                "the warp would fold the volume over itself (--allow-folds writes it anyway)"
-            )
+    def fold_message(self, source: Certificate, target: Certificate) -> str:
+        """What `check_bijective` says when either map flips a tetrahedron."""
+        return (
+            f"the maps flip {source.flipped} tetrahedra of {self.src.name} and {target.flipped} of {self.dst.name}; "
+            "the warp would fold the volume over itself (--allow-folds writes it anyway)"
+        )
 
     def untangling_displacement(self) -> float | None:
         """How far untangling moved the warp: the largest displacement at a moved node, in world units.
@@ -430,26 +410,6 @@ class VolumeMap:
             if len(d):
                 worst = max(worst or 0.0, float(d.max()))
         return worst
-
-    def forward(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Source points to the target; NaN outside the source polyhedron."""
-        return self.phi1.inverse(self.phi0.evaluate(as_points(points)).points).points
-
-    def inverse(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Target points back to the source; NaN outside the target polyhedron."""
-        return self.phi0.inverse(self.phi1.evaluate(as_points(points)).points).points
-
-    def inverse_jacobian(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """f^-1 and its Jacobian ``J_phi0^-1 J_phi1`` at target points: (K, 3) and (K, 3, 3), NaN outside."""
-        a = self.phi1.evaluate(as_points(points), jacobian=True)
-        b = self.phi0.inverse(a.points, jacobian=True)
-        return b.points, b.jacobian @ a.jacobian
-
-    def forward_jacobian(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """f and its Jacobian ``J_phi1^-1 J_phi0`` at source points: (K, 3) and (K, 3, 3), NaN outside."""
-        a = self.phi0.evaluate(as_points(points), jacobian=True)
-        b = self.phi1.inverse(a.points, jacobian=True)
-        return b.points, b.jacobian @ a.jacobian
 
     def pull_back_slabs(self, grid: VoxelGrid, slab_voxels: int = SLAB_VOXELS):
         """f^-1 at the voxel centres of an output grid inside the target, slab by slab.

@@ -295,6 +295,7 @@ def warp_volume_file(
     result = warp_volume(volume, vmap, interpolation=interpolation, background=background)
     body = encode_volume(result.volume, output)
     extras = []
+    rgb = None
     if report is not None or picture is not None:
         from .report import build_report, report_picture
 
@@ -303,9 +304,13 @@ def warp_volume_file(
 
             extras.append((report, (json.dumps(build_report(result), indent=2) + "\n").encode()))
         if picture is not None:
-            extras.append((picture, report_picture(volume, result)))
+            rgb = report_picture(volume, result)
     with PendingOutputs() as pending:
         write_checked(pending.path(output), body, output)
         for path, data in extras:
             write_checked(pending.path(path), data, path)
+        if rgb is not None:
+            from ..raster.imageio import RasterImage, write_image
+
+            write_image(pending.path(picture), RasterImage(rgb))
     return result

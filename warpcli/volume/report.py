@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import struct
-import zlib
-
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import distortion as measures
 from .compose import VolumeMap, VoxelGrid, safe_inverse
 
 #: The distortion is measured at about this many output voxels (a regular subgrid).
@@ -33,14 +31,17 @@ def distortion(jacobian: NDArray[np.float64]) -> dict[str, NDArray[np.float64]]:
     >>> [round(float(m[k][0]), 12) for k in ("conformal", "isometric", "det")]
     [3.0, 2.0, 8.0]
     """
+    # The measures of `warpcli.distortion`, taken on J itself (rather than on
+    # J^-1, as the 2D report does) because that is how these numbers were first
+    # rounded; the two agree up to rounding.
     finite = np.isfinite(jacobian).all(axis=(1, 2))
-    s = np.full((len(jacobian), 3), np.nan)
-    s[finite] = np.linalg.svd(jacobian[finite], compute_uv=False)
+    s = tuple(np.full(len(jacobian), np.nan) for _ in range(3))
+    for k, sk in enumerate(measures.singular_values(jacobian[finite])):
+        s[k][finite] = sk
     det = np.full(len(jacobian), np.nan)
-    det[finite] = np.linalg.det(jacobian[finite])
-    with np.errstate(all="ignore"):
-        conformal = (s**2).sum(axis=1) / np.cbrt(np.abs(det)) ** 2
-        isometric = np.maximum(s[:, 0], 1.0 / s[:, 2])
+    det[finite] = measures.determinant(jacobian[finite])
+    conformal = measures.conformal(s, det)
+    isometric = measures.isometric(s)
     return {"conformal": conformal, "isometric": isometric, "det": det}
 
 
@@ -62,7 +63,7 @@ def build_report(result) -> dict:
     vmap: VolumeMap = result.map
     grid = result.volume.grid
     points = sample_voxels(grid, vmap)
-    pre, jac_inv = vmap.inverse_jacobian(points)
+    pre, jac_inv = vmap.inverse_mapped(points)
     ok = np.isfinite(pre[:, 0]) & np.isfinite(jac_inv).all(axis=(1, 2))
     summary: dict = {"samples": int(ok.sum())}
     if ok.any():
@@ -106,9 +107,17 @@ def _untangle_info(phi) -> dict | None:
     return dict(info) if info else None
 
 
-def report_picture(volume, result, step: int = GRID_STEP) -> bytes:
-    """A PNG: three orthogonal slices through the target's centre, input above and output below,
-    with a grid of input planes every ``step`` voxels drawn on the input and carried through the map."""
+def report_picture(volume, result, step: int = GRID_STEP) -> NDArray[np.uint8]:
+    """The report's picture: three orthogonal slices through the target's centre, input above and
+    output below, with a grid of input planes every ``step`` voxels drawn on the input and carried
+    through the map.
+
+    Returns
+    -------
+    (H, W, 3) ndarray of uint8
+        RGB, to write with `warpcli.raster.imageio.write_image` (a PNG
+        without a time stamp: the same bytes run after run).
+    """
     vmap: VolumeMap = result.map
     grid = volume.grid
     nx, ny, nz = grid.shape
@@ -131,7 +140,7 @@ def report_picture(volume, result, step: int = GRID_STEP) -> bytes:
         on_out = _on_grid(grid.to_index(pre), step)
         panels_in.append(_overlay(src_img, on_in.reshape(b.shape)))
         panels_out.append(_overlay(out_img, on_out.reshape(b.shape)))
-    return _png(_tile([panels_in, panels_out]))
+    return _tile([panels_in, panels_out])
 
 
 def _grey(values, lo, hi) -> NDArray[np.uint8]:
@@ -162,17 +171,3 @@ def _tile(rows: list[list[NDArray[np.uint8]]], gap: int = 4) -> NDArray[np.uint8
             out[y : y + p.shape[0], x : x + p.shape[1]] = p[::-1]  # rows upwards, as a viewer shows them
             x += w[c] + gap
     return out
-
-
-def _png(rgb: NDArray[np.uint8]) -> bytes:
-    """A PNG of an RGB image (deterministic: no time stamp)."""
-    h, w, _ = rgb.shape
-    raw = b"".join(b"\x00" + rgb[y].tobytes() for y in range(h))
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-
-    return (
-        b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-        + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
-    )  # fmt: skip

@@ -59,6 +59,10 @@ class Theta:
         v.setflags(write=False)
         object.__setattr__(self, "vertices", v)
 
+    def same_as(self, other: Theta) -> bool:
+        """Whether two Thetas are the same polyhedron, vertex for vertex (by value, as in 2D)."""
+        return self.vertices.shape == other.vertices.shape and bool(np.array_equal(self.vertices, other.vertices))
+
 
 def theta_for(src: Surface, dst: Surface, strategy: str | os.PathLike[str] = "auto") -> Theta:
     """Choose Theta for two corresponding cages.

@@ -26,8 +26,9 @@ from ...options import MapOptions
 from ...polygon import Polygon
 from ..base import Certificate, GridSample, Mapped, ThetaMap, as_points, inv2
 from ..theta import Theta
+from ...simplicial import PiecewiseLinear
 from . import sparse, topology
-from .locate import TriangleLocator, affine_coefficients, barycentric_combine, triangle_neighbours
+from .locate import TriangleLocator, affine_coefficients, triangle_neighbours
 from .mesh import TriMesh, auto_max_area, mesh_polygon
 from .solve import DirichletSolver, flipped_triangles, solve_dirichlet
 
@@ -187,8 +188,7 @@ class FEMMap(ThetaMap):
         return new
 
     def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
-        tri, bary = self._domain_locator.locate(as_points(points))
-        out = barycentric_combine(self.values, self.mesh.triangles, tri, bary)
+        out, tri = PiecewiseLinear(self.values, self.mesh.triangles, self._domain_locator).evaluate(as_points(points))
         return Mapped(out, _gather(self._jacobians, tri) if jacobian else None)
 
     def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
@@ -231,8 +231,7 @@ class FEMMap(ThetaMap):
         rounding error; the boundary map is known exactly, so it is inverted
         there instead (triangle -1: no Jacobian).
         """
-        tri, bary = self._image_locator.locate(q)
-        out = barycentric_combine(self.mesh.vertices, self.mesh.triangles, tri, bary)
+        out, tri = PiecewiseLinear(self.mesh.vertices, self.mesh.triangles, self._image_locator).evaluate(q)
         lost = np.flatnonzero((tri < 0) & np.isfinite(q).all(axis=1))
         if lost.size:
             edge, s, _ = nearest_edge(q[lost], self.theta.points)

@@ -7,6 +7,8 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ...simplicial import barycentric_combine
+
 #: A point counts as inside a triangle when all its barycentric coordinates
 #: are at least -BARY_TOL: points on shared edges are found, and points on the
 #: polygon's boundary are inside.
@@ -18,7 +20,7 @@ _BLOCK = 1 << 20
 
 
 class TriangleLocator:
-    """Find, for many points at once, the triangle containing each point.
+    """Find, for many points at once, the triangle containing each point (a `warpcli.simplicial.Locator`).
 
     Triangles are binned by bounding box into a uniform grid of about one cell
     per triangle (stored as CSR arrays). A query looks up its cell and tests
@@ -173,24 +175,6 @@ def triangle_neighbours(triangles: ArrayLike) -> NDArray[np.int64]:
     out[h2] = h1 % m
     # Half-edge j = k * m + i  ->  (i, k).
     return out.reshape(3, m).T.copy()
-
-
-def barycentric_combine(
-    values: NDArray[np.float64],
-    triangles: NDArray[np.integer],
-    tri: NDArray[np.int64],
-    bary: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """``sum_k bary[:, k] * values[triangles[tri, k]]``, NaN where ``tri`` is -1."""
-    vals = values.reshape(len(values), -1)
-    out = np.full((len(tri), vals.shape[1]), np.nan)
-    found = tri >= 0
-    t = triangles[tri[found]]
-    b = bary[found]
-    out[found] = (
-        b[:, 0:1] * vals[t[:, 0]] + b[:, 1:2] * vals[t[:, 1]] + b[:, 2:3] * vals[t[:, 2]]
-    )
-    return out
 
 
 def affine_coefficients(v: NDArray[np.float64], t: NDArray[np.int64]) -> NDArray[np.float64]:
