@@ -1,12 +1,13 @@
-"""Regenerate the golden images in this folder from their committed inputs.
+"""Rewrite the stored outputs in this folder (what this version of warpcli writes) from their committed inputs.
 
-    python tests/golden/regenerate.py
+    python tests/golden/rewrite_stored.py
 
-Run it only when a change of output is intended (say why in the commit), and
-look at the new images before committing them. The inputs are drawn here
-(grid.png, 128x128, the sample grid pattern at a quarter of its size) and the
-polygons are written here; tests/test_golden.py warps the same inputs with the
-CLI and compares against these images.
+These images are warpcli's own output, so they record change, not correctness
+(tests/test_output_stability.py compares against them; tests/test_golden.py
+checks pixels against independent computations). Run it only when a change of
+output is intended (say why in the commit), and look at the new images before
+committing them. The inputs are drawn here (grid.png, 128x128, the sample grid
+pattern at a quarter of its size) and the polygons are written here.
 """
 
 from __future__ import annotations
