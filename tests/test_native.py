@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import importlib
+import os
 import threading
 
 import numpy as np
 import pytest
 
+from conftest import REPO
 from helpers import star
 from warpcli import _native
 from warpcli._native import Kernels, parallel
@@ -175,3 +177,22 @@ def test_warps_do_not_depend_on_the_number_of_threads(monkeypatch):
         r = warp_image(img, src, dst, alpha_channel=3)
         results.append((r.pixels.tobytes(), r.inverse_map.tobytes(), r.jacobian.tobytes()))
     assert results[0] == results[1] == results[2]
+
+
+def test_numba_cache_writes_hold_a_lock_beside_the_index(tmp_path):
+    """Every kernel module takes njit from warpcli._jit, which serializes numba's cache-index updates:
+    two processes compiling at once must not interleave the read-modify-write of one index."""
+    import ast
+
+    import warpcli._jit  # noqa: F401  (installs the lock)
+    from numba.core import caching
+
+    assert getattr(caching.IndexDataCacheFile.save, "serialized", False)
+    root = os.path.join(REPO, "warpcli")
+    for dirpath, _, files in os.walk(root):
+        for f in files:
+            if f.endswith(".py") and f != "_jit.py":
+                tree = ast.parse(open(os.path.join(dirpath, f)).read())
+                for node in ast.walk(tree):
+                    if isinstance(node, ast.ImportFrom) and node.module == "numba":
+                        assert "njit" not in {a.name for a in node.names}, f"{f} takes njit from numba, not warpcli._jit"

@@ -5,7 +5,7 @@ Called through `warpcli._native.Kernels` like every kernel of warpcli.
 
 from __future__ import annotations
 
-from numba import njit
+from .._jit import njit
 
 
 @njit(cache=True, nogil=True)

@@ -51,7 +51,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from .._jit import njit
 from numpy.typing import ArrayLike, NDArray
 
 from .bem_eval import NEAR, ElementSources, crecip, evaluate, gauss01, gauss_sources, local_pair, near_integrals

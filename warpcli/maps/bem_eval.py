@@ -25,7 +25,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from .._jit import njit
 from numpy.typing import NDArray
 
 from .closed_form import TWO_PI, fast_log

@@ -14,10 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-from numba import njit, types
+from numba import types
 from numba.extending import intrinsic
 from numpy.typing import ArrayLike, NDArray
 
+from .._jit import njit
 from ..boundary import to_theta_parameter
 
 __all__ = [

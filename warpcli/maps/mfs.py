@@ -46,7 +46,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from .._jit import njit
 from numpy.typing import ArrayLike, NDArray
 
 from ..grid import inside_polygon

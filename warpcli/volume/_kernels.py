@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from .._jit import njit
 
 #: Barycentric tolerance for "inside a tetrahedron" (relative to 1).
 TOL = 1e-9

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from ..._jit import njit
 
 from .locate import BARY_TOL
 
