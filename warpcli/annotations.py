@@ -168,8 +168,8 @@ def warp_points(
     >>> moved = warp_points([[0, 0], [50, 50], [500, 5]], square, kite)
     >>> moved.inside
     array([ True,  True, False])
-    >>> np.round(moved.points[0], 9)
-    array([0., 0.])
+    >>> bool(np.abs(moved.points[0]).max() < 1e-9)  # a vertex goes onto its vertex
+    True
     """
     fm = _the_map(src, dst, fmap, options, changes)
     pts = _as_points(points, "points", 2)
@@ -342,8 +342,11 @@ def warp_labels(
         if not isinstance(where, SamplingPlan):
             size = (w, h)
     pts = _source_points(where, size)
-    bg = np.asarray(background, dtype=lab.dtype)
-    if bg.item() != background:
+    try:
+        bg = np.asarray(background, dtype=lab.dtype)
+    except (OverflowError, TypeError, ValueError):
+        bg = None
+    if bg is None or bg.item() != background:
         raise InputError(f"background {background!r} does not fit labels of type {lab.dtype}")
     x = pts[..., 0]
     y = pts[..., 1]
