@@ -36,6 +36,12 @@ napoleon_google_docstring = False
 napoleon_numpy_docstring = True
 napoleon_use_rtype = False
 napoleon_preprocess_types = False
+# Attributes sections as fields, not attribute entries: a NamedTuple's fields are
+# documented by autodoc already, and would be described twice.
+napoleon_use_ivar = True
+# Parameter types such as "(n, 2) array_like" are prose: a word in them that names
+# two attributes (Polygon.n, Theta.n) is not a reference to either.
+suppress_warnings = ["ref.python"]
 default_role = "py:obj"
 autosummary_generate = True
 autodoc_default_options = {"members": True, "show-inheritance": False}
@@ -55,3 +61,15 @@ html_theme_options = {"description": "Smooth bijective image warping between pol
 # directory, and every picture it writes is shown under its code.
 warpgallery_examples = os.path.join(HERE, "examples")
 warpgallery_out = os.path.join(HERE, "gallery")
+
+
+def _literal_examples(app, ctx, lines: list[str]) -> None:
+    """click's ``\\b`` example blocks become line blocks, where ``frames/*.png`` would start emphasis: escape it."""
+    for k, line in enumerate(lines):
+        if line.lstrip().startswith("| "):
+            lines[k] = line.replace("*", "\\*")
+
+
+def setup(app) -> None:
+    app.connect("sphinx-click-process-description", _literal_examples)
+    app.connect("sphinx-click-process-epilog", _literal_examples)
