@@ -255,3 +255,16 @@ def test_cli_labels_of_another_size_leave_nothing_behind(tmp_path):
     code, err = run_cli([f"{t}/in.png", "--src", f"{t}/src.json", "--dst", f"{t}/dst.json", f"{t}/out.png",
                  "--labels", f"{t}/seg.png", f"{t}/seg_out.png", "--outside", "input"])  # fmt: skip
     assert code == 2 and "--outside input" in err and sorted(os.listdir(t)) == before
+
+
+def test_cli_labels_belong_to_a_single_whole_image_warp(tmp_path):
+    _files(tmp_path)
+    t = str(tmp_path)
+    before = sorted(os.listdir(t))
+    common = ["--src", f"{t}/src.json", "--dst", f"{t}/dst.json", "--labels", f"{t}/seg.png", f"{t}/seg_out.png"]
+    code, err = run_cli([f"{t}/in.png", f"{t}/out.tif", "--tiled", *common])
+    assert code == 2 and "--labels needs the whole image" in err
+    os.mkdir(f"{t}/outdir")
+    code, err = run_cli([f"{t}/in.png", "--out-dir", f"{t}/outdir", *common])
+    assert code == 2 and "--labels applies to a single warp" in err
+    assert sorted(os.listdir(t)) == sorted(before + ["outdir"]) and not os.listdir(f"{t}/outdir")
