@@ -312,7 +312,9 @@ def warp_labels(
     size : (width, height) or None
         The output size, for a map; by default (a map) the input's.
     background : scalar
-        The label of pixels without a pre-image (0: background).
+        The label of pixels without a pre-image (0: background), also where a
+        warp with ``outside="input"`` pasted the warp over its input (the
+        labels are not pasted: ``warp --labels`` refuses that option).
 
     Returns
     -------
