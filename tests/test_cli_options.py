@@ -22,7 +22,7 @@ WARP_OPTIONS = {
     "--out-name", "--interp", "--size", "--dtype", "--background", "--method", "--theta", "--boundary",
     "--src-boundary", "--dst-boundary", "--save-theta", "--energy", "--theta-start", "--nodes", "--conditions",
     "--max-area", "--antialias", "--outside", "--vacated", "--weights", "--report", "--grid", "--heatmap",
-    "--heatmap-measure", "--save-map", "--save-forward-map", "--stmap-t", "--tiled", "--verbose", "--quiet",
+    "--heatmap-measure", "--save-map", "--save-forward-map", "--stmap-t", "--tiled", "--labels", "--verbose", "--quiet",
     "--version",
 }  # fmt: skip
 

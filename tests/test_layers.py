@@ -57,8 +57,8 @@ LAYERS = [
     # Measuring and drawing a map: through raster, and maps only by duck typing (see NEVER).
     ("report", {"report": ("report",)}),
     # Where each output pixel comes from (the sampling plan, the paste of a retouch), what a
-    # sequence's frames and keyframes are, and a map as scikit-image's transforms are called.
-    ("sampling", {"sampling": ("plan", "composite", "sequence", "keyframes", "transform")}),
+    # sequence's frames and keyframes are, a map as scikit-image's transforms are called, annotations through it.
+    ("sampling", {"sampling": ("plan", "composite", "sequence", "keyframes", "transform", "annotations")}),
     # What runs a warp from files: 2D runs beside 3D, neither knowing the other (see NEVER).
     ("runs", {
         "runs": ("tiled", "pipeline", "batch", "distributed", "points"),

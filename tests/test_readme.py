@@ -1,4 +1,4 @@
-"""Every warp command in the README's shell examples runs as written (with the sample-making scripts they use)."""
+"""Every warp command and Python example of the README and of the docs pages runs as written."""
 
 from __future__ import annotations
 
@@ -8,10 +8,20 @@ import subprocess
 import sys
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+DOCS = os.path.join(ROOT, "docs")
 
 
-def readme_commands() -> list[str]:
-    text = open(os.path.join(ROOT, "README.md")).read()
+def pages() -> list[str]:
+    """The README, then every Markdown page of the docs (sorted; generated pages excluded)."""
+    out = [os.path.join(ROOT, "README.md")]
+    for dirpath, dirnames, files in sorted(os.walk(DOCS)):
+        dirnames[:] = sorted(d for d in dirnames if d not in ("_build", "gallery", "api", "_ext", "examples"))
+        out += [os.path.join(dirpath, f) for f in sorted(files) if f.endswith(".md")]
+    return out
+
+
+def commands(path: str) -> list[str]:
+    text = open(path).read()
     lines = []
     for block in re.findall(r"```sh\n(.*?)```", text, flags=re.S):
         # pip lines are the reader's set-up (the tests run with the test extra installed).
@@ -19,29 +29,42 @@ def readme_commands() -> list[str]:
     return lines
 
 
-COMMANDS = readme_commands()
+def python_blocks(path: str) -> list[str]:
+    return re.findall(r"```python\n(.*?)```", open(path).read(), flags=re.S)
+
+
+COMMANDS = [(os.path.relpath(p, ROOT), c) for p in pages() for c in commands(p)]
 
 
 def test_the_readme_has_examples():
-    assert len([c for c in COMMANDS if c.startswith("warp ")]) >= 6
-    # The retouch and volume sections' examples are among those run.
-    assert any("--outside input" in c for c in COMMANDS)
-    assert any(c.startswith("warp volume ") for c in COMMANDS)
+    readme = commands(os.path.join(ROOT, "README.md"))
+    assert len([c for c in readme if c.startswith("warp ")]) >= 3
+    assert len([c for _, c in COMMANDS if c.startswith("warp ")]) >= 12
+    # The retouch and volume examples are among those run.
+    assert any("--outside input" in c for _, c in COMMANDS)
+    assert any(c.startswith("warp volume ") for _, c in COMMANDS)
 
 
-def test_readme_commands_run_in_order(tmp_path):
+def test_the_readme_stays_short_and_links_into_the_docs():
+    text = open(os.path.join(ROOT, "README.md")).read()
+    assert len(text.splitlines()) <= 150
+    for page in re.findall(r"\]\((docs/[^)#]+)", text):
+        assert os.path.isfile(os.path.join(ROOT, page)), page
+    assert "<!-- quickstart-command -->" in text and "<!-- test-command -->" in text
+
+
+def test_readme_and_docs_commands_run_in_order(tmp_path):
     os.symlink(os.path.join(ROOT, "sample_images"), tmp_path / "sample_images")
     env = dict(os.environ, PATH=os.path.dirname(sys.executable) + os.pathsep + os.environ.get("PATH", ""))
-    for command in COMMANDS:  # later ones may use earlier outputs (apply-map on a saved map)
+    for page, command in COMMANDS:  # later ones may use earlier outputs (apply-map on a saved map)
         done = subprocess.run(command, shell=True, cwd=tmp_path, env=env, capture_output=True, text=True)
-        assert done.returncode == 0, f"{command}\n{done.stderr}"
+        assert done.returncode == 0, f"{page}: {command}\n{done.stderr}"
 
 
-def test_readme_python_examples_run(tmp_path, monkeypatch):
-    text = open(os.path.join(ROOT, "README.md")).read()
-    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
-    assert blocks
+def test_readme_and_docs_python_examples_run(tmp_path, monkeypatch):
+    found = [(p, b) for p in pages() for b in python_blocks(p)]
+    assert len(found) >= 3
     os.symlink(os.path.join(ROOT, "sample_images"), tmp_path / "sample_images")
     monkeypatch.chdir(tmp_path)
-    for block in blocks:
-        exec(compile(block, "README.md", "exec"), {})
+    for path, block in found:
+        exec(compile(block, os.path.relpath(path, ROOT), "exec"), {})

@@ -33,6 +33,8 @@ _EXPORTS = {
     "WarpError": "errors",
     "WarpOptions": "options",
     "WarpResult": "pipeline",
+    "WarpedBoxes": "annotations",
+    "WarpedPoints": "annotations",
     "apply_map_file": "pipeline",
     "build_map": "maps.compose",
     "build_report": "report",
@@ -43,6 +45,9 @@ _EXPORTS = {
     "save_stmap": "raster.stmap",
     "resample": "raster.resample",
     "warp_batch": "batch",
+    "warp_boxes": "annotations",
+    "warp_labels": "annotations",
+    "warp_points": "annotations",
     "warp_file": "pipeline",
     "warp_image": "pipeline",
     "warp_sequence": "batch",
@@ -54,6 +59,7 @@ _EXPORTS = {
 __all__ = sorted([*_EXPORTS, "__version__"])
 
 if TYPE_CHECKING:
+    from .annotations import WarpedBoxes, WarpedPoints, warp_boxes, warp_labels, warp_points
     from .errors import (
         FoldOverError,
         ImageInputError,

@@ -14,7 +14,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError, WarpError
+from .annotations import warp_labels
+from .errors import ImageInputError, InputError, WarpError
 from .maps.compose import BijectiveMap, PullBack
 from .budget import check_fits
 from .options import WarpOptions, resolve_options
@@ -351,6 +352,7 @@ def warp_file(
     dst_label: str | None = None,
     progress: Callable[[str], None] | None = None,
     tiled: bool | None = None,
+    labels: Sequence[tuple[str | os.PathLike[str], str | os.PathLike[str]]] = (),
     **changes: Any,
 ) -> WarpResult | TiledResult:
     """Read an image and two polygon files, warp, and write the result atomically.
@@ -390,6 +392,12 @@ def warp_file(
         True always, None (the default) when a whole warp would not fit in
         memory. The output is the same; the result then has no pixels (they
         are in the file), and the report, figures and STMaps are refused.
+    labels : sequence of (path-like, path-like)
+        Masks and label images of the input, each ``(input, output)``: each
+        is warped through the same map to the same output size with nearest
+        (`warpcli.annotations.warp_labels`: labels never blended, 0 where
+        the output has no pre-image) and written in its own type and format,
+        with the main output (all or none). Each must have the input's size.
 
     Returns
     -------
@@ -411,7 +419,12 @@ def warp_file(
     clock = time.perf_counter
     stage = progress or (lambda name: None)
     inputs = (input_path, src_path, dst_path)
+    labels = [(label_in, label_out) for label_in, label_out in labels]
+    if labels and opts.outside == "input":
+        raise InputError(f"{os.fspath(labels[0][0])}: labels are warped onto the background, not with --outside input")
+    inputs = (*inputs, *(label_in for label_in, _ in labels))
     extra = [p for p in (grid_path, heatmap_path, save_map, save_forward_map) if p is not None]
+    extra += [label_out for _, label_out in labels]
     for path in (output_path, *extra):
         check_image_output(path, inputs=inputs)
     if report_path is not None and os.fspath(report_path) != "-":
@@ -436,7 +449,7 @@ def warp_file(
         return _warp_file_tiled(
             input_path, output_path, src, dst, opts, progress,
             {"--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path, "--save-map": save_map,
-             "--save-forward-map": save_forward_map},
+             "--save-forward-map": save_forward_map, "--labels": labels or None},
             save_theta, header,
         )  # fmt: skip
     # The map needs the image's size, not its pixels: it is built on other
@@ -445,6 +458,7 @@ def warp_file(
     t0 = clock()
     stage("reading")
     image = read_image(input_path)
+    label_images = [_read_labels(label_in, image) for label_in, _ in labels]
     t_read = clock() - t0
     warn_if_outside(src, (image.width, image.height), os.fspath(input_path), "all background")
     out_size = opts.size if opts.size is not None else (image.width, image.height)
@@ -463,6 +477,8 @@ def warp_file(
         t0 = clock()
         stage("writing")
         write_like(pending.path(output_path), image, result.pixels, opts.dtype)
+        for (_, label_out), label_image in zip(labels, label_images):
+            write_like(pending.path(label_out), label_image, warp_labels(label_image.pixels, result))
         result.timings["read"] = t_read
         result.timings["write"] = clock() - t0
         if grid_path is not None or heatmap_path is not None:
@@ -502,6 +518,17 @@ def warp_file(
                 _write_json(pending.path(report_path), doc)
             result = dataclasses.replace(result, report=doc)
     return result
+
+
+def _read_labels(path: str | os.PathLike[str], image: RasterImage) -> RasterImage:
+    """A mask or label image of ``image``: read, and checked to have its size."""
+    labels = read_image(path)
+    if (labels.width, labels.height) != (image.width, image.height):
+        raise ImageInputError(
+            f"{os.fspath(path)}: labels are {labels.width}x{labels.height} but the image they annotate is "
+            f"{image.width}x{image.height}"
+        )
+    return labels
 
 
 def read_header_or_none(input_path: str | os.PathLike[str]) -> ImageHeader | None:

@@ -40,6 +40,8 @@ class SingleOutputs(NamedTuple):
         Which way the STMaps' t runs.
     tiled : bool
         Warp in strips.
+    labels : tuple of (str, str)
+        Masks and label images to carry through the same map, each (input, output).
     """
 
     save_theta: str | None
@@ -51,6 +53,7 @@ class SingleOutputs(NamedTuple):
     save_forward_map: str | None
     stmap_t: str
     tiled: bool
+    labels: tuple[tuple[str, str], ...] = ()
 
 
 single_outputs = collected(
@@ -81,6 +84,15 @@ single_outputs = collected(
         is_flag=True,
         help="Warp in strips of 256 rows, never holding the whole image: the same output in bounded memory "
         "(automatic when the image does not fit in memory).",
+    ),
+    click.option(
+        "--labels",
+        nargs=2,
+        multiple=True,
+        type=click.Path(dir_okay=False),
+        metavar="IN OUT",
+        help="A mask or label image of INPUT, warped through the same map to OUT (nearest: labels never blended, "
+        "0 outside the target), written with OUTPUT; repeat for more.",
     ),
 )  # fmt: skip
 
@@ -122,6 +134,7 @@ def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, r
     Examples:
       warp face.png --src face.json --dst smile.json warped.png
       warp face.png --src face.json --dst smile.json warped.png --report - --grid grid.png
+      warp face.png --src face.json --dst smile.json warped.png --labels seg.png seg_warped.png
       warp frames/*.png --src a.json --dst b.json --out-dir warped/ -q
     """
     if inverse:  # §6: moving the vertices back restores the image (to the map's accuracy)
@@ -131,6 +144,7 @@ def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, r
         "--report": outputs.report_path, "--grid": outputs.grid_path, "--heatmap": outputs.heatmap_path,
         "--save-map": outputs.save_map, "--save-forward-map": outputs.save_forward_map, "--size": options.size,
         "--save-theta": outputs.save_theta, "--tiled": True if outputs.tiled else None,
+        "--labels": outputs.labels or None,
     }  # fmt: skip
     used = [name for name, value in single_only.items() if value is not None]
     from ..sequence import is_pattern
@@ -183,6 +197,7 @@ def _single(input_path, output_path, polygons, options, outputs) -> None:
             heatmap_measure=outputs.heatmap_measure,
             progress=progress.stage,
             tiled=True if outputs.tiled else None,
+            labels=outputs.labels,
         )
     if outputs.report_path == "-":
         click.echo(json.dumps(result.report, indent=2))
