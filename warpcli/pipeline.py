@@ -410,7 +410,7 @@ def warp_file(
         raise InputError(f"unknown heatmap measure {heatmap_measure!r}; choose one of {', '.join(HEATMAP_MEASURES)}")
     clock = time.perf_counter
     stage = progress or (lambda name: None)
-    inputs = (input_path, src_path, dst_path)
+    inputs = tuple(p for p in (input_path, src_path, dst_path, opts.map.theta_file) if p is not None)
     extra = [p for p in (grid_path, heatmap_path, save_map, save_forward_map) if p is not None]
     for path in (output_path, *extra):
         check_image_output(path, inputs=inputs)

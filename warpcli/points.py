@@ -27,7 +27,7 @@ from .errors import InputError
 from .maps.compose import BijectiveMap
 from .options import MapOptions
 from .files import read_small_file
-from .outputs import PendingOutputs, write_checked
+from .outputs import PendingOutputs, check_output_path, write_checked
 from .polygon import check_pair, read_polygon
 
 log = logging.getLogger("warpcli")
@@ -104,8 +104,8 @@ def map_points_file(
         raise InputError(f"{name}: points must be a .json, .csv or .obj file")
     if os.path.splitext(os.fspath(output_path))[1].lower() != kind:
         raise InputError(f"{os.fspath(output_path)}: the output must have the input's format ({kind})")
-    if os.path.exists(output_path) and os.path.samefile(output_path, name):
-        raise InputError(f"{os.fspath(output_path)}: output would overwrite the input {name}")
+    theta_file = (options or MapOptions()).theta_file
+    check_output_path(output_path, inputs=tuple(p for p in (name, src_path, dst_path, theta_file) if p is not None))
     if kind == ".obj" and texture_size is None:
         raise InputError(f"{name}: an OBJ file's UVs need the texture size (--texture-size WxH)")
     raw = _read(name)

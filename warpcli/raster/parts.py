@@ -14,6 +14,7 @@ channel names, alpha and its convention, and metadata.
 
 from __future__ import annotations
 
+import errno
 import os
 
 import numpy as np
@@ -21,8 +22,8 @@ from numpy.typing import NDArray
 
 from ..capture import c_stderr, one_line
 from ..errors import ImageInputError, ImageIOError
-from ..outputs import write_failure_message
-from .imageio import OIIO_TYPES, ImageHeader, output_spec, verify_written
+from ..outputs import file_size_limit, write_failure_message
+from .imageio import OIIO_TYPES, ImageHeader, output_spec, size_limit_lifted, verify_written
 from .pixels import premultiplied
 
 #: Rows of a strip, and the side of a tile in tiled outputs.
@@ -83,11 +84,30 @@ class PartReader:
             self.close()
 
 
+#: Formats whose files cannot be written strip by strip, by name for messages: libjpeg
+#: ends the process when a write fails and the room for the whole file cannot be
+#: checked first; libwebp's writer never returns from a failed write (a full
+#: disk); OpenImageIO's JPEG 2000 writer leaves an empty file when given strips.
+NOT_IN_PARTS = {"jpeg": "JPEG", "webp": "WebP", "jpeg2000": "JPEG 2000"}
+
+
 def check_writable_in_parts(fmt: str, shown_name: str) -> None:
-    """Refuse a format that cannot be written strip by strip (JPEG: libjpeg ends the
-    process when a write fails, and the room for the whole file cannot be checked first)."""
-    if fmt == "jpeg":
-        raise ImageInputError(f"{shown_name}: JPEG cannot be written in parts; write TIFF, OpenEXR or PNG")
+    """Refuse a format that cannot be written strip by strip (`NOT_IN_PARTS`).
+
+    Raises
+    ------
+    ImageInputError
+        ``"OUT: JPEG cannot be written in parts; write TIFF, OpenEXR or PNG"``.
+    """
+    if fmt in NOT_IN_PARTS:
+        raise ImageInputError(f"{shown_name}: {NOT_IN_PARTS[fmt]} cannot be written in parts; write TIFF, OpenEXR or PNG")
+
+
+#: Formats written without compression, whose files hold at least a byte per
+#: sample (when no "compression" attribute asks otherwise): a file smaller than
+#: that was cut short, although their writers report no error (a full disk, a
+#: file size limit: BMP, SGI and FITS writers ignore failed writes).
+UNCOMPRESSED = ("bmp", "cineon", "dpx", "fits", "pnm", "sgi", "targa")
 
 
 def output_format(path: str) -> str:
@@ -174,7 +194,20 @@ class StripWriter:
         problem = one_line(self._out.geterror(), said.text, default="")
         if not ok:
             self._fail(problem or "unknown error")
-        verify_written(self._oiio, self.filename, self.format, self._spec, None, self.shown_name, problem)
+        spec = self._spec
+        if self.format in UNCOMPRESSED and spec.get_string_attribute("compression", "none").lower() in ("", "none"):
+            least = spec.width * spec.height * spec.nchannels
+            try:
+                actual = os.stat(self.filename).st_size
+            except OSError as err:
+                raise ImageIOError(f"{self.shown_name}: cannot write: {err.strerror or err}") from err
+            if actual < least:
+                limit = file_size_limit()
+                why = f"{os.strerror(errno.EFBIG)}: " if limit is not None and least > limit else ""
+                self._fail(f"{why}the {self.format.upper()} file is cut short at {actual} bytes (at least {least} expected)")
+        # The read-back opens the header only; OpenImageIO's size limit must not refuse it.
+        with size_limit_lifted():
+            verify_written(self._oiio, self.filename, self.format, spec, None, self.shown_name, problem)
 
     def abandon(self) -> None:
         """Give up the file (its temporary path is removed by `warpcli.outputs.atomic_path`)."""
