@@ -37,7 +37,8 @@ OUTSIDE = ("keep", "error")
 #: Largest points file read, in bytes.
 MAX_BYTES = 256 << 20
 
-_VT = re.compile(rb"^(\s*vt\s+)(\S+)(\s+)(\S+)(.*)$", re.S)
+# A file's first line may start with a UTF-8 byte order mark (kept, byte for byte).
+_VT = re.compile(rb"^((?:\xef\xbb\xbf)?\s*vt\s+)(\S+)(\s+)(\S+)(.*)$", re.S)
 
 
 @dataclass(frozen=True)
@@ -152,7 +153,7 @@ def _as_xy(values, name: str) -> NDArray[np.float64]:
 
 def _json_points(raw: bytes, name: str):
     try:
-        doc = json.loads(raw.decode("utf-8"))
+        doc = json.loads(raw.decode("utf-8-sig"))
     except (UnicodeDecodeError, ValueError, RecursionError) as err:
         raise InputError(f"{name}: invalid JSON: {err}") from None
     wrapped = isinstance(doc, dict)
@@ -166,7 +167,7 @@ def _json_points(raw: bytes, name: str):
 
 
 def _csv_points(raw: bytes, name: str):
-    lines = raw.decode("utf-8", errors="replace").splitlines()
+    lines = raw.decode("utf-8-sig", errors="replace").splitlines()  # a BOM is not part of the first line
     header = []
     if lines and not _numeric(lines[0]):
         header = [lines[0]]
