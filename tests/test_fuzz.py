@@ -168,3 +168,136 @@ def test_hostile_polygon_pairs(tmp_path_factory, pair):
         assert sorted(os.listdir(d)) == ["dst.json", "in.png", "src.json"]
     assert time.monotonic() - t0 < TIME_LIMIT
     assert memory.growth < MEMORY_LIMIT, (memory.growth >> 20, pair)
+
+
+# ---------------------------------------------------------------------------
+# Every subcommand: an output is never an input of the run, nor private.
+
+
+def _run(args):
+    err = io.StringIO()
+    with redirect_stderr(err), redirect_stdout(io.StringIO()):
+        code = main([str(a) for a in args])
+    return code, err.getvalue()
+
+
+def _square_run(d, size=16):
+    img = write_png(d / "in.png", np.full((size, size, 3), 90, dtype=np.uint8))
+    frame = write_polygon(d / "frame.json", [[0, 0], [size, 0], [size, size], [0, size]])
+    return img, frame
+
+
+def _snapshot(d):
+    return {p.name: p.read_bytes() for p in d.iterdir() if p.is_file()}
+
+
+@st.composite
+def colliding_sequences(draw):
+    """An input pattern, an output pattern and frames where some output frame is another input frame.
+
+    ``f.@.png`` -> ``f.D@.png``: output frame k is input frame int("D" + str(k)) when that is a frame too.
+    """
+    digit = draw(st.integers(1, 9))
+    k = draw(st.integers(0, 9))
+    frames = sorted({k, int(f"{digit}{k}")} | set(draw(st.lists(st.integers(0, 99), max_size=3))))
+    return "f.@.png", f"f.{digit}@.png", frames
+
+
+@given(colliding_sequences())
+@settings(max_examples=8, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+def test_a_sequence_output_frame_that_is_another_input_frame_is_refused(tmp_path_factory, case):
+    inp, out, frames = case
+    d = tmp_path_factory.mktemp("seq")
+    img, frame = _square_run(d)
+    for f in frames:
+        (d / inp.replace("@", str(f))).write_bytes(open(img, "rb").read())
+    before = _snapshot(d)
+    code, err = _run([d / inp, d / out, "--frames", ",".join(map(str, frames)), "--src", frame, "--dst", frame])
+    assert code == 2 and err.count("\n") == 1 and "output would overwrite the input" in err, err
+    assert _snapshot(d) == before
+
+
+def test_a_batch_output_that_is_another_input_is_refused(tmp_path):
+    img, frame = _square_run(tmp_path)
+    other = tmp_path / "in_w.png"
+    other.write_bytes(open(img, "rb").read())
+    before = _snapshot(tmp_path)
+    # in.png -> in_w.png, which is the batch's second input.
+    code, err = _run([img, other, "--out-dir", tmp_path, "--out-name", "{stem}_w{ext}", "--src", frame, "--dst", frame])
+    assert code == 2 and "output would overwrite the input" in err and err.count("\n") == 1, err
+    assert _snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("which", ["src", "dst", "theta"])
+@pytest.mark.parametrize("command", ["points", "report", "save-theta", "batch-theta"])
+def test_no_subcommand_writes_over_a_polygon_or_theta_file(tmp_path, command, which):
+    img, _ = _square_run(tmp_path)
+    src = write_polygon(tmp_path / "src.json", [[1, 1], [15, 1], [15, 15], [1, 15]])
+    dst = write_polygon(tmp_path / "dst.json", [[2, 1], [15, 2], [14, 15], [1, 14]])
+    theta = write_polygon(tmp_path / "theta.json", [[0, 0], [1, 0], [1, 1], [0, 1]])
+    victim = {"src": src, "dst": dst, "theta": theta}[which]
+    (tmp_path / "od").mkdir()
+    common = ["--src", src, "--dst", dst, "--theta", theta]
+    if command == "points":
+        (tmp_path / "p.json").write_text("[[5, 5]]")
+        args = ["points", tmp_path / "p.json", victim, *common]
+    elif command == "batch-theta":
+        if which != "theta":
+            pytest.skip("a batch's outputs are images")
+        args = [img, "--out-dir", tmp_path, "--out-name", "theta.json", *common]
+    else:
+        args = [img, tmp_path / "o.png", f"--{command}", victim, *common]
+    before = _snapshot(tmp_path)
+    code, err = _run(args)
+    assert code == 2 and err.count("\n") == 1, err
+    assert _snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o077, 0o002, 0o027])
+def test_outputs_get_the_permissions_open_gives(tmp_path, umask):
+    img, frame = _square_run(tmp_path)
+    (tmp_path / "p.csv").write_text("5,5\n")
+    kept = tmp_path / "kept.json"
+    kept.write_text("{}")
+    kept.chmod(0o640)
+    old = os.umask(umask)
+    try:
+        code, err = _run([img, tmp_path / "o.png", "--src", frame, "--dst", frame, "--report", tmp_path / "r.json",
+                          "--save-theta", tmp_path / "t.json", "--save-map", tmp_path / "m.exr"])  # fmt: skip
+        assert code == 0, err
+        code, err = _run(["points", tmp_path / "p.csv", tmp_path / "q.csv", "--src", frame, "--dst", frame])
+        assert code == 0, err
+        code, err = _run([img, tmp_path / "o2.png", "--src", frame, "--dst", frame, "--report", kept])
+        assert code == 0, err
+    finally:
+        os.umask(old)
+    for name in ("o.png", "r.json", "t.json", "m.exr", "q.csv", "o2.png"):
+        assert (tmp_path / name).stat().st_mode & 0o777 == 0o666 & ~umask, name
+    assert kept.stat().st_mode & 0o777 == 0o640  # a replaced file keeps its mode
+
+
+@given(st.lists(st.tuples(st.integers(0, 15), st.integers(0, 15)), min_size=1, max_size=5), st.integers(0, 2))
+@settings(max_examples=6, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+def test_a_byte_order_mark_is_not_data(tmp_path_factory, points, kind):
+    d = tmp_path_factory.mktemp("bom")
+    _, frame = _square_run(d)
+    bom = b"\xef\xbb\xbf"
+    if kind == 0:
+        body, name = "".join(f"{x}.5,{y}.25\n" for x, y in points).encode(), "p.csv"
+    elif kind == 1:
+        body, name = json.dumps([[x + 0.5, y + 0.25] for x, y in points]).encode(), "p.json"
+    else:
+        body = "".join(f"vt {x / 16:.9g} {1 - y / 16:.9g}\n" for x, y in points).encode() + b"f 1/1 1/1 1/1\n"
+        name = "p.obj"
+    (d / name).write_bytes(bom + body)
+    out = d / ("q" + name[1:])
+    code, err = _run(["points", d / name, out, "--src", frame, "--dst", frame, "--texture-size", "16x16"])
+    assert code == 0, err
+    got = out.read_bytes()
+    if kind == 0:
+        rows = [tuple(map(float, ln.split(","))) for ln in got.decode("utf-8-sig").splitlines() if ln]
+        assert np.allclose(rows, [(x + 0.5, y + 0.25) for x, y in points], atol=1e-6)  # identity: every point mapped
+    elif kind == 2:
+        assert got.startswith(bom) and got.count(b"vt ") == len(points)
+        uv = [tuple(map(float, ln.split()[1:])) for ln in got.lstrip(bom).splitlines() if ln.startswith(b"vt")]
+        assert np.allclose(uv, [(x / 16, 1 - y / 16) for x, y in points], atol=1e-6)

@@ -26,8 +26,8 @@ from .files import file_kind, format_bytes
 
 __all__ = [
     "PENDING_MARKER", "TEMP_NAME_GLOB", "TEMP_NAME_PATTERN", "PendingOutputs", "RunInputs", "atomic_path", "check_output_path",
-    "check_room", "copy_from_memory", "file_size_limit", "memory_file", "output_mode", "write_checked",
-    "write_failure_message",
+    "check_room", "copy_from_memory", "end_when_consistent", "file_size_limit", "memory_file", "output_mode",
+    "remove_temporaries", "write_checked", "write_failure_message",
 ]  # fmt: skip
 
 #: Name of the temporary file an output is written to before it is renamed over
@@ -40,6 +40,37 @@ TEMP_NAME_PATTERN = ".{stem}.warpcli-tmp-XXXXXXXX{ext}"
 TEMP_NAME_GLOB = ".*.warpcli-tmp-*"
 #: The marker in the names of pending outputs.
 PENDING_MARKER = ".warpcli-pending-"
+
+# Temporary and pending files that exist now, for `remove_temporaries` (a
+# SIGTERM ends the process at once, without unwinding: see `warpcli.cli.run`).
+_live: set[str] = set()
+# While a run's pending outputs are renamed into place (all or none), an end
+# asked for by a signal waits until the renames are done.
+_renaming = 0
+_end_after_renames = None
+
+
+def remove_temporaries() -> None:
+    """Remove every temporary and pending file of this process that still exists.
+
+    Safe in a signal handler: no lock, no allocation of note.
+    """
+    for name in list(_live):
+        try:
+            os.unlink(name)
+        except OSError:
+            pass
+    _live.clear()
+
+
+def end_when_consistent(end) -> None:
+    """Call ``end()`` now, or, while pending outputs are being renamed into
+    place, as soon as they all are (a run's outputs are all there or none)."""
+    global _end_after_renames
+    if _renaming:
+        _end_after_renames = end
+    else:
+        end()
 
 
 def check_output_path(path: str | os.PathLike[str], inputs: tuple[str | os.PathLike[str], ...] | RunInputs = ()) -> None:
@@ -120,6 +151,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[str]:
     prefix, suffix = _temp_affixes(path, directory)
     try:
         fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=directory)
+        _live.add(tmp)
         os.close(fd)
     except OSError as err:
         raise _write_error(path, err) from err
@@ -128,9 +160,11 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[str]:
         _sync_file(tmp)
         os.chmod(tmp, output_mode(path))
         os.replace(tmp, path)
+        _live.discard(tmp)
     except BaseException as err:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        _live.discard(tmp)
         if isinstance(err, OSError) and not isinstance(err, WarpError):
             raise _write_error(path, err) from err
         raise
@@ -508,6 +542,7 @@ class PendingOutputs:
         directory, base = os.path.split(name)
         stem, ext = os.path.splitext(base)
         fd, tmp = tempfile.mkstemp(prefix=f".{stem}{PENDING_MARKER}", suffix=ext, dir=directory)
+        _live.add(tmp)
         os.close(fd)
         self._pending.append((tmp, name))
         return tmp
@@ -515,15 +550,23 @@ class PendingOutputs:
     def __exit__(
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
+        global _renaming, _end_after_renames
         pending, self._pending = self._pending, []
         if exc_type is None:
+            _renaming += 1
             try:
                 for k, (tmp, final) in enumerate(pending):
                     os.chmod(tmp, output_mode(final))
                     os.replace(tmp, final)
+                    _live.discard(tmp)
             except OSError as err:
                 _remove(tmp for tmp, _ in pending[k:])
                 raise ImageIOError(f"{final}: cannot move the output into place: {err.strerror or err}") from err
+            finally:
+                _renaming -= 1
+                end, _end_after_renames = _end_after_renames, None
+                if end is not None and not _renaming:
+                    end()
         else:
             _remove(tmp for tmp, _ in pending)
             # Messages name the user's paths, not the pending ones.
@@ -537,6 +580,7 @@ class PendingOutputs:
 
 def _remove(paths) -> None:
     for tmp in paths:
+        _live.discard(tmp)
         try:
             os.unlink(tmp)
         except FileNotFoundError:
