@@ -301,3 +301,67 @@ def test_a_byte_order_mark_is_not_data(tmp_path_factory, points, kind):
         assert got.startswith(bom) and got.count(b"vt ") == len(points)
         uv = [tuple(map(float, ln.split()[1:])) for ln in got.lstrip(bom).splitlines() if ln.startswith(b"vt")]
         assert np.allclose(uv, [(x / 16, 1 - y / 16) for x, y in points], atol=1e-6)
+
+
+@pytest.mark.parametrize("other", ["uint16", "float32", "int8", "shape"])
+@pytest.mark.parametrize("where", [0, 1, 3])
+def test_a_tiff_stack_with_a_page_unlike_the_others_is_refused(tmp_path, other, where):
+    tifffile = pytest.importorskip("tifffile")
+    from warpcli.errors import ImageInputError
+    from warpcli.volume.volio import read_volume
+
+    with tifffile.TiffWriter(tmp_path / "v.tif") as w:
+        for k in range(4):
+            page = np.full((8, 10), k + 1, np.uint8)
+            if k == where:
+                page = np.full((8, 12), k + 1, np.uint8) if other == "shape" else page.astype(other)
+            w.write(page, photometric="minisblack", metadata=None)
+    with pytest.raises(ImageInputError) as info:
+        read_volume(tmp_path / "v.tif")
+    msg = str(info.value)
+    page = 2 if where == 0 else where + 1  # the first page unlike page 1
+    assert msg.startswith(f"{tmp_path / 'v.tif'}: page {page} holds"), msg
+    assert "one pixel type and size" in msg and "\n" not in msg
+
+
+def test_a_tiff_stack_cut_short_is_refused_and_tifffile_says_nothing(tmp_path, capfd):
+    tifffile = pytest.importorskip("tifffile")
+    from warpcli.errors import ImageInputError
+    from warpcli.volume.volio import read_volume
+
+    tifffile.imwrite(tmp_path / "v.tif", np.arange(8 * 8 * 8, dtype=np.uint16).reshape(8, 8, 8), photometric="minisblack")
+    data = (tmp_path / "v.tif").read_bytes()
+    for cut in (len(data) - 100, len(data) - 300, len(data) // 2):
+        (tmp_path / "c.tif").write_bytes(data[:cut])
+        with pytest.raises(ImageInputError):
+            read_volume(tmp_path / "c.tif")
+    assert capfd.readouterr().err == ""
+
+
+@given(st.sampled_from([1e7, 1e8, 1e9]), st.sampled_from(["bem", "mfs"]), st.integers(4, 9))
+@settings(max_examples=6, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+def test_a_theta_too_flat_for_a_smooth_method_or_too_large_is_refused(tmp_path_factory, stretch, method, n):
+    d = tmp_path_factory.mktemp("theta")
+    img, _ = _square_run(d, 64)
+    a = 2 * math.pi * np.arange(n) / n
+    poly = write_polygon(d / "p.json", np.stack([32 + 25 * np.cos(a), 32 + 25 * np.sin(a)], axis=1))
+    write_polygon(d / "flat.json", np.stack([stretch * np.cos(a), np.sin(a)], axis=1))
+    write_polygon(d / "huge.json", np.stack([1e300 * np.cos(a), 1e300 * np.sin(a)], axis=1))
+    code, err = _run([img, d / "o.png", "--src", poly, "--dst", poly, "--theta", d / "flat.json", "--method", method])
+    assert code == 2 and "flat.json: Theta is too flat" in err and err.count("\n") == 1, err
+    code, err = _run([img, d / "o.png", "--src", poly, "--dst", poly, "--theta", d / "huge.json"])
+    assert code == 2 and "huge.json: Theta's coordinates are too large" in err, err
+    assert not (d / "o.png").exists()
+
+
+def test_an_at_sign_in_batch_names_is_a_file_name_and_an_output_pattern_after_one_image_is_blamed(tmp_path):
+    img, frame = _square_run(tmp_path)
+    for name in ("photo@2x.png", "icon@@3x.png"):
+        (tmp_path / name).write_bytes(open(img, "rb").read())
+    (tmp_path / "od").mkdir()
+    code, err = _run([tmp_path / "photo@2x.png", tmp_path / "icon@@3x.png", "--out-dir", tmp_path / "od", "--src", frame, "--dst", frame])
+    assert code == 0, err
+    assert sorted(os.listdir(tmp_path / "od")) == ["icon@@3x.png", "photo@2x.png"]
+    for pattern in ("out.#.png", "out.%04d.png", "o_####.png"):
+        code, err = _run([img, tmp_path / pattern, "--src", frame, "--dst", frame])
+        assert code == 2 and err.startswith(f"warp: error: {tmp_path / pattern}: OUTPUT is a sequence pattern"), err
