@@ -365,3 +365,75 @@ def test_an_at_sign_in_batch_names_is_a_file_name_and_an_output_pattern_after_on
     for pattern in ("out.#.png", "out.%04d.png", "o_####.png"):
         code, err = _run([img, tmp_path / pattern, "--src", frame, "--dst", frame])
         assert code == 2 and err.startswith(f"warp: error: {tmp_path / pattern}: OUTPUT is a sequence pattern"), err
+
+
+def _warnings(args):
+    code, err = _run(args)
+    assert code == 0, err
+    return [line for line in err.splitlines() if line.startswith("warp: ") and not line.startswith("warp: error")]
+
+
+@given(st.integers(5, 14), st.integers(1, 13), st.integers(0, 2**32 - 1))
+@settings(max_examples=10, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+def test_a_target_whose_start_vertex_is_moved_is_warned_about_and_ordinary_pairs_are_not(tmp_path_factory, n, k, seed):
+    from helpers import star_shaped
+
+    k = k % n or 1
+    rng = np.random.default_rng(seed)
+    d = tmp_path_factory.mktemp("relabel")
+    img = write_png(d / "in.png", np.full((64, 64, 3), 90, dtype=np.uint8))
+    src = np.asarray(star_shaped(rng.uniform(0.2, 1, n), rng.uniform(0.3, 1, n))) * 24 + 32 - 12
+    angle, scale = rng.uniform(-0.5, 0.5), rng.uniform(0.8, 1.1)
+    rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    moved = (src - 32) @ rot.T * scale + 32
+    ordinary = moved + rng.normal(0, 0.3, moved.shape)  # an ordinary deformation: about 1 % of the size
+    write_polygon(d / "src.json", src)
+    write_polygon(d / "ordinary.json", ordinary)
+    write_polygon(d / "rolled.json", np.roll(moved, k, axis=0))  # src's vertex i onto the target's vertex i + k
+    from warpcli.errors import PolygonError
+    from warpcli.polygon import read_polygon
+
+    for name in ("src.json", "ordinary.json", "rolled.json"):
+        try:
+            read_polygon(d / name)
+        except PolygonError:
+            return  # the noise made it invalid: nothing to warp
+    said = _warnings([img, d / "o.png", "--src", d / "src.json", "--dst", d / "ordinary.json", "--interp", "nearest"])
+    assert not [w for w in said if "far better" in w], said
+    said = _warnings([img, d / "o.png", "--src", d / "src.json", "--dst", d / "rolled.json", "--interp", "nearest"])
+    relabel = [w for w in said if "far better" in w]
+    assert len(relabel) == 1 and f"vertex i + {k} " in relabel[0] and f"at its vertex {k} " in relabel[0], said
+
+
+@given(st.integers(32, 200), st.integers(32, 200), st.floats(0.05, 0.4))
+@settings(max_examples=5, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+def test_polygons_in_normalised_coordinates_are_warned_about(tmp_path_factory, w, h, margin):
+    d = tmp_path_factory.mktemp("norm")
+    img = write_png(d / "in.png", np.full((h, w, 3), 90, dtype=np.uint8))
+    unit = write_polygon(d / "unit.json", [[margin, margin], [1 - margin, margin], [1 - margin, 1], [margin, 1 - margin / 2]])
+    said = _warnings([img, d / "o.png", "--src", unit, "--dst", unit])
+    assert sum("lies within 0..1" in line and "not normalised" in line for line in said) == 2, said
+    pixels = write_polygon(d / "px.json", [[1, 1], [w - 1, 1], [w - 1, h - 1], [1, h - 1]])
+    assert not _warnings([img, d / "o.png", "--src", pixels, "--dst", pixels])
+
+
+@pytest.mark.parametrize("channels", [2, 4])
+def test_an_alpha_dropped_by_jpeg_is_warned_about_naming_the_output(tmp_path, channels):
+    img = write_png(tmp_path / "in.png", np.full((16, 16, channels), 90, dtype=np.uint8))
+    frame = write_polygon(tmp_path / "frame.json", [[0, 0], [16, 0], [16, 16], [0, 16]])
+    said = _warnings([img, tmp_path / "o.jpg", "--src", frame, "--dst", frame])
+    assert said == [f"warp: {tmp_path / 'o.jpg'}: JPEG has no alpha channel: the image's alpha is dropped "
+                    "(PNG, TIFF and OpenEXR keep it)"]  # fmt: skip
+    assert not _warnings([img, tmp_path / "o.png", "--src", frame, "--dst", frame])
+
+
+@pytest.mark.parametrize("odd", [1, 2, 3])
+def test_a_frame_whose_channels_do_not_fit_the_background_is_named(tmp_path, odd):
+    frame = write_polygon(tmp_path / "frame.json", [[0, 0], [16, 0], [16, 16], [0, 16]])
+    for f in (1, 2, 3):
+        write_png(tmp_path / f"s.{f}.png", np.full((16, 16, 1 if f == odd else 3), 90, dtype=np.uint8))
+    code, err = _run([tmp_path / "s.@.png", tmp_path / "w.@.png", "--frames", "1-3", "--src", frame, "--dst", frame,
+                      "--background", "1,0.5,0"])  # fmt: skip
+    errors = [line for line in err.splitlines() if line.startswith("warp: error")]
+    assert code == 2 and errors == [f"warp: error: {tmp_path / f's.{odd}.png'}: background has 3 values but the image has 1 channels"]
+    assert sorted(p.name for p in tmp_path.glob("w.*")) == [f"w.{f}.png" for f in (1, 2, 3) if f != odd]

@@ -15,12 +15,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import InputError, WarpError
+from .errors import InputError, WarpError, naming
 from .maps.compose import BijectiveMap
 from .options import WarpOptions, resolve_options
 from .outputs import RunInputs
 from .pipeline import read_header_or_none, write_like
-from .plan import SamplingPlan, check_paste, plan_for
+from .plan import SamplingPlan, background_values, check_paste, plan_for
 from .polygon import check_pair, read_polygon
 from .raster.imageio import check_image_output, read_image
 from .tiled import in_parts, warp_file_tiled
@@ -238,6 +238,10 @@ def warp_one(inp: str, out: str, plans: PlanCache) -> BatchItem:
         image = read_image(inp)
         shape = opts.size if opts.size is not None else (image.width, image.height)
         check_paste(opts.outside, shape, (image.width, image.height), inp)
+        try:  # a frame with other channels than the background's: name the frame
+            background_values(opts.background, image.pixels)
+        except InputError as err:
+            raise naming(err, inp) from err
         px = plans.get(shape).render(image.pixels, alpha_channel=image.alpha_channel,
                                      associated_alpha=image.associated_alpha)  # fmt: skip
         write_like(out, image, px, opts.dtype)

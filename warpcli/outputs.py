@@ -26,7 +26,7 @@ from .files import file_kind, format_bytes
 
 __all__ = [
     "PENDING_MARKER", "TEMP_NAME_GLOB", "TEMP_NAME_PATTERN", "PendingOutputs", "RunInputs", "atomic_path", "check_output_path",
-    "check_room", "copy_from_memory", "end_when_consistent", "file_size_limit", "memory_file", "output_mode",
+    "check_room", "copy_from_memory", "end_when_consistent", "file_size_limit", "final_path", "memory_file", "output_mode",
     "remove_temporaries", "write_checked", "write_failure_message",
 ]  # fmt: skip
 
@@ -48,6 +48,25 @@ _live: set[str] = set()
 # asked for by a signal waits until the renames are done.
 _renaming = 0
 _end_after_renames = None
+
+
+# Pending paths handed out now, with the outputs they become.
+_finals: dict[str, str] = {}
+
+
+def final_path(path: str | os.PathLike[str]) -> str:
+    """The output a pending path (`PendingOutputs.path`) becomes, for messages; any other path as it is.
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    str
+    """
+    name = os.fspath(path)
+    return _finals.get(name, name)
 
 
 def remove_temporaries() -> None:
@@ -544,6 +563,7 @@ class PendingOutputs:
         fd, tmp = tempfile.mkstemp(prefix=f".{stem}{PENDING_MARKER}", suffix=ext, dir=directory)
         _live.add(tmp)
         os.close(fd)
+        _finals[tmp] = os.fspath(final)
         self._pending.append((tmp, name))
         return tmp
 
@@ -552,6 +572,8 @@ class PendingOutputs:
     ) -> None:
         global _renaming, _end_after_renames
         pending, self._pending = self._pending, []
+        for tmp, _ in pending:
+            _finals.pop(tmp, None)
         if exc_type is None:
             _renaming += 1
             try:

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError, WarpError
+from .errors import InputError, WarpError, naming
 from .maps.compose import BijectiveMap, PullBack
 from .budget import check_fits
 from .options import WarpOptions, resolve_options
@@ -332,6 +332,21 @@ class _EarlyMap:
         return cls(src, dst, opts, regions)
 
 
+def _warn_if_relabelled(src: Polygon, dst: Polygon) -> None:
+    """Warn when the target's vertex list starts elsewhere: src's vertex i matches
+    dst's vertex i + k far better than vertex i (the warp then twists the image)."""
+    from .polygon import cyclic_relabelling
+
+    found = cyclic_relabelling(src, dst)
+    if found is not None:
+        k, d0, dk = found
+        log.warning(
+            "%s matches %s far better with its vertex i onto vertex i + %d than onto vertex i (shape distance %.2g "
+            "against %.2g): the warp twists the image; start %s's vertex list at its vertex %d if that is not "
+            "what you want", src.name, dst.name, k, dk, d0, dst.name, k,
+        )  # fmt: skip
+
+
 def warp_file(
     input_path: str | os.PathLike[str],
     output_path: str | os.PathLike[str],
@@ -456,6 +471,12 @@ def warp_file(
             src.name,
             dst.name,
         )
+    else:
+        _warn_if_relabelled(src, dst)
+    try:  # an image with other channels than the background's: name the image
+        background_values(opts.background, image.pixels)
+    except InputError as err:
+        raise naming(err, os.fspath(input_path)) from err
     result = _warp(image.pixels, src, dst, opts, image.alpha_channel, image.associated_alpha, None, progress, early)
     # Every output is written under a pending name and renamed into place
     # only when all are written: a run's outputs succeed or fail together.

@@ -17,7 +17,9 @@ from ..budget import check_fits
 from ..capture import c_stderr, one_line
 from ..errors import ImageInputError, ImageIOError
 from ..files import check_regular_file, format_bytes
-from ..outputs import RunInputs, atomic_path, check_output_path, check_room, copy_from_memory, memory_file, write_failure_message
+from ..outputs import (
+    RunInputs, atomic_path, check_output_path, check_room, copy_from_memory, final_path, memory_file, write_failure_message,
+)
 from .dtypes import DTYPES
 from .pixels import from_unit, premultiplied, to_unit
 
@@ -386,6 +388,11 @@ def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
     if out is None:
         raise ImageIOError(f"{shown_name}: cannot write: {_oiio_error(oiio)}")
     fmt = out.format_name()
+    if fmt == "jpeg" and (image.alpha_channel is not None or nc in (2, 4)):
+        _log.warning(
+            "%s: JPEG has no alpha channel: the image's alpha is dropped (PNG, TIFF and OpenEXR keep it)",
+            final_path(shown_name),
+        )
     spec, premultiply = output_spec(
         oiio, fmt, (w, h, nc), type_name, image.channel_names, image.alpha_channel, image.associated_alpha,
         image.attributes,
