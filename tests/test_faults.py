@@ -342,4 +342,5 @@ def test_sigterm_at_any_moment_ends_in_one_line_and_leaves_nothing(tmp_path):
         else:
             assert proc.returncode in (143, -sig.SIGTERM), (delay, proc.returncode, stderr)
             assert stderr.strip() in ("", "warp: terminated"), (delay, stderr)
-            assert os.listdir(out) == [], (delay, os.listdir(out))
+            # All of a run's outputs or none (the signal may come after the renames), never a temporary.
+            assert sorted(os.listdir(out)) in ([], ["m.exr", "o.png", "r.json"]), (delay, os.listdir(out))
