@@ -437,3 +437,58 @@ def test_a_frame_whose_channels_do_not_fit_the_background_is_named(tmp_path, odd
     errors = [line for line in err.splitlines() if line.startswith("warp: error")]
     assert code == 2 and errors == [f"warp: error: {tmp_path / f's.{odd}.png'}: background has 3 values but the image has 1 channels"]
     assert sorted(p.name for p in tmp_path.glob("w.*")) == [f"w.{f}.png" for f in (1, 2, 3) if f != odd]
+
+
+def _tetra(path, scale):
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float) * scale + 1
+    path.write_text("".join(f"v {float(x)!r} {float(y)!r} {float(z)!r}\n" for x, y, z in v) + "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    return path
+
+
+@pytest.mark.parametrize("entry", [(0, 0), (1, 3), (2, 1)])
+@pytest.mark.parametrize("value", ["nan", "inf", "zero-row"])
+def test_a_volume_with_a_broken_affine_is_blamed_not_the_cages(tmp_path, entry, value):
+    nib = pytest.importorskip("nibabel")
+    img = nib.Nifti1Image(np.zeros((8, 8, 8), np.uint8), np.eye(4))
+    h = img.header
+    h["qform_code"], h["sform_code"] = 0, 1
+    rows = [list(h["srow_x"]), list(h["srow_y"]), list(h["srow_z"])]
+    if value == "zero-row":
+        rows[entry[0]] = [0.0, 0.0, 0.0, 0.0]
+    else:
+        rows[entry[0]][entry[1]] = float(value)
+    h["srow_x"], h["srow_y"], h["srow_z"] = rows
+    nib.save(nib.Nifti1Image(np.zeros((8, 8, 8), np.uint8), None, header=h), tmp_path / "v.nii")
+    cage = _tetra(tmp_path / "c.obj", 5.0)
+    code, err = _run(["volume", tmp_path / "v.nii", tmp_path / "o.nii", "--src", cage, "--dst", cage])
+    assert code == 2 and err.startswith(f"warp: error: {tmp_path / 'v.nii'}: the header's voxel-to-world affine is"), err
+    assert err.count("\n") == 1 and not (tmp_path / "o.nii").exists()
+
+
+@pytest.mark.parametrize("scale", [1e120, 1e200, 1e300])
+def test_a_cage_too_large_is_said_to_be_too_large(tmp_path, scale):
+    tifffile = pytest.importorskip("tifffile")
+    tifffile.imwrite(tmp_path / "v.tif", np.zeros((8, 8, 8), np.uint8), photometric="minisblack")
+    cage = _tetra(tmp_path / "c.obj", scale)
+    code, err = _run(["volume", tmp_path / "v.tif", tmp_path / "o.tif", "--src", cage, "--dst", cage])
+    assert code == 2 and "c.obj: vertex" in err and "too far out" in err and err.count("\n") == 1, err
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o077])
+def test_volume_outputs_get_the_permissions_open_gives(tmp_path, umask):
+    tifffile = pytest.importorskip("tifffile")
+    from test_volume_surface import write_obj
+    from warpcli.volume.examples import box
+
+    tifffile.imwrite(tmp_path / "v.tif", np.zeros((8, 8, 8), np.uint8), photometric="minisblack")
+    v, f = box(1, (1, 1, 1), (7, 7, 7))
+    write_obj(tmp_path / "c.obj", v, f)
+    old = os.umask(umask)
+    try:
+        code, err = _run(["volume", tmp_path / "v.tif", tmp_path / "o.tif", "--src", tmp_path / "c.obj",
+                          "--dst", tmp_path / "c.obj", "--report", tmp_path / "r.json"])  # fmt: skip
+    finally:
+        os.umask(old)
+    assert code == 0, err
+    for name in ("o.tif", "r.json"):
+        assert (tmp_path / name).stat().st_mode & 0o777 == 0o666 & ~umask, name

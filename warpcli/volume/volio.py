@@ -160,6 +160,7 @@ def _read_nifti(name: str) -> Volume:
         raw = raw[..., None]
     data = np.ascontiguousarray(np.transpose(raw, (2, 1, 0, 3)))  # (i, j, k, c) -> (k, j, i, c)
     affine = np.asarray(img.affine, dtype=np.float64)
+    check_affine(name, affine)
     return Volume(data, VoxelGrid(tuple(int(s) for s in shape[:3]), affine), "nifti", img)  # type: ignore[arg-type]
 
 
@@ -183,6 +184,22 @@ def _read_tiff(name: str) -> Volume:
         )
     nz, ny, nx, _ = data.shape
     return Volume(np.ascontiguousarray(data), tiff_grid((nx, ny, nz)), "tiff", None)
+
+
+def check_affine(name: str, affine: NDArray[np.float64]) -> None:
+    """Refuse a voxel-to-world affine that is not finite or not invertible (the
+    cages would be blamed for what is the volume's header).
+
+    Raises
+    ------
+    ImageInputError
+        Naming the volume file.
+    """
+    if affine.shape != (4, 4) or not np.isfinite(affine).all():
+        raise ImageInputError(f"{name}: the header's voxel-to-world affine is not finite: {np.round(affine, 6).tolist()}")
+    det = float(np.linalg.det(affine[:3, :3]))
+    if not (np.isfinite(det) and abs(det) > 0):
+        raise ImageInputError(f"{name}: the header's voxel-to-world affine is singular (voxels of zero volume)")
 
 
 def check_pages(name: str) -> None:
