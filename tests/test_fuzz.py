@@ -492,3 +492,63 @@ def test_volume_outputs_get_the_permissions_open_gives(tmp_path, umask):
     assert code == 0, err
     for name in ("o.tif", "r.json"):
         assert (tmp_path / name).stat().st_mode & 0o777 == 0o666 & ~umask, name
+
+
+@st.composite
+def garbage_files(draw):
+    """Bytes a user might hand any subcommand: empty, text, a cut-off real file, random bytes, with or without a BOM."""
+    kind = draw(st.sampled_from(["empty", "text", "cut", "random", "bom"]))
+    if kind == "empty":
+        return b""
+    if kind == "text":
+        return draw(st.text(max_size=200)).encode("utf-8", "surrogatepass")
+    if kind == "random":
+        return draw(st.binary(max_size=600))
+    if kind == "bom":
+        return b"\xef\xbb\xbf" + draw(st.sampled_from([b"1,2\n3,4\n", b"[[1, 2]]", b"vt 0.5 0.5\n", b"x,y\n1,2,3\n"]))
+    return draw(st.sampled_from(["png", "tif", "exr", "nii", "obj"])).encode() + draw(st.binary(max_size=64))
+
+
+@given(garbage_files(), st.sampled_from(["points-csv", "points-json", "points-obj", "apply-map", "volume-tif",
+                                         "volume-nii", "volume-cage", "sequence", "batch", "theta"]))  # fmt: skip
+@settings(max_examples=40, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+def test_every_subcommand_takes_garbage_with_one_line_and_leaves_nothing(tmp_path_factory, data, where):
+    d = tmp_path_factory.mktemp("garbage")
+    img, frame = _square_run(d)
+    (d / "od").mkdir()
+    ext = {"points-csv": "csv", "points-json": "json", "points-obj": "obj", "apply-map": "exr", "volume-tif": "tif",
+           "volume-nii": "nii", "volume-cage": "obj", "sequence": "png", "batch": "png", "theta": "json"}[where]  # fmt: skip
+    bad = d / f"bad.1.{ext}" if where == "sequence" else d / f"bad.{ext}"
+    bad.write_bytes(data)
+    if where.startswith("points"):
+        args = ["points", bad, d / f"out.{ext}", "--src", frame, "--dst", frame, "--texture-size", "16x16"]
+    elif where == "apply-map":
+        args = ["apply-map", bad, img, d / "out.png"]
+    elif where == "volume-cage":
+        pytest.importorskip("tifffile").imwrite(d / "v.tif", np.zeros((8, 8, 8), np.uint8), photometric="minisblack")
+        args = ["volume", d / "v.tif", d / "out.tif", "--src", bad, "--dst", bad]
+    elif where.startswith("volume"):
+        pytest.importorskip("tifffile")
+        cage = _tetra(d / "c.obj", 5.0)
+        args = ["volume", bad, d / f"out.{ext}", "--src", cage, "--dst", cage]
+    elif where == "sequence":
+        args = [d / "bad.@.png", d / "out.@.png", "--frames", "1", "--src", frame, "--dst", frame]
+    elif where == "batch":
+        args = [bad, img, "--out-dir", d / "od", "--src", frame, "--dst", frame]
+    else:
+        args = [img, d / "out.png", "--src", frame, "--dst", frame, "--theta", bad]
+    before = _snapshot(d)
+    old = signal.signal(signal.SIGALRM, _alarm)
+    signal.alarm(TIME_LIMIT)
+    try:
+        code, err = _run(args)
+    except _TimeLimit:
+        pytest.fail(f"more than {TIME_LIMIT} s: {where} {data[:40]!r}")
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+    assert "Traceback" not in err and all(line.startswith("warp: ") for line in err.splitlines()), err
+    assert code in (0, 1, 2), (code, err)
+    if code != 0 and where != "batch":
+        assert _snapshot(d) == before and not any(p.name.startswith(".") for p in d.iterdir()), err
+    assert not any(".warpcli-" in p.name for p in d.rglob("*"))
