@@ -346,3 +346,18 @@ def test_sigterm_at_any_moment_ends_in_one_line_and_leaves_nothing(tmp_path):
             assert stderr.strip() in ("", "warp: terminated"), (delay, stderr)
             # All of a run's outputs or none (the signal may come after the renames), never a temporary.
             assert sorted(os.listdir(out)) in ([], ["m.exr", "o.png", "r.json"]), (delay, os.listdir(out))
+
+
+@pytest.mark.parametrize("ext", STRIP_FORMATS)
+def test_strips_on_a_full_disk_fail_in_every_format_and_leave_nothing(full_disk, tmp_path, ext):
+    from warpcli.pipeline import warp_file
+
+    inp = write_png(tmp_path / "in.png", noise(300, 400, 3, np.uint8))
+    frame = write_polygon(tmp_path / "f.json", [[0, 0], [400, 0], [400, 300], [0, 300]])
+    out = full_disk / f"out.{ext}"
+    with pytest.raises(ImageIOError) as info:
+        warp_file(inp, out, frame, frame, tiled=True, interp="nearest")
+    msg = str(info.value)
+    assert not isinstance(info.value, ImageInputError)  # a failure while writing: exit 1
+    assert msg.startswith(f"{out}: cannot write: ") and "No space left on device" in msg and "\n" not in msg, msg
+    assert listing(full_disk) == []
