@@ -230,3 +230,134 @@ def test_the_cli_shows_one_line_for_a_truncated_png(tmp_path):
     assert not out.exists() and listing(tmp_path) == ["cut.png", "frame.json", "whole.png"]
     with pytest.raises(ImageInputError):  # and the same in-process
         read_image(cut)
+
+
+# ---------------------------------------------------------------------------
+# Strips (--tiled): every format the strip writer accepts, under a file size
+# limit; OpenImageIO's image-size limit; SIGTERM at any moment.
+
+#: The formats `warpcli.raster.parts.StripWriter` writes (JPEG, WebP and JPEG 2000 are refused).
+STRIP_FORMATS = ["exr", "tif", "png", "bmp", "dpx", "fits", "hdr", "tga", "sgi", "ppm", "pgm", "rla", "iff", "gif", "jxl"]
+
+STRIP_SCRIPT = textwrap.dedent(
+    """
+    import json, os, resource, sys
+    import numpy as np
+    sys.path.insert(0, "tests")
+    from helpers import write_png, write_polygon
+    import OpenImageIO as oiio
+    from warpcli.pipeline import warp_file
+    d, limit, oiio_mb, formats = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4].split(",")
+    w, h = 800, 600
+    inp = write_png(f"{d}/in.png", (np.random.default_rng(1).random((h, w, 3)) * 255).astype(np.uint8))
+    frame = write_polygon(f"{d}/f.json", [[0, 0], [w, 0], [w, h], [0, h]])
+    if oiio_mb:
+        oiio.attribute("limits:imagesize_MB", oiio_mb)
+    if limit:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))  # Python ignores SIGXFSZ: writes fail with EFBIG
+    for ext in formats:
+        out = f"{d}/out.{ext}"
+        try:
+            warp_file(inp, out, frame, frame, tiled=True, interp="nearest")
+            print(json.dumps([ext, "written", os.path.getsize(out)]))
+        except Exception as err:
+            print(json.dumps([ext, type(err).__name__, str(err)]))
+    print(json.dumps(["limit", oiio.get_int_attribute("limits:imagesize_MB", 0), 0]))
+    """
+)
+
+
+def _strips(tmp_path, limit, oiio_mb, formats):
+    done = subprocess.run(
+        [sys.executable, "-c", STRIP_SCRIPT, str(tmp_path), str(limit), str(oiio_mb), ",".join(formats)],
+        capture_output=True, text=True, cwd=REPO, timeout=600,
+    )  # fmt: skip
+    assert done.returncode == 0 and done.stderr == "", done.stderr
+    return [json.loads(line) for line in done.stdout.splitlines()]
+
+
+def test_strips_under_a_file_size_limit_fail_in_every_format_and_leave_nothing(tmp_path):
+    results = _strips(tmp_path, 100_000, 0, STRIP_FORMATS)  # every output is far more than 100 kB
+    assert [r[0] for r in results[:-1]] == STRIP_FORMATS
+    for ext, kind, msg in results[:-1]:
+        assert kind == "ImageIOError", (ext, kind, msg)
+        assert msg.startswith(f"{tmp_path}/out.{ext}: cannot write: ") and "\n" not in msg, msg
+        assert "File too large" in msg, msg
+    assert sorted(os.listdir(tmp_path)) == ["f.json", "in.png"]
+
+
+def test_strips_are_not_refused_by_openimageios_image_size_limit(tmp_path):
+    # 800 x 600 x 3 bytes (1.44 MB) over a limit lowered to 1 MB: without the
+    # lift, the header read and the read-back refuse it and the output is lost.
+    formats = ["tif", "exr", "fits", "png"]
+    results = _strips(tmp_path, 0, 1, formats)
+    assert [r[1] for r in results[:-1]] == ["written"] * len(formats), results
+    assert results[-1][:2] == ["limit", 1]  # restored afterwards
+    source = read_image(tmp_path / "in.png").pixels
+    for ext in formats:
+        back = read_image(tmp_path / f"out.{ext}").pixels
+        assert back.shape == source.shape
+        assert np.array_equal(back.astype(np.float64), source.astype(np.float64)) or ext == "exr"
+
+
+@pytest.mark.parametrize("ext", ["webp", "jp2", "jpg"])
+def test_formats_that_cannot_be_written_in_strips_are_refused_first(tmp_path, ext):
+    results = _strips(tmp_path, 0, 0, [ext])
+    ext_, kind, msg = results[0]
+    assert kind == "ImageInputError" and "cannot be written in parts" in msg, msg
+    assert sorted(os.listdir(tmp_path)) == ["f.json", "in.png"]
+
+
+def test_sigterm_at_any_moment_ends_in_one_line_and_leaves_nothing(tmp_path):
+    """SIGTERM from 0.05 s to 2 s after start (imports, map, writing): exit 143 (or killed
+    before the handler exists), never 0 after "terminated", no traceback, no hang, no leftover,
+    all of a run's outputs or none."""
+    import signal as sig
+    import time
+
+    img = write_png(tmp_path / "in.png", noise(256, 256, 3, np.uint8))
+    frame = write_polygon(tmp_path / "frame.json", [[0, 0], [256, 0], [256, 256], [0, 256]])
+    dst = write_polygon(tmp_path / "dst.json", [[10, 0], [256, 20], [240, 256], [0, 230]])
+    # Dense over the imports (0.3-0.5 s here, where the issue saw aborts and hangs), sparse after.
+    delays = np.r_[np.linspace(0.05, 0.6, 12), np.linspace(0.8, 2.0, 4)] + np.random.default_rng(5).uniform(0, 0.03, 16)
+    t_end = time.monotonic() + 240
+    for k, delay in enumerate(delays):
+        if time.monotonic() > t_end:
+            break
+        out = tmp_path / f"out{k}"
+        out.mkdir()
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "warpcli", img, "--src", frame, "--dst", dst, str(out / "o.png"),
+             "--report", str(out / "r.json"), "--save-map", str(out / "m.exr")],
+            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        time.sleep(delay)
+        proc.send_signal(sig.SIGTERM)
+        try:
+            stdout, stderr = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            pytest.fail(f"hangs after SIGTERM at {delay:.2f} s")
+        assert "Traceback" not in stderr and "nanobind" not in stderr, (delay, stderr)
+        if proc.returncode == 0:  # finished before the signal: every output there
+            assert "terminated" not in stderr and sorted(os.listdir(out)) == ["m.exr", "o.png", "r.json"]
+        else:
+            assert proc.returncode in (143, -sig.SIGTERM), (delay, proc.returncode, stderr)
+            assert stderr.strip() in ("", "warp: terminated"), (delay, stderr)
+            # All of a run's outputs or none (the signal may come after the renames), never a temporary.
+            assert sorted(os.listdir(out)) in ([], ["m.exr", "o.png", "r.json"]), (delay, os.listdir(out))
+
+
+@pytest.mark.parametrize("ext", STRIP_FORMATS)
+def test_strips_on_a_full_disk_fail_in_every_format_and_leave_nothing(full_disk, tmp_path, ext):
+    from warpcli.pipeline import warp_file
+
+    inp = write_png(tmp_path / "in.png", noise(300, 400, 3, np.uint8))
+    frame = write_polygon(tmp_path / "f.json", [[0, 0], [400, 0], [400, 300], [0, 300]])
+    out = full_disk / f"out.{ext}"
+    with pytest.raises(ImageIOError) as info:
+        warp_file(inp, out, frame, frame, tiled=True, interp="nearest")
+    msg = str(info.value)
+    assert not isinstance(info.value, ImageInputError)  # a failure while writing: exit 1
+    assert msg.startswith(f"{out}: cannot write: ") and "No space left on device" in msg and "\n" not in msg, msg
+    assert listing(full_disk) == []

@@ -15,11 +15,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import InputError, WarpError
+from .errors import InputError, WarpError, naming
 from .maps.compose import BijectiveMap
 from .options import WarpOptions, resolve_options
+from .outputs import RunInputs
 from .pipeline import read_header_or_none, write_like
-from .plan import SamplingPlan, check_paste, plan_for
+from .plan import SamplingPlan, background_values, check_paste, plan_for
 from .polygon import check_pair, read_polygon
 from .raster.imageio import check_image_output, read_image
 from .tiled import in_parts, warp_file_tiled
@@ -134,31 +135,36 @@ def warp_batch(
         ``on_item`` and in its item, and the rest still go through.
     """
     opts = resolve_options(options, changes)
-    tasks, src, dst = prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label)
+    tasks, src, dst = prepare_batch(
+        input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=opts.map.theta_file
+    )
     plans = PlanCache(BijectiveMap.between(src, dst, opts.map), opts)
     return _each(lambda task: warp_one(task[0], task[1], plans), tasks, jobs, on_item)
 
 
-def prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label):
+def prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=None):
     """A batch's checks before any work: the (input, output) pairs, and the two polygons.
+
+    ``theta_file`` is the Theta file the map reads, if any (an input too).
 
     Raises
     ------
     InputError
         For a missing directory, a bad pattern, two inputs with one output,
-        an output that is an input, or bad polygons.
+        an output that is any input of the run, or bad polygons.
     """
     directory = os.fspath(out_dir)
     if not os.path.isdir(directory):
         raise InputError(f"{directory}: output directory does not exist")
     outputs = [os.path.join(directory, output_name(p, pattern)) for p in input_paths]
     seen: dict[str, str] = {}
+    inputs = RunInputs(p for p in (*input_paths, src_path, dst_path, theta_file) if p is not None)
     for inp, out in zip(input_paths, outputs):
         key = os.path.abspath(out)
         if key in seen:
             raise InputError(f"{out}: both {seen[key]} and {os.fspath(inp)} would be written there")
         seen[key] = os.fspath(inp)
-        check_image_output(out, inputs=(*input_paths, src_path, dst_path))
+        check_image_output(out, inputs=inputs)
     src = read_polygon(src_path, src_label)
     dst = read_polygon(dst_path, dst_label)
     check_pair(src, dst)
@@ -232,6 +238,10 @@ def warp_one(inp: str, out: str, plans: PlanCache) -> BatchItem:
         image = read_image(inp)
         shape = opts.size if opts.size is not None else (image.width, image.height)
         check_paste(opts.outside, shape, (image.width, image.height), inp)
+        try:  # a frame with other channels than the background's: name the frame
+            background_values(opts.background, image.pixels)
+        except InputError as err:
+            raise naming(err, inp) from err
         px = plans.get(shape).render(image.pixels, alpha_channel=image.alpha_channel,
                                      associated_alpha=image.associated_alpha)  # fmt: skip
         write_like(out, image, px, opts.dtype)
@@ -328,8 +338,10 @@ def warp_sequence(
         raise InputError(f"{output_pattern}: the output pattern is the input pattern; frames would be overwritten")
     ins = expand(os.fspath(input_pattern), frames)
     outs = expand(os.fspath(output_pattern), frames)
-    for (_, inp), (_, out) in zip(ins, outs):
-        check_image_output(out, inputs=(inp, src_path, dst_path))
+    # Every output against every input of the run: f.1@.png's frame 1 is f.@.png's frame 11.
+    inputs = RunInputs(p for p in (*(inp for _, inp in ins), src_path, dst_path, opts.map.theta_file) if p is not None)
+    for _, out in outs:
+        check_image_output(out, inputs=inputs)
     src_keys = read_animated(src_path, src_label)
     dst_keys = read_animated(dst_path, dst_label)
     # Every frame's polygons first (interpolation can self-intersect): errors before any work.

@@ -73,7 +73,9 @@ def warp_batch_dask(
     from .maps.compose import BijectiveMap
 
     opts = resolve_options(options, changes)
-    tasks, src, dst = prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label)
+    tasks, src, dst = prepare_batch(
+        input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=opts.map.theta_file
+    )
     # One sampling plan per output size, made here and shipped; an input whose
     # header cannot be read fails in its task, with the message a local run gives.
     cache = PlanCache(BijectiveMap.between(src, dst, opts.map), opts)

@@ -33,3 +33,17 @@ class MeshingError(WarpError):
 
 class FoldOverError(WarpError):
     """A map is not one-to-one, so warping would fold the image."""
+
+
+def naming(err: WarpError, name: str) -> WarpError:
+    """``err`` with ``name`` (the file it is about) in front, unless its message names it already.
+
+    A check made deep inside (a background with 3 values for a 1-channel
+    image) does not know which file of a batch or sequence it is about.
+
+    >>> str(naming(InputError("background has 3 values"), "f.2.png"))
+    'f.2.png: background has 3 values'
+    """
+    if name in str(err):
+        return err
+    return type(err)(f"{name}: {err}")

@@ -112,6 +112,11 @@ class MapOptions:
     conditions: str = "dirichlet"
     nodes: int | None = None
 
+    @property
+    def theta_file(self) -> str | None:
+        """The Theta file these options read (``theta`` a .json path), else None: an input of the run."""
+        return None if self.theta in THETAS else str(self.theta)
+
     def __post_init__(self) -> None:
         _choice("method", self.method, METHODS)
         if self.theta not in THETAS and not str(self.theta).lower().endswith(".json"):

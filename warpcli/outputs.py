@@ -25,8 +25,9 @@ from .errors import ImageInputError, ImageIOError, WarpError
 from .files import file_kind, format_bytes
 
 __all__ = [
-    "PENDING_MARKER", "TEMP_NAME_GLOB", "TEMP_NAME_PATTERN", "PendingOutputs", "atomic_path", "check_output_path",
-    "check_room", "copy_from_memory", "file_size_limit", "memory_file", "write_checked", "write_failure_message",
+    "PENDING_MARKER", "TEMP_NAME_GLOB", "TEMP_NAME_PATTERN", "PendingOutputs", "RunInputs", "atomic_path", "check_output_path",
+    "check_room", "copy_from_memory", "end_when_consistent", "file_size_limit", "final_path", "memory_file", "output_mode",
+    "remove_temporaries", "write_checked", "write_failure_message",
 ]  # fmt: skip
 
 #: Name of the temporary file an output is written to before it is renamed over
@@ -40,8 +41,58 @@ TEMP_NAME_GLOB = ".*.warpcli-tmp-*"
 #: The marker in the names of pending outputs.
 PENDING_MARKER = ".warpcli-pending-"
 
+# Temporary and pending files that exist now, for `remove_temporaries` (a
+# SIGTERM ends the process at once, without unwinding: see `warpcli.cli.run`).
+_live: set[str] = set()
+# While a run's pending outputs are renamed into place (all or none), an end
+# asked for by a signal waits until the renames are done.
+_renaming = 0
+_end_after_renames = None
 
-def check_output_path(path: str | os.PathLike[str], inputs: tuple[str | os.PathLike[str], ...] = ()) -> None:
+
+# Pending paths handed out now, with the outputs they become.
+_finals: dict[str, str] = {}
+
+
+def final_path(path: str | os.PathLike[str]) -> str:
+    """The output a pending path (`PendingOutputs.path`) becomes, for messages; any other path as it is.
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    str
+    """
+    name = os.fspath(path)
+    return _finals.get(name, name)
+
+
+def remove_temporaries() -> None:
+    """Remove every temporary and pending file of this process that still exists.
+
+    Safe in a signal handler: no lock, no allocation of note.
+    """
+    for name in list(_live):
+        try:
+            os.unlink(name)
+        except OSError:
+            pass
+    _live.clear()
+
+
+def end_when_consistent(end) -> None:
+    """Call ``end()`` now, or, while pending outputs are being renamed into
+    place, as soon as they all are (a run's outputs are all there or none)."""
+    global _end_after_renames
+    if _renaming:
+        _end_after_renames = end
+    else:
+        end()
+
+
+def check_output_path(path: str | os.PathLike[str], inputs: tuple[str | os.PathLike[str], ...] | RunInputs = ()) -> None:
     """Check before any work that an output can be written at ``path``.
 
     Whether its format is one the writer knows is the writer's to check
@@ -50,8 +101,8 @@ def check_output_path(path: str | os.PathLike[str], inputs: tuple[str | os.PathL
     Parameters
     ----------
     path : path-like
-    inputs : tuple of path-like
-        Paths that must not be overwritten.
+    inputs : tuple of path-like, or RunInputs
+        Paths that must not be overwritten (a `RunInputs` for many).
 
     Raises
     ------
@@ -62,9 +113,7 @@ def check_output_path(path: str | os.PathLike[str], inputs: tuple[str | os.PathL
         input is never overwritten).
     """
     name = os.fspath(path)
-    for other in inputs:
-        if _same_file(name, os.fspath(other)):
-            raise ImageInputError(f"{name}: output would overwrite the input {os.fspath(other)}")
+    (inputs if isinstance(inputs, RunInputs) else RunInputs(inputs)).check(name)
     directory = os.path.dirname(os.path.abspath(name))
     if not os.path.isdir(directory):
         raise ImageInputError(f"{name}: output directory {directory} does not exist")
@@ -95,7 +144,8 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[str]:
     ------
     str
         The temporary path to write to, created empty with mode 0600 (given
-        the umask's permissions when renamed).
+        `output_mode`'s permissions when renamed: those of the file it
+        replaces, else the umask's).
 
     Raises
     ------
@@ -120,17 +170,20 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[str]:
     prefix, suffix = _temp_affixes(path, directory)
     try:
         fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=directory)
+        _live.add(tmp)
         os.close(fd)
     except OSError as err:
         raise _write_error(path, err) from err
     try:
         yield tmp
         _sync_file(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())
+        os.chmod(tmp, output_mode(path))
         os.replace(tmp, path)
+        _live.discard(tmp)
     except BaseException as err:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        _live.discard(tmp)
         if isinstance(err, OSError) and not isinstance(err, WarpError):
             raise _write_error(path, err) from err
         raise
@@ -206,17 +259,114 @@ def _sync_directory(directory: str) -> None:
             os.close(fd)
 
 
-def _same_file(a: str, b: str) -> bool:
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return os.path.abspath(a) == os.path.abspath(b)
+class RunInputs:
+    """Every input file of a run, to refuse an output that is any of them.
+
+    A sequence's output frame can be another of its input frames
+    (``f.@.png`` -> ``f.1@.png`` with frames 1 and 11); a batch's output
+    another of its images; a report the Theta file. Files are compared by
+    identity (device and inode: hard links, symbolic links) and by resolved
+    path (an input that does not exist yet, a missing frame), in a set, so
+    a run of many frames costs one look-up per output.
+
+    Parameters
+    ----------
+    paths : iterable of path-like
+        The run's inputs (images, polygon files, a Theta file, a map).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> d = tempfile.mkdtemp()
+    >>> a = os.path.join(d, "a.png"); open(a, "w").close()
+    >>> inputs = RunInputs([a, os.path.join(d, "b.png")])
+    >>> inputs.find(os.path.join(d, ".", "a.png")) == a
+    True
+    >>> inputs.find(os.path.join(d, "c.png")) is None
+    True
+    """
+
+    def __init__(self, paths=()) -> None:
+        self._ids: dict[tuple[int, int], str] = {}
+        self._paths: dict[str, str] = {}
+        for p in paths:
+            self.add(p)
+
+    def add(self, path: str | os.PathLike[str]) -> None:
+        """Count ``path`` among the inputs."""
+        name = os.fspath(path)
+        self._paths.setdefault(os.path.realpath(name), name)
+        try:
+            st = os.stat(name)
+        except (OSError, ValueError):
+            return
+        self._ids.setdefault((st.st_dev, st.st_ino), name)
+
+    def find(self, path: str | os.PathLike[str]) -> str | None:
+        """The input that ``path`` is (as the user named it), or None."""
+        name = os.fspath(path)
+        try:
+            st = os.stat(name)
+        except (OSError, ValueError):
+            pass
+        else:
+            if (st.st_dev, st.st_ino) in self._ids:
+                return self._ids[(st.st_dev, st.st_ino)]
+        return self._paths.get(os.path.realpath(name))
+
+    def check(self, path: str | os.PathLike[str]) -> None:
+        """Refuse ``path`` as an output if it is one of the inputs.
+
+        Raises
+        ------
+        ImageInputError
+            ``"OUT: output would overwrite the input IN"``.
+        """
+        other = self.find(path)
+        if other is not None:
+            raise ImageInputError(f"{os.fspath(path)}: output would overwrite the input {other}")
 
 
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def output_mode(path: str | os.PathLike[str]) -> int:
+    """The permissions a file written at ``path`` gets, as an ordinary ``open`` would give it.
+
+    mkstemp creates its files 0600; an output renamed from one would stay
+    private. A new file gets ``0666 & ~umask``; a file replaced keeps its
+    own permissions (as an editor saving it does).
+
+    Parameters
+    ----------
+    path : path-like
+        The output's final path.
+
+    Returns
+    -------
+    int
+        The permission bits.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> out = os.path.join(tempfile.mkdtemp(), "a.txt")
+    >>> output_mode(out) == 0o666 & ~_umask()
+    True
+    >>> open(out, "w").close(); os.chmod(out, 0o640)
+    >>> oct(output_mode(out))
+    '0o640'
+    """
+    try:
+        st = os.stat(path)
+    except OSError:
+        return 0o666 & ~_umask()
+    if stat.S_ISREG(st.st_mode):
+        return stat.S_IMODE(st.st_mode)
+    return 0o666 & ~_umask()
 
 
 def file_size_limit() -> int | None:
@@ -411,21 +561,34 @@ class PendingOutputs:
         directory, base = os.path.split(name)
         stem, ext = os.path.splitext(base)
         fd, tmp = tempfile.mkstemp(prefix=f".{stem}{PENDING_MARKER}", suffix=ext, dir=directory)
+        _live.add(tmp)
         os.close(fd)
+        _finals[tmp] = os.fspath(final)
         self._pending.append((tmp, name))
         return tmp
 
     def __exit__(
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
+        global _renaming, _end_after_renames
         pending, self._pending = self._pending, []
+        for tmp, _ in pending:
+            _finals.pop(tmp, None)
         if exc_type is None:
+            _renaming += 1
             try:
                 for k, (tmp, final) in enumerate(pending):
+                    os.chmod(tmp, output_mode(final))
                     os.replace(tmp, final)
+                    _live.discard(tmp)
             except OSError as err:
                 _remove(tmp for tmp, _ in pending[k:])
                 raise ImageIOError(f"{final}: cannot move the output into place: {err.strerror or err}") from err
+            finally:
+                _renaming -= 1
+                end, _end_after_renames = _end_after_renames, None
+                if end is not None and not _renaming:
+                    end()
         else:
             _remove(tmp for tmp, _ in pending)
             # Messages name the user's paths, not the pending ones.
@@ -439,6 +602,7 @@ class PendingOutputs:
 
 def _remove(paths) -> None:
     for tmp in paths:
+        _live.discard(tmp)
         try:
             os.unlink(tmp)
         except FileNotFoundError:

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .annotations import warp_labels
-from .errors import ImageInputError, InputError, WarpError
+from .errors import ImageInputError, InputError, WarpError, naming
 from .maps.compose import BijectiveMap, PullBack
 from .budget import check_fits
 from .options import WarpOptions, resolve_options
@@ -333,6 +333,21 @@ class _EarlyMap:
         return cls(src, dst, opts, regions)
 
 
+def _warn_if_relabelled(src: Polygon, dst: Polygon) -> None:
+    """Warn when the target's vertex list starts elsewhere: src's vertex i matches
+    dst's vertex i + k far better than vertex i (the warp then twists the image)."""
+    from .polygon import cyclic_relabelling
+
+    found = cyclic_relabelling(src, dst)
+    if found is not None:
+        k, d0, dk = found
+        log.warning(
+            "%s matches %s far better with its vertex i onto vertex i + %d than onto vertex i (shape distance %.2g "
+            "against %.2g): the warp twists the image; start %s's vertex list at its vertex %d if that is not "
+            "what you want", src.name, dst.name, k, dk, d0, dst.name, k,
+        )  # fmt: skip
+
+
 def warp_file(
     input_path: str | os.PathLike[str],
     output_path: str | os.PathLike[str],
@@ -418,7 +433,7 @@ def warp_file(
         raise InputError(f"unknown heatmap measure {heatmap_measure!r}; choose one of {', '.join(HEATMAP_MEASURES)}")
     clock = time.perf_counter
     stage = progress or (lambda name: None)
-    inputs = (input_path, src_path, dst_path)
+    inputs = tuple(p for p in (input_path, src_path, dst_path, opts.map.theta_file) if p is not None)
     labels = [(label_in, label_out) for label_in, label_out in labels]
     if labels and opts.outside == "input":
         raise InputError(f"{os.fspath(labels[0][0])}: labels are warped onto the background, not with --outside input")
@@ -470,6 +485,12 @@ def warp_file(
             src.name,
             dst.name,
         )
+    else:
+        _warn_if_relabelled(src, dst)
+    try:  # an image with other channels than the background's: name the image
+        background_values(opts.background, image.pixels)
+    except InputError as err:
+        raise naming(err, os.fspath(input_path)) from err
     result = _warp(image.pixels, src, dst, opts, image.alpha_channel, image.associated_alpha, None, progress, early)
     # Every output is written under a pending name and renamed into place
     # only when all are written: a run's outputs succeed or fail together.

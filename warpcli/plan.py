@@ -386,7 +386,9 @@ def check_paste(outside: str, size: tuple[int, int], input_size: tuple[int, int]
 
 
 def warn_if_outside(poly: Polygon, size: tuple[int, int], image_name: str, consequence: str) -> None:
-    """Warn when a polygon misses an image of ``size`` (width, height) entirely."""
+    """Warn when a polygon misses an image of ``size`` (width, height) entirely, or is
+    in normalised 0..1 coordinates on an image of `NORMALISED_MIN_SIDE` pixels or more
+    (a speck in its top-left pixel: nearly all the output would be background)."""
     xmin, ymin, xmax, ymax = poly.bounds
     width, height = size
     if xmax <= 0 or ymax <= 0 or xmin >= width or ymin >= height:
@@ -394,6 +396,15 @@ def warn_if_outside(poly: Polygon, size: tuple[int, int], image_name: str, conse
             "%s lies entirely outside %s (%dx%d): the output will be %s", poly.name, image_name, width, height,
             consequence,
         )  # fmt: skip
+    elif xmin >= 0 and ymin >= 0 and xmax <= 1 and ymax <= 1 and min(width, height) >= NORMALISED_MIN_SIDE:
+        log.warning(
+            "%s lies within 0..1 but %s is %dx%d pixels: polygon coordinates are pixels (x right, y down), "
+            "not normalised; multiply them by the image's width and height", poly.name, image_name, width, height,
+        )  # fmt: skip
+
+
+#: The least side of an image on which a polygon within 0..1 is taken for normalised coordinates.
+NORMALISED_MIN_SIDE = 32
 
 
 def plan_for(

@@ -27,7 +27,7 @@ from .errors import InputError
 from .maps.compose import BijectiveMap
 from .options import MapOptions
 from .files import read_small_file
-from .outputs import PendingOutputs, write_checked
+from .outputs import PendingOutputs, check_output_path, write_checked
 from .polygon import check_pair, read_polygon
 
 log = logging.getLogger("warpcli")
@@ -37,7 +37,8 @@ OUTSIDE = ("keep", "error")
 #: Largest points file read, in bytes.
 MAX_BYTES = 256 << 20
 
-_VT = re.compile(rb"^(\s*vt\s+)(\S+)(\s+)(\S+)(.*)$", re.S)
+# A file's first line may start with a UTF-8 byte order mark (kept, byte for byte).
+_VT = re.compile(rb"^((?:\xef\xbb\xbf)?\s*vt\s+)(\S+)(\s+)(\S+)(.*)$", re.S)
 
 
 @dataclass(frozen=True)
@@ -104,8 +105,8 @@ def map_points_file(
         raise InputError(f"{name}: points must be a .json, .csv or .obj file")
     if os.path.splitext(os.fspath(output_path))[1].lower() != kind:
         raise InputError(f"{os.fspath(output_path)}: the output must have the input's format ({kind})")
-    if os.path.exists(output_path) and os.path.samefile(output_path, name):
-        raise InputError(f"{os.fspath(output_path)}: output would overwrite the input {name}")
+    theta_file = (options or MapOptions()).theta_file
+    check_output_path(output_path, inputs=tuple(p for p in (name, src_path, dst_path, theta_file) if p is not None))
     if kind == ".obj" and texture_size is None:
         raise InputError(f"{name}: an OBJ file's UVs need the texture size (--texture-size WxH)")
     raw = _read(name)
@@ -152,7 +153,7 @@ def _as_xy(values, name: str) -> NDArray[np.float64]:
 
 def _json_points(raw: bytes, name: str):
     try:
-        doc = json.loads(raw.decode("utf-8"))
+        doc = json.loads(raw.decode("utf-8-sig"))
     except (UnicodeDecodeError, ValueError, RecursionError) as err:
         raise InputError(f"{name}: invalid JSON: {err}") from None
     wrapped = isinstance(doc, dict)
@@ -166,7 +167,7 @@ def _json_points(raw: bytes, name: str):
 
 
 def _csv_points(raw: bytes, name: str):
-    lines = raw.decode("utf-8", errors="replace").splitlines()
+    lines = raw.decode("utf-8-sig", errors="replace").splitlines()  # a BOM is not part of the first line
     header = []
     if lines and not _numeric(lines[0]):
         header = [lines[0]]

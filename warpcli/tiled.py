@@ -42,7 +42,7 @@ from .maps.compose import BijectiveMap
 from .options import WarpOptions
 from .plan import SamplingPlan, plan_for, warn_if_outside
 from .polygon import Polygon
-from .raster.imageio import ImageHeader, read_header
+from .raster.imageio import ImageHeader, read_header, size_limit_lifted
 from .raster.parts import TILE, PartReader, StripWriter, check_writable_in_parts, output_format
 
 log = logging.getLogger("warpcli")
@@ -117,7 +117,9 @@ def warp_file_tiled(
     timings.update(compose=0.0, resample=0.0, write=0.0)
     stage("warping in strips")
     log.info("%s: warping in strips of %d rows, %d x %d -> %d x %d", name, TILE, header.width, header.height, width, height)
-    with atomic_path(output_path) as tmp, PartReader(input_path, header) as reader:
+    # OpenImageIO's size limit (a guard for whole-image decoders) must not refuse
+    # the images strips exist for: the input is read and the output checked in parts.
+    with size_limit_lifted(), atomic_path(output_path) as tmp, PartReader(input_path, header) as reader:
         writer = StripWriter(tmp, output_path, width, height, out_header)
         try:
             for y in range(0, height, TILE):

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 
 import click
 
 from ..errors import WarpError
+from ..outputs import end_when_consistent, remove_temporaries
 from .apply_map import apply_map
 from .exits import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, exit_code
 from .group import DefaultGroup
@@ -23,11 +25,31 @@ cli = DefaultGroup(
 
 
 class Terminated(BaseException):
-    """SIGTERM arrived: unwind like Ctrl-C, so that no temporary file stays behind."""
+    """SIGTERM arrived (kept for callers that catch it; `main` now ends the process at once)."""
 
 
 def _terminate(signum, frame):
-    raise Terminated()
+    """End the run now: temporary and pending files removed, one line, exit 143.
+
+    Raising an exception here, to unwind like Ctrl-C, is not safe: SIGTERM
+    can arrive while a module is imported (OpenImageIO's nanobind module
+    aborts the process with "Critical nanobind error" when its import is
+    interrupted), while the import or logging lock is held (the unwinding
+    then waits on it for ever), or inside code that catches the exception
+    and goes on to exit 0. So nothing is unwound: the files this process
+    created are removed (`warpcli.outputs.remove_temporaries`), and the line
+    goes straight to file descriptor 2, without Python's stream locks. Pending
+    outputs being renamed into place finish first, so that a run leaves all
+    of them or none.
+    """
+    def end():
+        remove_temporaries()
+        try:
+            os.write(2, b"warp: terminated\n")
+        finally:
+            os._exit(EXIT_TERMINATED)
+
+    end_when_consistent(end)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -149,7 +149,12 @@ def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, r
     used = [name for name, value in single_only.items() if value is not None]
     from ..sequence import is_pattern
 
-    if frames is not None or any(is_pattern(p) for p in paths):
+    if frames is None and out_dir is None and len(paths) == 2 and _numbered(paths[1]) and not is_pattern(paths[0]):
+        raise click.UsageError(
+            f"{paths[1]}: OUTPUT is a sequence pattern but INPUT {paths[0]} is one image; "
+            "give INPUT as a pattern too (with --frames), or OUTPUT as a file name"
+        )
+    if frames is not None or (out_dir is None and scheduler is None and _sequence_paths(paths)):
         if out_dir is not None or scheduler is not None:
             raise click.UsageError("--frames takes an OUTPUT pattern, not --out-dir or --scheduler")
         if len(paths) != 2:
@@ -170,6 +175,24 @@ def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, r
     if len(paths) != 2:
         raise click.UsageError(f"expected INPUT and OUTPUT (or INPUTs with --out-dir DIR), got {len(paths)} path(s)")
     _single(*paths, polygons, options, outputs)
+
+
+def _sequence_paths(paths) -> bool:
+    """Whether paths given without --frames or --out-dir name a sequence: an INPUT
+    pattern that is not itself an existing file (``photo@2x.png`` is a file name)."""
+    import os
+
+    from ..sequence import is_pattern
+
+    return bool(paths) and is_pattern(paths[0]) and not os.path.isfile(paths[0])
+
+
+def _numbered(path) -> bool:
+    """Whether ``path`` is a sequence pattern by # or %d: ``@`` alone is common in file names (``icon@2x.png``)."""
+    from ..sequence import parse_pattern
+
+    found = parse_pattern(path)
+    return found is not None and "@" not in found.wildcard.replace("#", "")
 
 
 def _single(input_path, output_path, polygons, options, outputs) -> None:

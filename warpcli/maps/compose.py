@@ -19,7 +19,7 @@ from ..polygon import Polygon, check_pair
 from ..mapping import Certificate, ComposedMap
 from .base import ThetaMap
 from .registry import METHODS, THETAS
-from .theta import Theta, from_file
+from .theta import SMOOTH_MAX_ASPECT, Theta, aspect_ratio, from_file
 
 #: The compiled helpers of the composition (`warpcli.maps._kernels`), loaded without numba.
 _compiled = Kernels("warpcli.maps._kernels")
@@ -349,7 +349,8 @@ def theta_for(src: Polygon, dst: Polygon, options) -> Theta:
     ------
     InputError
         If the file cannot be read, or mixed conditions meet another Theta
-        or polygons that are not quadrilaterals.
+        or polygons that are not quadrilaterals; also for a file's Theta
+        flatter than `warpcli.maps.theta.SMOOTH_MAX_ASPECT` with BEM or MFS.
     """
     if getattr(options, "conditions", "dirichlet") == "mixed":
         # §5.2: natural boundary conditions need Theta to be the unit square.
@@ -360,7 +361,17 @@ def theta_for(src: Polygon, dst: Polygon, options) -> Theta:
         return Theta(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]), name="unit square")
     if options.theta in THETAS:
         return THETAS[options.theta].load()(src, dst, options)
-    return from_file(options.theta, src.n)
+    theta = from_file(options.theta, src.n)
+    method = getattr(options, "method", "fem")
+    if method in ("bem", "mfs"):
+        ratio = aspect_ratio(theta.points)
+        if ratio > SMOOTH_MAX_ASPECT:
+            raise InputError(
+                f"{options.theta}: Theta is too flat for --method {method} (its axes' ratio is {ratio:.3g}:1, the "
+                f"limit is {SMOOTH_MAX_ASPECT:g}:1); stretching Theta does not change the map: "
+                "scale it to a rounder box, or use --method fem"
+            )
+    return theta
 
 
 def build_map(

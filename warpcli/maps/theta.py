@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -52,6 +53,13 @@ class Theta:
             raise InputError(f"{self.name}: Theta needs at least 3 [x, y] vertices, got shape {pts.shape}")
         if not np.isfinite(pts).all():
             raise InputError(f"{self.name}: Theta has a non-finite coordinate")
+        big = float(np.abs(pts).max())
+        if big > THETA_COORD_LIMIT:
+            # Beyond it, the products of the convexity test overflow: say so, not "not convex".
+            raise InputError(
+                f"{self.name}: Theta's coordinates are too large ({big:.3g}; the limit is {THETA_COORD_LIMIT:g}): "
+                "scale it down, the map does not depend on Theta's size"
+            )
         bad = _not_strictly_convex(pts)
         if bad is not None:
             raise InputError(f"{self.name}: Theta must be strictly convex, but it is not at vertex {bad}")
@@ -279,3 +287,26 @@ def from_file(path: str, n: int) -> Theta:
     if len(arr) != n:
         raise InputError(f"{path}: Theta has {len(arr)} vertices but the polygons have {n}")
     return Theta(arr, name=path)
+
+
+#: Largest Theta coordinate magnitude: the convexity test's cross products
+#: (up to (2 x)^2) stay finite below about 6.7e153.
+THETA_COORD_LIMIT = 1e150
+#: Largest ratio of a user Theta's principal axes that BEM and MFS take. The
+#: composed map does not depend on an affine change of Theta (FEM's does not
+#: to 4e-14 px up to 1e9:1), but BEM's and MFS's fits do once Theta is very
+#: flat: for a regular 7-gon stretched s times in x, their maps agree with
+#: s = 1 to 4e-13 px up to s = 1e6, then differ by 0.8 px at 1e7, 8.4 px at
+#: 1e8 and 43 px at 1e9 (a folded, collapsed map the certificate passes).
+SMOOTH_MAX_ASPECT = 1e6
+
+
+def aspect_ratio(points: NDArray[np.float64]) -> float:
+    """The ratio of the principal axes of a polygon's vertices (1 for a regular polygon).
+
+    >>> round(aspect_ratio(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 1.0], [0.0, 1.0]])), 6)
+    4.0
+    """
+    centred = points - points.mean(axis=0)
+    ev = np.linalg.eigvalsh(centred.T @ centred)
+    return float(np.sqrt(ev[1] / ev[0])) if ev[0] > 0 else math.inf

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from .formats import MAX_FILE_BYTES, read_polygon
 from .predicates import signed_area
-from .shape import COORD_LIMIT, Polygon, check_pair
+from .shape import COORD_LIMIT, Polygon, check_pair, cyclic_relabelling
 from .validate import MIN_CLEARANCE, MIN_CLEARANCE_RELATIVE, clearance_floor, validate_points
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "Polygon",
     "check_pair",
     "clearance_floor",
+    "cyclic_relabelling",
     "read_polygon",
     "signed_area",
     "validate_points",

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import PolygonError
-from .messages import format_below, format_number, format_point
+from .messages import format_number, format_point
 from .predicates import intersection_point, orient, orient_sign, point_segment_distance, segments_touch, signed_area
 
 __all__ = ["MIN_CLEARANCE", "MIN_CLEARANCE_RELATIVE", "check_edges", "clearance_floor", "validate_points"]
@@ -252,29 +252,47 @@ def check_edges(pts: NDArray[np.float64], name: str, *, clearance: bool, grid: b
         )
     if not clearance:
         return scan.tested
-    note = _floor_note(floor)
     length = np.hypot(b[:, 0] - a[:, 0], b[:, 1] - a[:, 1])
     short = np.flatnonzero(length < floor)
     if short.size:
         i = int(short[np.argmin(length[short])])
         j = (i + 1) % n
+        value, limit = _apart(length[i], floor)
         raise PolygonError(
-            f"{name}: edge {i} is too short: {format_below(length[i], floor)} px from vertex {i} "
-            f"{format_point(pts[i])} to vertex {j} {format_point(pts[j])} (the minimum is {note})"
+            f"{name}: edge {i} is too short: {value} px from vertex {i} "
+            f"{format_point(pts[i])} to vertex {j} {format_point(pts[j])} (the minimum is {_floor_note(floor, limit)})"
         )
     if scan.near is not None:
         d, v, e = scan.near
+        value, limit = _apart(d, floor)
         raise PolygonError(
-            f"{name}: polygon is too thin: vertex {v} {format_point(pts[v])} is {format_below(d, floor)} px from "
-            f"edge {e} (the minimum clearance is {note})"
+            f"{name}: polygon is too thin: vertex {v} {format_point(pts[v])} is {value} px from "
+            f"edge {e} (the minimum clearance is {_floor_note(floor, limit)})"
         )
     return scan.tested
 
 
-def _floor_note(floor: float) -> str:
+def _apart(value: float, floor: float) -> tuple[str, str]:
+    """``value`` (< ``floor``) and ``floor`` written with enough digits to show the one below
+    the other: a 1.0 px edge under a floor of 1.0000003 px is not "1.0 px, the minimum is 1.0 px".
+
+    >>> _apart(1.0, 1.0000003)
+    ('1.0', '1.0000003')
+    >>> _apart(0.0005, 0.001)
+    ('0.0005', '0.001')
+    """
+    for digits in (6, 9, 12, 17):
+        a, b = f"{float(value):.{digits}g}", f"{float(floor):.{digits}g}"
+        if float(a) < float(b):
+            break
+    return tuple(t if any(ch in t for ch in ".en") else t + ".0" for t in (a, b))  # type: ignore[return-value]
+
+
+def _floor_note(floor: float, shown: str | None = None) -> str:
+    shown = shown or format_number(floor)
     if format_number(floor) != format_number(MIN_CLEARANCE):
-        return f"{format_number(floor)} px for a polygon this large: {MIN_CLEARANCE_RELATIVE:g} of its bounding box's diagonal"
-    return f"{format_number(floor)} px"
+        return f"{shown} px for a polygon this large: {MIN_CLEARANCE_RELATIVE:g} of its bounding box's diagonal"
+    return f"{shown} px"
 
 
 class _PairScan:

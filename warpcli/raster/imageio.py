@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import re
+import threading
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -14,7 +17,9 @@ from ..budget import check_fits
 from ..capture import c_stderr, one_line
 from ..errors import ImageInputError, ImageIOError
 from ..files import check_regular_file, format_bytes
-from ..outputs import atomic_path, check_output_path, check_room, copy_from_memory, memory_file, write_failure_message
+from ..outputs import (
+    RunInputs, atomic_path, check_output_path, check_room, copy_from_memory, final_path, memory_file, write_failure_message,
+)
 from .dtypes import DTYPES
 from .pixels import from_unit, premultiplied, to_unit
 
@@ -224,6 +229,40 @@ class ImageHeader:
         return (self.height, self.width) if self.orientation in (5, 6, 7, 8) else (self.width, self.height)
 
 
+_limit_lock = threading.Lock()
+_limit_users = 0
+_limit_saved = 0
+
+
+@contextlib.contextmanager
+def size_limit_lifted() -> Iterator[None]:
+    """OpenImageIO's image-size limit lifted for the block.
+
+    OpenImageIO refuses to open an image whose decoded size exceeds
+    ``limits:imagesize_MB`` (by default about the machine's memory), a guard
+    for readers that decode a whole image. A header read decodes nothing, and
+    strips (`warpcli.raster.parts`) read and write parts: there the limit
+    would refuse exactly the images they exist for. Whole images are guarded
+    by `warpcli.budget.check_fits` from their headers. The attribute is
+    global: nested and concurrent blocks share one lift, undone by the last.
+    """
+    import OpenImageIO as oiio
+
+    global _limit_users, _limit_saved
+    with _limit_lock:
+        if _limit_users == 0:
+            _limit_saved = oiio.get_int_attribute("limits:imagesize_MB", 0)
+            oiio.attribute("limits:imagesize_MB", 0)  # 0: no limit
+        _limit_users += 1
+    try:
+        yield
+    finally:
+        with _limit_lock:
+            _limit_users -= 1
+            if _limit_users == 0:
+                oiio.attribute("limits:imagesize_MB", _limit_saved)
+
+
 def read_header(path: str | os.PathLike[str]) -> ImageHeader:
     """The header of the image at ``path``, as `read_image` would read it, without its pixels.
 
@@ -234,7 +273,8 @@ def read_header(path: str | os.PathLike[str]) -> ImageHeader:
         reads, or of a pixel type with no numpy twin (or per-channel types).
     """
     name = os.fspath(path)
-    inp, _ = _open_input(name)
+    with size_limit_lifted():  # no pixel is decoded
+        inp, _ = _open_input(name)
     try:
         spec = inp.spec()
     finally:
@@ -266,7 +306,7 @@ def convert_pixels(pixels: NDArray, dtype: str) -> NDArray:
     return from_unit(to_unit(px), target)
 
 
-def check_image_output(path: str | os.PathLike[str], inputs: tuple[str | os.PathLike[str], ...] = ()) -> None:
+def check_image_output(path: str | os.PathLike[str], inputs: tuple[str | os.PathLike[str], ...] | RunInputs = ()) -> None:
     """Check before any work that an image can be written at ``path``.
 
     `warpcli.outputs.check_output_path`'s checks, then that OpenImageIO
@@ -276,7 +316,7 @@ def check_image_output(path: str | os.PathLike[str], inputs: tuple[str | os.Path
     ----------
     path : path-like
         The output; its extension picks the format.
-    inputs : tuple of path-like
+    inputs : tuple of path-like, or warpcli.outputs.RunInputs
         Paths that must not be overwritten.
 
     Raises
@@ -348,6 +388,11 @@ def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
     if out is None:
         raise ImageIOError(f"{shown_name}: cannot write: {_oiio_error(oiio)}")
     fmt = out.format_name()
+    if fmt == "jpeg" and (image.alpha_channel is not None or nc in (2, 4)):
+        _log.warning(
+            "%s: JPEG has no alpha channel: the image's alpha is dropped (PNG, TIFF and OpenEXR keep it)",
+            final_path(shown_name),
+        )
     spec, premultiply = output_spec(
         oiio, fmt, (w, h, nc), type_name, image.channel_names, image.alpha_channel, image.associated_alpha,
         image.attributes,

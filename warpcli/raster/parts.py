@@ -14,6 +14,7 @@ channel names, alpha and its convention, and metadata.
 
 from __future__ import annotations
 
+import errno
 import os
 
 import numpy as np
@@ -21,8 +22,8 @@ from numpy.typing import NDArray
 
 from ..capture import c_stderr, one_line
 from ..errors import ImageInputError, ImageIOError
-from ..outputs import write_failure_message
-from .imageio import OIIO_TYPES, ImageHeader, output_spec, verify_written
+from ..outputs import check_room, file_size_limit, write_failure_message
+from .imageio import OIIO_TYPES, ImageHeader, output_spec, size_limit_lifted, verify_written
 from .pixels import premultiplied
 
 #: Rows of a strip, and the side of a tile in tiled outputs.
@@ -83,11 +84,30 @@ class PartReader:
             self.close()
 
 
+#: Formats whose files cannot be written strip by strip, by name for messages: libjpeg
+#: ends the process when a write fails and the room for the whole file cannot be
+#: checked first; libwebp's writer never returns from a failed write (a full
+#: disk); OpenImageIO's JPEG 2000 writer leaves an empty file when given strips.
+NOT_IN_PARTS = {"jpeg": "JPEG", "webp": "WebP", "jpeg2000": "JPEG 2000"}
+
+
 def check_writable_in_parts(fmt: str, shown_name: str) -> None:
-    """Refuse a format that cannot be written strip by strip (JPEG: libjpeg ends the
-    process when a write fails, and the room for the whole file cannot be checked first)."""
-    if fmt == "jpeg":
-        raise ImageInputError(f"{shown_name}: JPEG cannot be written in parts; write TIFF, OpenEXR or PNG")
+    """Refuse a format that cannot be written strip by strip (`NOT_IN_PARTS`).
+
+    Raises
+    ------
+    ImageInputError
+        ``"OUT: JPEG cannot be written in parts; write TIFF, OpenEXR or PNG"``.
+    """
+    if fmt in NOT_IN_PARTS:
+        raise ImageInputError(f"{shown_name}: {NOT_IN_PARTS[fmt]} cannot be written in parts; write TIFF, OpenEXR or PNG")
+
+
+#: Formats written without compression, whose files hold at least a byte per
+#: sample (when no "compression" attribute asks otherwise): a file smaller than
+#: that was cut short, although their writers report no error (a full disk, a
+#: file size limit: BMP, SGI and FITS writers ignore failed writes).
+UNCOMPRESSED = ("bmp", "cineon", "dpx", "fits", "pnm", "sgi", "targa")
 
 
 def output_format(path: str) -> str:
@@ -97,6 +117,32 @@ def output_format(path: str) -> str:
     out = oiio.ImageOutput.create(path)
     oiio.geterror()
     return "" if out is None else out.format_name()
+
+
+def _uncompressed(spec) -> bool:
+    return spec.get_string_attribute("compression", "none").lower() in ("", "none")
+
+
+def _first_hole(filename: str, size: int) -> int | None:
+    """The offset of the first hole (bytes never written) in a file, or None (or where unknown)."""
+    if not hasattr(os, "SEEK_HOLE"):
+        return None
+    fd = os.open(filename, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+    try:
+        at = os.lseek(fd, 0, os.SEEK_HOLE)
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    return at if at < size else None
+
+
+def _nearly_full(filename: str) -> bool:
+    try:
+        vfs = os.statvfs(os.path.dirname(os.path.abspath(filename)))
+    except OSError:
+        return False
+    return vfs.f_bavail * vfs.f_frsize < 2 * max(vfs.f_bsize, 4096)
 
 
 class StripWriter:
@@ -133,6 +179,11 @@ class StripWriter:
             oiio, self.format, (width, height, header.channels), OIIO_TYPES[header.dtype], header.channel_names,
             header.alpha_channel, header.associated_alpha, header.attributes,
         )  # fmt: skip
+        if self.format in UNCOMPRESSED and _uncompressed(spec):
+            # Their writers ignore failed writes, and FITS's seeks over what it could
+            # not write (a sparse file of the full size): room for them is checked first.
+            least = width * height * header.channels
+            check_room(filename, shown_name, least, f"a {self.format.upper()} of {width} x {height} takes at least {least} bytes")
         self.tiled = bool(out.supports("tiles"))
         if self.tiled:
             spec.tile_width = spec.tile_height = TILE
@@ -174,7 +225,25 @@ class StripWriter:
         problem = one_line(self._out.geterror(), said.text, default="")
         if not ok:
             self._fail(problem or "unknown error")
-        verify_written(self._oiio, self.filename, self.format, self._spec, None, self.shown_name, problem)
+        spec = self._spec
+        if self.format in UNCOMPRESSED and _uncompressed(spec):
+            least = spec.width * spec.height * spec.nchannels
+            try:
+                actual = os.stat(self.filename).st_size
+                hole = _first_hole(self.filename, actual)
+            except OSError as err:
+                raise ImageIOError(f"{self.shown_name}: cannot write: {err.strerror or err}") from err
+            if actual < least:
+                limit = file_size_limit()
+                why = f"{os.strerror(errno.EFBIG)}: " if limit is not None and least > limit else ""
+                self._fail(f"{why}the {self.format.upper()} file is cut short at {actual} bytes (at least {least} expected)")
+            if hole is not None and _nearly_full(self.filename):
+                # A hole the writer seeked over on a full disk (a file system that
+                # compresses may also store zeros as holes: only a full disk counts).
+                self._fail(f"{os.strerror(errno.ENOSPC)}: the {self.format.upper()} file has unwritten bytes from {hole}")
+        # The read-back opens the header only; OpenImageIO's size limit must not refuse it.
+        with size_limit_lifted():
+            verify_written(self._oiio, self.filename, self.format, spec, None, self.shown_name, problem)
 
     def abandon(self) -> None:
         """Give up the file (its temporary path is removed by `warpcli.outputs.atomic_path`)."""

@@ -17,6 +17,8 @@ from ..files import read_small_file
 #: Surface formats read by extension.
 SURFACE_EXTENSIONS = (".obj", ".off", ".ply")
 
+#: Largest cage coordinate magnitude: the cube of twice it (volumes) stays finite.
+CAGE_COORD_LIMIT = 1e100
 #: A triangle whose area is below this fraction of the squared diameter is degenerate.
 DEGENERATE_AREA = 1e-14
 
@@ -178,6 +180,13 @@ def from_faces(vertices: ArrayLike, faces, name: str = "surface") -> Surface:
     if not np.isfinite(v).all():
         bad = int(np.flatnonzero(~np.isfinite(v).all(axis=1))[0])
         raise SurfaceError(f"{name}: vertex {bad} has a non-finite coordinate")
+    if v.size and np.abs(v).max() > CAGE_COORD_LIMIT:
+        # Areas and volumes (products of up to three differences) would overflow: say so, not "degenerate face".
+        bad = int(np.argmax(np.abs(v).max(axis=1)))
+        raise SurfaceError(
+            f"{name}: vertex {bad} is too far out ({np.abs(v[bad]).max():.3g}; the limit is {CAGE_COORD_LIMIT:g}): "
+            "scale the cage down"
+        )
     if isinstance(faces, np.ndarray) and faces.ndim == 2:
         groups = {faces.shape[1]: (np.arange(len(faces)), faces.astype(np.int64))}
     else:

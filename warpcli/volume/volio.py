@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import io
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -86,7 +88,43 @@ def read_volume(path: str | os.PathLike[str]) -> Volume:
     check_regular_file(name, "volume", ImageInputError)
     if kind == "nifti":
         return _read_nifti(name)
-    return _read_tiff(name)
+    with tifffile_log() as said:
+        check_pages(name)
+        volume = _read_tiff(name)
+    if said:
+        # tifffile skipped what it could not read (a page past the end of a
+        # file cut short): the volume would lack pages without a word.
+        raise ImageInputError(f"{name}: cannot read TIFF: the file is damaged: {said[0]}")
+    return volume
+
+
+@contextlib.contextmanager
+def tifffile_log() -> Iterator[list[str]]:
+    """tifffile's log lines during the block, kept from stderr and collected.
+
+    tifffile logs what it skips in a damaged file ("invalid page offset")
+    through the logging module, which would print it before warpcli's own
+    message; here each line is one item of the yielded list, for the caller
+    to turn into its message.
+    """
+    import logging
+
+    said: list[str] = []
+
+    class Collect(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            said.append(" ".join(record.getMessage().split()))
+
+    logger = logging.getLogger("tifffile")
+    handler = Collect(logging.WARNING)
+    old = logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        yield said
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = old
 
 
 def _check_memory(name: str, nbytes: int) -> None:
@@ -122,6 +160,7 @@ def _read_nifti(name: str) -> Volume:
         raw = raw[..., None]
     data = np.ascontiguousarray(np.transpose(raw, (2, 1, 0, 3)))  # (i, j, k, c) -> (k, j, i, c)
     affine = np.asarray(img.affine, dtype=np.float64)
+    check_affine(name, affine)
     return Volume(data, VoxelGrid(tuple(int(s) for s in shape[:3]), affine), "nifti", img)  # type: ignore[arg-type]
 
 
@@ -145,6 +184,59 @@ def _read_tiff(name: str) -> Volume:
         )
     nz, ny, nx, _ = data.shape
     return Volume(np.ascontiguousarray(data), tiff_grid((nx, ny, nz)), "tiff", None)
+
+
+def check_affine(name: str, affine: NDArray[np.float64]) -> None:
+    """Refuse a voxel-to-world affine that is not finite or not invertible (the
+    cages would be blamed for what is the volume's header).
+
+    Raises
+    ------
+    ImageInputError
+        Naming the volume file.
+    """
+    if affine.shape != (4, 4) or not np.isfinite(affine).all():
+        raise ImageInputError(f"{name}: the header's voxel-to-world affine is not finite: {np.round(affine, 6).tolist()}")
+    det = float(np.linalg.det(affine[:3, :3]))
+    if not (np.isfinite(det) and abs(det) > 0):
+        raise ImageInputError(f"{name}: the header's voxel-to-world affine is singular (voxels of zero volume)")
+
+
+def check_pages(name: str) -> None:
+    """Refuse a TIFF stack whose pages differ in pixel type, size or samples.
+
+    tifffile reads such a file as several series, and the first would be a
+    volume with pages missing (the others dropped, or their bytes read as
+    another type): a wrong result without a word. Only the pages' headers are
+    read; a file tifffile cannot parse is left to `read_volume` to report.
+
+    Parameters
+    ----------
+    name : str
+        The TIFF file.
+
+    Raises
+    ------
+    ImageInputError
+        Naming the first page that differs from page 1, and how.
+    """
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(name) as tif:
+            kinds = [(np.dtype(p.dtype) if p.dtype is not None else None, tuple(p.shape)) for p in tif.pages]
+    except (tifffile.TiffFileError, OSError, ValueError, TypeError):
+        return
+    for k, kind in enumerate(kinds[1:], start=2):
+        if kind != kinds[0]:
+            raise ImageInputError(
+                f"{name}: page {k} holds {_page_kind(kind)}, page 1 {_page_kind(kinds[0])}; "
+                "a volume's pages must all have one pixel type and size"
+            )
+
+
+def _page_kind(kind) -> str:
+    return f"{kind[0]} pixels of shape {' x '.join(map(str, kind[1]))}"
 
 
 def check_volume_output(path: str | os.PathLike[str], inputs: tuple = ()) -> None:
