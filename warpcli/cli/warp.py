@@ -140,9 +140,11 @@ def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, r
             raise click.UsageError("--frames takes an OUTPUT pattern, not --out-dir or --scheduler")
         if len(paths) != 2:
             raise click.UsageError(f"expected an INPUT and an OUTPUT pattern with --frames, got {len(paths)} path(s)")
-        if used:
-            raise click.UsageError(f"{', '.join(used)} applies to a single warp, not to a sequence")
-        _sequence(paths, frames, polygons, options, jobs)
+        per_frame = ("--save-map", "--save-forward-map")  # sequences write one map per frame
+        if [name for name in used if name not in per_frame]:
+            names = ", ".join(name for name in used if name not in per_frame)
+            raise click.UsageError(f"{names} applies to a single warp, not to a sequence")
+        _sequence(paths, frames, polygons, options, jobs, outputs)
         return
     if out_dir is not None:
         if used:
@@ -192,10 +194,10 @@ def _single(input_path, output_path, polygons, options, outputs) -> None:
         log.debug("%s: %s", key.replace("_", " "), value)
 
 
-def _sequence(paths, frames, polygons, options, jobs=1):
+def _sequence(paths, frames, polygons, options, jobs=1, outputs=None):
     """Warp the frames of a sequence; report failed frames one line each and go on."""
     from ..errors import InputError
-    from ..batch import warp_sequence
+    from ..batch import FrameMaps, warp_sequence
     from ..sequence import is_pattern, missing_frames_error, parse_frames
 
     if frames is None:
@@ -203,9 +205,12 @@ def _sequence(paths, frames, polygons, options, jobs=1):
     for path in paths:
         if not is_pattern(path):
             raise InputError(f"{path}: with --frames, INPUT and OUTPUT are sequence patterns (shot.#.exr, shot.%04d.exr)")
+    maps = None
+    if outputs is not None and (outputs.save_map is not None or outputs.save_forward_map is not None):
+        maps = FrameMaps(outputs.save_map, outputs.save_forward_map, outputs.stmap_t == "up")
     items = warp_sequence(
         paths[0], paths[1], parse_frames(frames), polygons.src_path, polygons.dst_path, options,
-        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=_report_item, jobs=jobs,
+        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=_report_item, jobs=jobs, maps=maps,
     )  # fmt: skip
     _exit_for(items, "frames")
 
