@@ -412,7 +412,7 @@ def _warp_run_in_worker(src, dst, tasks, opts, maps, level, filters):
 def warp_sequence(
     input_pattern: str,
     output_pattern: str,
-    frames: Sequence[int],
+    frames: Sequence[int] | None,
     src_path: str | os.PathLike[str],
     dst_path: str | os.PathLike[str],
     options: WarpOptions | None = None,
@@ -445,8 +445,10 @@ def warp_sequence(
     ----------
     input_pattern, output_pattern : str
         Sequence patterns; the output's must differ from the input's.
-    frames : sequence of int
-        The frames, in order (`warpcli.sequence.parse_frames`).
+    frames : sequence of int, or None
+        The frames, in order (`warpcli.sequence.parse_frames`); None: those
+        of the input pattern on disk (`warpcli.sequence.frames_from_disk`,
+        which logs how many as a warning).
     src_path, dst_path : path-like
         Polygon files, still or keyframed.
     options : WarpOptions or None
@@ -469,14 +471,19 @@ def warp_sequence(
     ------
     InputError
         At once, before any work: bad patterns, polygons (at any frame) or
-        options, an output that is an input. A frame that fails later (a
-        missing or unreadable image, a write error) is reported through
-        ``on_item`` and in its item, and the rest go on.
+        options, an output that is an input, an input pattern that finds no
+        frame where Nuke's reading of ``####`` would (the message says so). A
+        frame that fails later (a missing or unreadable image, a write
+        error) is reported through ``on_item`` and in its item, and the
+        rest go on.
     """
     from .keyframes import read_animated
-    from .sequence import expand, parse_pattern
+    from .sequence import expand, frames_from_disk, other_reading_hint, parse_pattern
 
     opts = resolve_options(options, changes)
+    if frames is None:
+        frames, message = frames_from_disk(input_pattern)
+        logging.getLogger("warpcli").warning("%s", message)
     if not (isinstance(jobs, int) and jobs >= 1):
         raise InputError(f"jobs must be a whole number of at least 1, got {jobs!r}")
     patterns = {"input": parse_pattern(os.fspath(input_pattern))}
@@ -501,6 +508,9 @@ def warp_sequence(
                 check_stmap_path(pattern)
     ins = expand(os.fspath(input_pattern), frames)
     outs = expand(os.fspath(output_pattern), frames)
+    hint = other_reading_hint(input_pattern, frames)  # shot.####.exr typed as in Nuke
+    if hint is not None:
+        raise InputError(hint)
     for (f, inp), (_, out) in zip(ins, outs):
         check_image_output(out, inputs=(inp, src_path, dst_path))
         for extra in maps.paths(f) if maps is not None else ():

@@ -95,8 +95,9 @@ single_outputs = collected(
 @click.option(
     "--frames",
     metavar="SPEC",
-    help="Image sequences: INPUT and OUTPUT are patterns (shot.#.exr: # is 4 digits, @ one, or %04d) and SPEC "
-    "the frames: 1001-1100, 1-100x2, 1,5,10-12. Polygon files may hold keyframes; one map per distinct pair.",
+    help="Image sequences: INPUT and OUTPUT are patterns (shot.#.exr: # is 4 digits as in oiiotool, @ one, or %04d) "
+    "and SPEC the frames: 1001-1100, 1-100x2, 1,5,10-12; without it, the frames of INPUT on disk. Polygon files may "
+    "hold keyframes; one map per distinct pair. --save-map map.#.exr writes one STMap per frame.",
 )
 @click.option("--inverse", is_flag=True, help="Undo the warp from SRC to DST: map DST onto SRC (the same polygon files, swapped).")
 @click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
@@ -198,10 +199,8 @@ def _sequence(paths, frames, polygons, options, jobs=1, outputs=None):
     """Warp the frames of a sequence; report failed frames one line each and go on."""
     from ..errors import InputError
     from ..batch import FrameMaps, warp_sequence
-    from ..sequence import is_pattern, missing_frames_error, parse_frames
+    from ..sequence import is_pattern, parse_frames
 
-    if frames is None:
-        raise missing_frames_error(paths[0])
     for path in paths:
         if not is_pattern(path):
             raise InputError(f"{path}: with --frames, INPUT and OUTPUT are sequence patterns (shot.#.exr, shot.%04d.exr)")
@@ -209,7 +208,7 @@ def _sequence(paths, frames, polygons, options, jobs=1, outputs=None):
     if outputs is not None and (outputs.save_map is not None or outputs.save_forward_map is not None):
         maps = FrameMaps(outputs.save_map, outputs.save_forward_map, outputs.stmap_t == "up")
     items = warp_sequence(
-        paths[0], paths[1], parse_frames(frames), polygons.src_path, polygons.dst_path, options,
+        paths[0], paths[1], None if frames is None else parse_frames(frames), polygons.src_path, polygons.dst_path, options,
         src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=_report_item, jobs=jobs, maps=maps,
     )  # fmt: skip
     _exit_for(items, "frames")
