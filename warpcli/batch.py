@@ -30,7 +30,7 @@ from .raster.imageio import check_image_output, read_image
 from .tiled import in_parts, warp_file_tiled
 
 __all__ = [
-    "BatchItem", "FrameMaps", "PlanCache", "output_name", "prepare_batch", "warp_batch", "warp_one", "warp_run", "warp_sequence",
+    "BatchItem", "FrameMaps", "PlanCache", "apply_map_sequence", "output_name", "prepare_batch", "warp_batch", "warp_one", "warp_run", "warp_sequence",
 ]  # fmt: skip
 
 
@@ -592,3 +592,106 @@ def _in_processes(units, pairs, opts, maps, width, on_item) -> list[BatchItem]:
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
     return items
+
+
+def apply_map_sequence(
+    map_path: str | os.PathLike[str],
+    input_pattern: str,
+    output_pattern: str,
+    frames: Sequence[int] | None,
+    options: WarpOptions | None = None,
+    *,
+    t_up: bool | None = None,
+    on_item: Callable[[BatchItem], None] | None = None,
+    jobs: int = 1,
+    **changes: Any,
+) -> list[BatchItem]:
+    """Warp the frames of a sequence with saved STMaps: one per frame (a pattern), or one for all.
+
+    Each frame is what `warpcli.pipeline.apply_map_file` makes of it. A map
+    file is read once for all the frames that use it (per input size): one
+    map over the whole sequence, or the hard links `FrameMaps` writes for
+    frames that share a map.
+
+    Parameters
+    ----------
+    map_path : str or path-like
+        A sequence pattern (``map.#.exr``: frame ``f`` uses ``map.000f.exr``)
+        or one STMap for every frame.
+    input_pattern, output_pattern : str
+        Sequence patterns, different.
+    frames : sequence of int, or None
+        The frames; None: those of the input pattern on disk (logged).
+    options : WarpOptions or None
+        ``interp``, ``background`` and ``dtype`` are used; ``**changes`` change them.
+    t_up : bool or None
+        Which way the maps' t runs; None: as each map's header says.
+    on_item : callable or None
+        Called with each `BatchItem`, in frame order.
+    jobs : int
+        Threads warping frames at once (bytes as with 1).
+
+    Returns
+    -------
+    list of BatchItem
+        In frame order; a frame whose map, input or output fails is reported
+        in its item and the others go on.
+
+    Raises
+    ------
+    InputError
+        At once, for bad patterns or options, or an output that is an input.
+    """
+    from .raster.stmap import check_stmap_path, load_stmap
+    from .sequence import expand, frames_from_disk, other_reading_hint, parse_pattern
+
+    opts = resolve_options(options, changes)
+    if frames is None:
+        frames, message = frames_from_disk(input_pattern)
+        logging.getLogger("warpcli").warning("%s", message)
+    seqs = {}
+    for what, pattern in (("input", input_pattern), ("output", output_pattern), ("map", map_path)):
+        seqs[what] = parse_pattern(os.fspath(pattern))
+        if seqs[what] is None and what != "map":
+            raise InputError(f"{os.fspath(pattern)}: the {what} of a sequence must be a pattern (#, @ or %04d)")
+    if seqs["output"].pattern in (seqs["input"].pattern, seqs["map"] and seqs["map"].pattern):
+        raise InputError(f"{output_pattern}: the output pattern is an input pattern; frames would be overwritten")
+    check_stmap_path(os.fspath(map_path))
+    ins = expand(os.fspath(input_pattern), frames)
+    outs = expand(os.fspath(output_pattern), frames)
+    for seq in (seqs["input"], seqs["map"]):
+        hint = None if seq is None else other_reading_hint(seq.pattern, frames)
+        if hint is not None:
+            raise InputError(hint)
+    tasks = []
+    for (f, inp), (_, out) in zip(ins, outs):
+        mp = seqs["map"].path(f) if seqs["map"] is not None else os.fspath(map_path)
+        check_image_output(out, inputs=(inp, mp))
+        tasks.append((mp, inp, out))
+    plans: dict[tuple, SamplingPlan] = {}
+    lock = threading.Lock()
+
+    def one(task: tuple[str, str, str]) -> BatchItem:
+        mp, inp, out = task
+        try:
+            image = read_image(inp)
+            try:
+                st = os.stat(mp)
+                key = (st.st_dev, st.st_ino, st.st_mtime_ns, image.width, image.height)
+            except OSError:
+                key = (mp, image.width, image.height)  # load_stmap says what is wrong
+            with lock:  # one load per distinct map file
+                plan = plans.get(key)
+                if plan is None:
+                    points = load_stmap(mp, (image.width, image.height), t_up=t_up)
+                    plan = SamplingPlan.from_points(points, interp=opts.interp, background=opts.background)
+                    if len(plans) > jobs:  # a map per frame: keep those of the frames in flight, not all
+                        del plans[next(iter(plans))]
+                    plans[key] = plan
+            px = plan.render(image.pixels, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha)
+            write_like(out, image, px, opts.dtype)
+            return BatchItem(inp, out)
+        except WarpError as err:
+            return BatchItem(inp, out, err)
+
+    return _each(one, tasks, jobs, on_item)

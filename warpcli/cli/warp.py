@@ -99,6 +99,7 @@ single_outputs = collected(
     "and SPEC the frames: 1001-1100, 1-100x2, 1,5,10-12; without it, the frames of INPUT on disk. Polygon files may "
     "hold keyframes; one map per distinct pair. --save-map map.#.exr writes one STMap per frame.",
 )
+@click.option("--frame", "frame", type=int, metavar="N", help="Keyframed polygon files in a single warp: the polygons at frame N.")
 @click.option("--inverse", is_flag=True, help="Undo the warp from SRC to DST: map DST onto SRC (the same polygon files, swapped).")
 @click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
 @click.option("--scheduler", metavar="ADDRESS|local", help="Batch: run on a Dask cluster (tcp://host:8786), or 'local' for a LocalCluster of --jobs processes; the map is built here once and shipped. Needs warpcli[dask].")
@@ -109,7 +110,7 @@ single_outputs = collected(
 @single_outputs
 @verbosity
 @click.version_option(__version__, "--version", prog_name="warp")
-def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, resampling, mapping, outputs):  # fmt: skip
+def warp(paths, polygons, frames, frame, inverse, out_dir, scheduler, jobs, out_name, resampling, mapping, outputs):  # fmt: skip
     """Warp INPUT so that polygon SRC goes onto polygon DST; write OUTPUT.
 
     The map is smooth and bijective (no fold-overs) and takes each edge of SRC
@@ -139,6 +140,8 @@ def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, r
     if frames is not None or any(is_pattern(p) for p in paths):
         if out_dir is not None or scheduler is not None:
             raise click.UsageError("--frames takes an OUTPUT pattern, not --out-dir or --scheduler")
+        if frame is not None:
+            raise click.UsageError("--frame N picks one frame of keyframed polygons for a single warp; a sequence takes each frame's")
         if len(paths) != 2:
             raise click.UsageError(f"expected an INPUT and an OUTPUT pattern with --frames, got {len(paths)} path(s)")
         per_frame = ("--save-map", "--save-forward-map")  # sequences write one map per frame
@@ -148,8 +151,8 @@ def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, r
         _sequence(paths, frames, polygons, options, jobs, outputs)
         return
     if out_dir is not None:
-        if used:
-            raise click.UsageError(f"{', '.join(used)} applies to a single warp, not to --out-dir")
+        if used or frame is not None:
+            raise click.UsageError(f"{', '.join(used + (['--frame'] if frame is not None else []))} applies to a single warp, not to --out-dir")
         if not paths:
             raise click.UsageError("no INPUT given")
         _batch(paths, out_dir, out_name, polygons, options, jobs, scheduler)
@@ -158,10 +161,10 @@ def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, r
         raise click.UsageError("--scheduler runs a batch: give --out-dir DIR")
     if len(paths) != 2:
         raise click.UsageError(f"expected INPUT and OUTPUT (or INPUTs with --out-dir DIR), got {len(paths)} path(s)")
-    _single(*paths, polygons, options, outputs)
+    _single(*paths, polygons, options, outputs, frame)
 
 
-def _single(input_path, output_path, polygons, options, outputs) -> None:
+def _single(input_path, output_path, polygons, options, outputs, frame=None) -> None:
     """Warp one image, with the extra outputs asked for; log the timings (-v) and the map (-vv)."""
     from ..pipeline import warp_file
 
@@ -186,6 +189,7 @@ def _single(input_path, output_path, polygons, options, outputs) -> None:
             heatmap_measure=outputs.heatmap_measure,
             progress=progress.stage,
             tiled=True if outputs.tiled else None,
+            frame=frame,
         )
     if outputs.report_path == "-":
         click.echo(json.dumps(result.report, indent=2))
@@ -209,9 +213,9 @@ def _sequence(paths, frames, polygons, options, jobs=1, outputs=None):
         maps = FrameMaps(outputs.save_map, outputs.save_forward_map, outputs.stmap_t == "up")
     items = warp_sequence(
         paths[0], paths[1], None if frames is None else parse_frames(frames), polygons.src_path, polygons.dst_path, options,
-        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=_report_item, jobs=jobs, maps=maps,
+        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=report_item, jobs=jobs, maps=maps,
     )  # fmt: skip
-    _exit_for(items, "frames")
+    exit_for(items, "frames")
 
 
 def _batch(paths, out_dir, out_name, polygons, options, jobs=1, scheduler=None):
@@ -221,21 +225,21 @@ def _batch(paths, out_dir, out_name, polygons, options, jobs=1, scheduler=None):
 
         items = warp_batch_dask(
             list(paths), out_dir, polygons.src_path, polygons.dst_path, options, scheduler=scheduler,
-            pattern=out_name, src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=_report_item,
+            pattern=out_name, src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=report_item,
             workers=jobs,
         )  # fmt: skip
-        _exit_for(items, "inputs")
+        exit_for(items, "inputs")
         return
     from ..batch import warp_batch
 
     items = warp_batch(
         list(paths), out_dir, polygons.src_path, polygons.dst_path, options, pattern=out_name,
-        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=_report_item, jobs=jobs,
+        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=report_item, jobs=jobs,
     )  # fmt: skip
-    _exit_for(items, "inputs")
+    exit_for(items, "inputs")
 
 
-def _report_item(item) -> None:
+def report_item(item) -> None:
     """One line per failed input (always), one per written output (with -v)."""
     if item.error is None:
         logging.getLogger("warpcli").info("wrote %s", item.output_path)
@@ -243,7 +247,7 @@ def _report_item(item) -> None:
         click.echo(f"warp: error: {item.error}", err=True)
 
 
-def _exit_for(items, what: str) -> None:
+def exit_for(items, what: str) -> None:
     """Batch exit status: the worst failure's, after every item was tried."""
     failed = [item for item in items if item.error is not None]
     if failed:
