@@ -55,11 +55,11 @@ def apply_map(map_path, input_path, output_path, resampling, stmap_t, frames, jo
 def _sequence(map_path, input_path, output_path, resampling, t_up, frames, jobs) -> None:
     """Every frame through its map; failed frames one line each, the others go on."""
     from ..batch import apply_map_sequence
-    from ..sequence import parse_frames
-    from .warp import exit_for, report_item
+    from .warp import exit_for, frames_or_disk, progress_for, reporter
 
-    items = apply_map_sequence(
-        map_path, input_path, output_path, None if frames is None else parse_frames(frames), resampling,
-        t_up=t_up, on_item=report_item, jobs=jobs,
-    )  # fmt: skip
+    spec = frames_or_disk(frames, input_path)
+    with progress_for(spec) as progress:
+        items = apply_map_sequence(
+            map_path, input_path, output_path, spec, resampling, t_up=t_up, on_item=reporter(progress), jobs=jobs
+        )
     exit_for(items, "frames")

@@ -203,7 +203,7 @@ def _sequence(paths, frames, polygons, options, jobs=1, outputs=None):
     """Warp the frames of a sequence; report failed frames one line each and go on."""
     from ..errors import InputError
     from ..batch import FrameMaps, warp_sequence
-    from ..sequence import is_pattern, parse_frames
+    from ..sequence import is_pattern
 
     for path in paths:
         if not is_pattern(path):
@@ -211,10 +211,12 @@ def _sequence(paths, frames, polygons, options, jobs=1, outputs=None):
     maps = None
     if outputs is not None and (outputs.save_map is not None or outputs.save_forward_map is not None):
         maps = FrameMaps(outputs.save_map, outputs.save_forward_map, outputs.stmap_t == "up")
-    items = warp_sequence(
-        paths[0], paths[1], None if frames is None else parse_frames(frames), polygons.src_path, polygons.dst_path, options,
-        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=report_item, jobs=jobs, maps=maps,
-    )  # fmt: skip
+    spec = frames_or_disk(frames, paths[0])
+    with progress_for(spec) as progress:
+        items = warp_sequence(
+            paths[0], paths[1], spec, polygons.src_path, polygons.dst_path, options, src_label=polygons.src_label,
+            dst_label=polygons.dst_label, on_item=reporter(progress), jobs=jobs, maps=maps,
+        )  # fmt: skip
     exit_for(items, "frames")
 
 
@@ -237,6 +239,34 @@ def _batch(paths, out_dir, out_name, polygons, options, jobs=1, scheduler=None):
         src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=report_item, jobs=jobs,
     )  # fmt: skip
     exit_for(items, "inputs")
+
+
+def frames_or_disk(frames: str | None, pattern: str) -> tuple[int, ...]:
+    """--frames SPEC, or without it the frames of the input pattern on disk (said in one line)."""
+    from ..sequence import frames_from_disk, parse_frames
+
+    if frames is not None:
+        return parse_frames(frames)
+    spec, message = frames_from_disk(pattern)
+    logging.getLogger("warpcli").warning("%s", message)
+    return spec
+
+
+def progress_for(frames) -> Progress:
+    """The progress line of a sequence: frames done of the total, rate and time left (terminal only, not -q)."""
+    log = logging.getLogger("warpcli")
+    return Progress(sys.stderr, enabled=log.isEnabledFor(logging.WARNING), total=None if frames is None else len(frames))
+
+
+def reporter(progress: Progress):
+    """`report_item` under a progress line: the line is cleared before a message and counts the item."""
+
+    def report(item) -> None:
+        progress.clear()
+        report_item(item)
+        progress.item_done()
+
+    return report
 
 
 def report_item(item) -> None:
