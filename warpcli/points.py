@@ -241,8 +241,10 @@ def _table_points(raw: bytes, name: str, kind: str, columns: tuple[str, str] | N
     decimal_comma = sep in (";", "\t") and any("," in f for fields in split for f in fields) and not any(
         "." in f for fields in split for f in fields
     )
-    header = None if all(_number(f, decimal_comma) is not None for f in split[0]) else split[0]
-    ix, iy = _xy_columns(header, columns, name)
+    ix, iy, named = _xy_columns(split[0], columns, name)
+    # The first line is a header when it names the columns, or its x and y are not numbers.
+    numeric = all(i < len(split[0]) and _number(split[0][i], decimal_comma) is not None for i in (ix, iy))
+    header = split[0] if named or not numeric else None
     body = rows[1:] if header is not None else rows
     fields_of = split[1:] if header is not None else split
     pts = []
@@ -314,26 +316,29 @@ def _number(field: str, decimal_comma: bool) -> float | None:
         return None
 
 
-def _xy_columns(header: list[str] | None, columns: tuple[str, str] | None, name: str) -> tuple[int, int]:
-    """The 0-based x and y columns: as given, else named x and y in the header, else the first two."""
-    names = [] if header is None else [h.strip().strip('"').strip().lower() for h in header]
+def _xy_columns(first: list[str], columns: tuple[str, str] | None, name: str) -> tuple[int, int, bool]:
+    """The 0-based x and y columns, and whether the first line names them (a header): as given
+    (names or numbers from 1), else the columns the first line names x and y, else the first two."""
+    names = [h.strip().strip('"').strip().lower() for h in first]
     if columns is not None:
-        picked = []
+        picked, named = [], False
         for col in columns:
             key = str(col).strip()
             if key.isdigit() and int(key) >= 1:
                 picked.append(int(key) - 1)
             elif key.lower() in names:
                 picked.append(names.index(key.lower()))
+                named = True
             else:
-                known = f"the header has {', '.join(header)}" if header is not None else "the file has no header"
-                raise InputError(f"{name}: no column {key!r} ({known}); give header names or numbers from 1")
+                raise InputError(
+                    f"{name}: no column {key!r} (the first line has {', '.join(first)[:60]}); give header names or numbers from 1"
+                )
         if picked[0] == picked[1]:
             raise InputError(f"{name}: x and y are the same column ({picked[0] + 1})")
-        return picked[0], picked[1]
+        return picked[0], picked[1], named
     if "x" in names and "y" in names:
-        return names.index("x"), names.index("y")
-    return 0, 1
+        return names.index("x"), names.index("y"), True
+    return 0, 1, False
 
 
 def _obj_points(raw: bytes, name: str, size: tuple[int, int]):

@@ -570,9 +570,11 @@ def other_reading_hint(pattern: str | os.PathLike[str], frames: Iterable[int] | 
         return None
     example = theirs[0]
     simple = f"{seq.prefix}%0{other.padding}d{seq.suffix}" if other.padding > 1 else f"{seq.prefix}%d{seq.suffix}"
+    digits = "digits" if other.padding > 1 else "digit, unpadded"
     return (
-        f"{seq.pattern}: no frame found: each # is 4 digits here, as in oiiotool ({seq.path(example)}), but "
-        f"{other.path(example)} exists, as Nuke reads {seq.wildcard}; write {simple} for {other.padding} digit(s)"
+        f"{seq.pattern}: no frame found: each # is 4 digits here, as in oiiotool "
+        f"({os.path.basename(seq.path(example))}), but {os.path.basename(other.path(example))} exists, as Nuke "
+        f"reads {seq.wildcard}; for {other.padding} {digits} write {simple}"
     )
 
 
