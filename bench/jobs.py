@@ -22,6 +22,7 @@ import hashlib
 import json
 import math
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -60,6 +61,12 @@ def digest(directory: str) -> dict[str, str]:
     return {name: hashlib.sha256(open(os.path.join(directory, name), "rb").read()).hexdigest() for name in sorted(os.listdir(directory))}
 
 
+def _children_cpu() -> float:
+    """User and system seconds of the finished child processes (and theirs) so far."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=50)
@@ -84,6 +91,7 @@ def main(argv: list[str] | None = None) -> None:
             with open(os.path.join(tmp, name), "w") as fh:
                 json.dump(pts, fh)
         times: dict[int, list[float]] = {j: [] for j in jobs}
+        cpu: dict[int, list[float]] = {j: [] for j in jobs}
         hashes: dict[int, dict[str, str]] = {}
         for r in range(args.rounds):
             for j in (jobs if r % 2 == 0 else jobs[::-1]):
@@ -95,18 +103,20 @@ def main(argv: list[str] | None = None) -> None:
                     cmd = [warp, ins, os.path.join(out, f"out.#.{args.format}"), "--frames", f"1-{args.frames}", *polys, "--jobs", str(j), "-q"]
                 else:
                     cmd = [warp, *frames, *polys, "--out-dir", out, "--jobs", str(j), "-q"]
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), _children_cpu()
                 subprocess.run(cmd, check=True)
                 times[j].append(time.perf_counter() - t0)
+                cpu[j].append(_children_cpu() - c0)
                 hashes[j] = digest(out)
-                print(f"round {r + 1} jobs {j}: {times[j][-1]:.2f} s", file=sys.stderr, flush=True)
+                print(f"round {r + 1} jobs {j}: {times[j][-1]:.2f} s, {cpu[j][-1]:.2f} s of CPU", file=sys.stderr, flush=True)
     base = statistics.median(times[jobs[0]])
     print(f"{args.shot}: {args.frames} frames of {w}x{h} {args.format.upper()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}; median of {args.rounds}")
-    print("| jobs | seconds (median) | per frame | speed-up vs jobs %d | outputs identical to jobs %d |" % (jobs[0], jobs[0]))
-    print("|---:|---:|---:|---:|---|")
+    print("| jobs | seconds (median) | per frame | CPU seconds (median) | speed-up vs jobs %d | outputs identical to jobs %d |" % (jobs[0], jobs[0]))
+    print("|---:|---:|---:|---:|---:|---|")
     for j in jobs:
         m = statistics.median(times[j])
-        print(f"| {j} | {m:.2f} | {m / args.frames:.3f} | {base / m:.2f} | {'yes' if hashes[j] == hashes[jobs[0]] else 'NO'} |")
+        c = statistics.median(cpu[j])
+        print(f"| {j} | {m:.2f} | {m / args.frames:.3f} | {c:.2f} | {base / m:.2f} | {'yes' if hashes[j] == hashes[jobs[0]] else 'NO'} |")
 
 
 if __name__ == "__main__":
