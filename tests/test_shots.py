@@ -280,3 +280,33 @@ def test_the_progress_line_is_drawn_and_cleared_on_a_terminal():
         p.item_done()
         time.sleep(0.1)
     assert "frames 1/3" in term.text and term.text.endswith("\r\x1b[K")
+
+
+@pytest.mark.parametrize("jobs", [1, 3])
+def test_still_polygons_write_one_map_for_the_whole_sequence_on_any_number_of_threads(tmp_path, jobs):
+    _frames(tmp_path / "in", range(1, 6))
+    src = write_polygon(tmp_path / "s.json", star(n=5, cx=48, cy=36, r_in=11, r_out=30))
+    dst = write_polygon(tmp_path / "d.json", star(n=5, cx=48, cy=36, r_in=9, r_out=32, phase=0.3))
+    code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", "1-5", "--jobs", jobs, "--save-map", tmp_path / "m.%03d.tif"])
+    assert code == 0, err
+    assert len({os.stat(tmp_path / f"m.{f:03d}.tif").st_ino for f in range(1, 6)}) == 1
+    assert os.stat(tmp_path / "m.001.tif").st_nlink == 5
+    code, err = run_cli([tmp_path / "in" / "shot.0001.png", tmp_path / "one.png", "--src", src, "--dst", dst, "--save-map", tmp_path / "one.tif"])
+    assert code == 0, err
+    assert (tmp_path / "one.tif").read_bytes() == (tmp_path / "m.003.tif").read_bytes()
+
+
+def test_sequence_maps_must_be_float_patterns_apart_from_the_frames(tmp_path):
+    _frames(tmp_path / "in", [1])
+    src = write_polygon(tmp_path / "s.json", star(n=5, cx=48, cy=36, r_in=11, r_out=30))
+    base = [tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", src, "--frames", "1"]
+    for extra, match in (
+        (["--save-map", tmp_path / "m.exr"], "must be a pattern"),
+        (["--save-map", tmp_path / "m.#.png"], "float OpenEXR"),
+        (["--save-map", tmp_path / "out.#.png"], "frames would be overwritten"),
+        (["--save-map", tmp_path / "m.#.exr", "--save-forward-map", tmp_path / "m.#.exr"], "frames would be overwritten"),
+        (["--report", tmp_path / "r.json"], "not to a sequence"),
+    ):
+        code, err = run_cli([*base, *extra])
+        assert code == 2 and err.count("\n") == 1 and match in err, err
+        assert not list(tmp_path.glob("out.*")) and not list(tmp_path.glob("m.*"))

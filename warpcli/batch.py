@@ -30,7 +30,8 @@ from .raster.imageio import check_image_output, read_image
 from .tiled import in_parts, warp_file_tiled
 
 __all__ = [
-    "BatchItem", "FrameMaps", "PlanCache", "apply_map_sequence", "output_name", "prepare_batch", "warp_batch", "warp_one", "warp_run", "warp_sequence",
+    "BatchItem", "FrameMaps", "PlanCache", "RunMaps", "apply_map_sequence", "link_or_copy", "output_name", "prepare_batch",
+    "warp_batch", "warp_one", "warp_run", "warp_sequence",
 ]  # fmt: skip
 
 
@@ -244,8 +245,16 @@ class FrameMaps:
         return tuple(None if p is None else frame_path(p, frame) for p in (self.inverse, self.forward))  # type: ignore[return-value]
 
 
-class _RunMaps:
-    """The map files of one run written so far, by (input size, output size): later frames link to them."""
+class RunMaps:
+    """The map files of one run of frames (one polygon pair), shared by the threads warping them.
+
+    The first frame of each (input size, output size) writes its maps; the
+    others wait for it and link to them (`link_or_copy`).
+
+    Parameters
+    ----------
+    maps : FrameMaps
+    """
 
     def __init__(self, maps: FrameMaps) -> None:
         self.maps = maps
@@ -253,6 +262,13 @@ class _RunMaps:
         self.lock = threading.Lock()
 
     def save(self, frame: int, fmap: BijectiveMap, plan: SamplingPlan, in_size: tuple[int, int]) -> None:
+        """Write (or link) the maps of ``frame``, warped with ``plan`` from an input of ``in_size``.
+
+        Raises
+        ------
+        ImageIOError
+            If a file cannot be written.
+        """
         from .raster.stmap import save_stmap
 
         paths = self.maps.paths(frame)
@@ -291,7 +307,7 @@ def link_or_copy(source: str, target: str) -> None:
 
 
 def warp_one(
-    inp: str, out: str, plans: PlanCache, *, frame: int | None = None, maps: _RunMaps | None = None
+    inp: str, out: str, plans: PlanCache, *, frame: int | None = None, maps: RunMaps | None = None
 ) -> BatchItem:
     """One image of a batch or sequence: read, render through its size's plan, write; its error in the item.
 
@@ -304,8 +320,9 @@ def warp_one(
     plans : PlanCache
     frame : int or None
         The frame number, in a sequence writing maps.
-    maps : optional
-        A run's map files (`warp_run`), written (or linked) before the frame.
+    maps : RunMaps or None
+        A run's map files (`warp_run`), written (or linked) before the frame
+        (which is then warped whole, never in strips).
 
     Returns
     -------
@@ -387,7 +404,7 @@ def warp_run(
             if on_item is not None:
                 on_item(item)
         return done
-    run_maps = None if maps is None else _RunMaps(maps)
+    run_maps = None if maps is None else RunMaps(maps)
     return _each(lambda task: warp_one(task[0], task[1], plans, frame=task[2], maps=run_maps), list(tasks), jobs, on_item)
 
 
