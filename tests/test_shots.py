@@ -310,3 +310,11 @@ def test_sequence_maps_must_be_float_patterns_apart_from_the_frames(tmp_path):
         code, err = run_cli([*base, *extra])
         assert code == 2 and err.count("\n") == 1 and match in err, err
         assert not list(tmp_path.glob("out.*")) and not list(tmp_path.glob("m.*"))
+
+
+def test_an_output_pattern_with_hash_runs_is_warned_about(tmp_path):
+    _frames(tmp_path / "in", [7])
+    src = write_polygon(tmp_path / "s.json", star(n=5, cx=48, cy=36, r_in=11, r_out=30))
+    code, err = run_cli([tmp_path / "in" / "shot.%04d.png", tmp_path / "out.####.png", "--src", src, "--dst", src, "--frames", "7"])
+    assert code == 0 and err.count("\n") == 1 and "out.0000000000000007.png" in err and "out.%04d.png" in err, err
+    assert (tmp_path / "out.0000000000000007.png").exists()

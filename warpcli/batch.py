@@ -528,6 +528,7 @@ def warp_sequence(
     hint = other_reading_hint(input_pattern, frames)  # shot.####.exr typed as in Nuke
     if hint is not None:
         raise InputError(hint)
+    _warn_about_outputs([output_pattern, *((maps.inverse, maps.forward) if maps is not None else ())], frames)
     for (f, inp), (_, out) in zip(ins, outs):
         check_image_output(out, inputs=(inp, src_path, dst_path))
         for extra in maps.paths(f) if maps is not None else ():
@@ -562,6 +563,16 @@ def warp_sequence(
         size = len(tasks) if maps is not None else max(1, math.ceil(len(ins) / width))
         units += [tasks[k : k + size] for k in range(0, len(tasks), size)]
     return _in_processes(units, pairs, opts, maps, width, on_item)
+
+
+def _warn_about_outputs(patterns, frames) -> None:
+    """One warning per output pattern written with ``##``... (16 digits for ``####`` here, 4 in Nuke)."""
+    from .sequence import output_reading_warning
+
+    for pattern in patterns:
+        line = None if pattern is None or not frames else output_reading_warning(pattern, frames[0])
+        if line is not None:
+            logging.getLogger("warpcli").warning("%s", line)
 
 
 def _processes(jobs: int, runs: int, ins: list[tuple[int, str]], opts: WarpOptions) -> int:
@@ -680,6 +691,7 @@ def apply_map_sequence(
         hint = None if seq is None else other_reading_hint(seq.pattern, frames)
         if hint is not None:
             raise InputError(hint)
+    _warn_about_outputs([output_pattern], frames)
     tasks = []
     for (f, inp), (_, out) in zip(ins, outs):
         mp = seqs["map"].path(f) if seqs["map"] is not None else os.fspath(map_path)

@@ -25,6 +25,7 @@ __all__ = [
     "missing_frames_error",
     "nuke_reading",
     "other_reading_hint",
+    "output_reading_warning",
     "parse_frames",
     "parse_pattern",
 ]
@@ -650,3 +651,27 @@ def frames_from_disk(pattern: str | os.PathLike[str], option: str = "--frames") 
 
 def _cut_text(text: str, most: int) -> str:
     return text if len(text) <= most else text[: most - 3] + "..."
+
+
+def output_reading_warning(pattern: str | os.PathLike[str], frame: int) -> str | None:
+    """A line for an output pattern whose ``##``... would be read otherwise in Nuke (None for any other).
+
+    A run of two or more ``#`` is 4 digits per ``#`` here (``####``: 16), where
+    Nuke writes one digit per ``#``: worth saying before a shot is written
+    under names no compositor expects.
+
+    Examples
+    --------
+    >>> print(output_reading_warning("out.####.exr", 1001))
+    out.####.exr: each # is 4 digits, as in oiiotool, so frames are written as out.0000000000001001.exr; for 4 digits write out.%04d.exr
+    >>> output_reading_warning("out.#.exr", 1001) is None
+    True
+    """
+    seq = _require_pattern(pattern)
+    other = nuke_reading(pattern)
+    if other is None or len(seq.wildcard) < 2:
+        return None
+    return (
+        f"{seq.pattern}: each # is 4 digits, as in oiiotool, so frames are written as "
+        f"{os.path.basename(seq.path(frame))}; for {other.padding} digits write {seq.prefix}%0{other.padding}d{seq.suffix}"
+    )

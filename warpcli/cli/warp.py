@@ -234,10 +234,11 @@ def _batch(paths, out_dir, out_name, polygons, options, jobs=1, scheduler=None):
         return
     from ..batch import warp_batch
 
-    items = warp_batch(
-        list(paths), out_dir, polygons.src_path, polygons.dst_path, options, pattern=out_name,
-        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=report_item, jobs=jobs,
-    )  # fmt: skip
+    with progress_for(paths, "inputs") as progress:
+        items = warp_batch(
+            list(paths), out_dir, polygons.src_path, polygons.dst_path, options, pattern=out_name,
+            src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=reporter(progress), jobs=jobs,
+        )  # fmt: skip
     exit_for(items, "inputs")
 
 
@@ -252,10 +253,10 @@ def frames_or_disk(frames: str | None, pattern: str) -> tuple[int, ...]:
     return spec
 
 
-def progress_for(frames) -> Progress:
-    """The progress line of a sequence: frames done of the total, rate and time left (terminal only, not -q)."""
+def progress_for(items, what: str = "frames") -> Progress:
+    """The progress line of a sequence or batch: items done of the total, rate and time left (terminal only, not -q)."""
     log = logging.getLogger("warpcli")
-    return Progress(sys.stderr, enabled=log.isEnabledFor(logging.WARNING), total=None if frames is None else len(frames))
+    return Progress(sys.stderr, enabled=log.isEnabledFor(logging.WARNING), total=len(items), what=what)
 
 
 def reporter(progress: Progress):
