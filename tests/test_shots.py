@@ -318,3 +318,19 @@ def test_an_output_pattern_with_hash_runs_is_warned_about(tmp_path):
     code, err = run_cli([tmp_path / "in" / "shot.%04d.png", tmp_path / "out.####.png", "--src", src, "--dst", src, "--frames", "7"])
     assert code == 0 and err.count("\n") == 1 and "out.0000000000000007.png" in err and "out.%04d.png" in err, err
     assert (tmp_path / "out.0000000000000007.png").exists()
+
+
+@pytest.mark.parametrize("budget, processes", [(600_000, False), (10_000_000, True)])
+def test_worker_processes_stay_within_the_memory_budget(tmp_path, monkeypatch, budget, processes):
+    """A frame of 96 x 72 RGB needs 0.44 MB (its pixels, the output and its map): 0.6 MB holds one at a time."""
+    import concurrent.futures
+
+    _frames(tmp_path / "in", range(1, 4))
+    src, dst = _animated(tmp_path, 3, 1, 3)
+    started = []
+    real = concurrent.futures.ProcessPoolExecutor
+    monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", lambda *a, **k: started.append(k["max_workers"]) or real(*a, **k))
+    monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", str(budget))
+    code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", "1-3", "--jobs", 2])
+    assert code == 0, err
+    assert started == ([2] if processes else [])
