@@ -1,7 +1,13 @@
-"""Batch speed-up with --jobs: N frames of about 2 MP through one map, jobs 1 against 2 (and more).
+"""Batch and sequence speed-up with --jobs: N frames through one map, or a shot with a map per frame.
 
     python bench/jobs.py                      # 50 frames of 1600x1250 PNG, 3 rounds: ~3 minutes
     python bench/jobs.py --frames 20 --format exr --jobs 1,2,4
+    python bench/jobs.py --shot animated --frames 24 --size 1280x720 --rounds 5
+
+``--shot batch`` (the default) warps the frames with ``--out-dir``, one map for all of them.
+``--shot animated`` warps them as a sequence (``frame.#.png --frames 1-N``) whose polygons are
+keyframed (the star turns and moves from the first frame to the last), so every frame has a map
+of its own: the case that only processes make parallel.
 
 Each round runs `warp --out-dir` as a subprocess once per jobs value, in alternating order, on
 the same generated frames (a colour ramp and a checker, different per frame; a 12-vertex star
@@ -16,6 +22,7 @@ import hashlib
 import json
 import math
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -34,7 +41,7 @@ def write_frames(directory: str, count: int, w: int, h: int, ext: str) -> list[s
     paths = []
     for k in range(count):
         px = np.stack([(x * 255 // w + 3 * k) % 256, (y * 255 // h) % 256, ((x // 16 + y // 16 + k) % 2) * 200], axis=2).astype(np.uint8)
-        path = os.path.join(directory, f"frame{k:03d}.{ext}")
+        path = os.path.join(directory, f"frame.{k + 1:04d}.{ext}")
         out = oiio.ImageOutput.create(path)
         out.open(path, oiio.ImageSpec(w, h, 3, "uint8"))
         out.write_image(px)
@@ -54,6 +61,12 @@ def digest(directory: str) -> dict[str, str]:
     return {name: hashlib.sha256(open(os.path.join(directory, name), "rb").read()).hexdigest() for name in sorted(os.listdir(directory))}
 
 
+def _children_cpu() -> float:
+    """User and system seconds of the finished child processes (and theirs) so far."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=50)
@@ -61,6 +74,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--format", default="png")
     parser.add_argument("--jobs", default="1,2")
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--shot", choices=("batch", "animated"), default="batch")
     args = parser.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     jobs = [int(j) for j in args.jobs.split(",")]
@@ -68,28 +82,41 @@ def main(argv: list[str] | None = None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         frames = write_frames(tmp, args.frames, w, h, args.format)
         s = min(w, h)
-        for name, pts in (("src.json", star(w / 2, h / 2, 0.2 * s, 0.45 * s)), ("dst.json", star(w / 2, h / 2, 0.15 * s, 0.47 * s, 0.3))):
+        src, dst = star(w / 2, h / 2, 0.2 * s, 0.45 * s), star(w / 2, h / 2, 0.15 * s, 0.47 * s, 0.3)
+        if args.shot == "animated":  # keyframes at the first and last frame: a new pair on every frame
+            n = args.frames
+            src = {"frames": {"1": src, str(n): star(w / 2 + 0.04 * s, h / 2, 0.2 * s, 0.45 * s, 0.2)}}
+            dst = {"frames": {"1": dst, str(n): star(w / 2, h / 2 + 0.03 * s, 0.15 * s, 0.47 * s, 0.5)}}
+        for name, pts in (("src.json", src), ("dst.json", dst)):
             with open(os.path.join(tmp, name), "w") as fh:
                 json.dump(pts, fh)
         times: dict[int, list[float]] = {j: [] for j in jobs}
+        cpu: dict[int, list[float]] = {j: [] for j in jobs}
         hashes: dict[int, dict[str, str]] = {}
         for r in range(args.rounds):
             for j in (jobs if r % 2 == 0 else jobs[::-1]):
                 out = os.path.join(tmp, f"out{j}")
                 os.makedirs(out, exist_ok=True)
-                cmd = [warp, *frames, "--src", os.path.join(tmp, "src.json"), "--dst", os.path.join(tmp, "dst.json"), "--out-dir", out, "--jobs", str(j), "-q"]
-                t0 = time.perf_counter()
+                polys = ["--src", os.path.join(tmp, "src.json"), "--dst", os.path.join(tmp, "dst.json")]
+                if args.shot == "animated":
+                    ins = os.path.join(tmp, f"frame.#.{args.format}")
+                    cmd = [warp, ins, os.path.join(out, f"out.#.{args.format}"), "--frames", f"1-{args.frames}", *polys, "--jobs", str(j), "-q"]
+                else:
+                    cmd = [warp, *frames, *polys, "--out-dir", out, "--jobs", str(j), "-q"]
+                t0, c0 = time.perf_counter(), _children_cpu()
                 subprocess.run(cmd, check=True)
                 times[j].append(time.perf_counter() - t0)
+                cpu[j].append(_children_cpu() - c0)
                 hashes[j] = digest(out)
-                print(f"round {r + 1} jobs {j}: {times[j][-1]:.2f} s", file=sys.stderr, flush=True)
+                print(f"round {r + 1} jobs {j}: {times[j][-1]:.2f} s, {cpu[j][-1]:.2f} s of CPU", file=sys.stderr, flush=True)
     base = statistics.median(times[jobs[0]])
-    print(f"{args.frames} frames of {w}x{h} {args.format.upper()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}; median of {args.rounds}")
-    print("| jobs | seconds (median) | per frame | speed-up vs jobs %d | outputs identical to jobs %d |" % (jobs[0], jobs[0]))
-    print("|---:|---:|---:|---:|---|")
+    print(f"{args.shot}: {args.frames} frames of {w}x{h} {args.format.upper()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}; median of {args.rounds}")
+    print("| jobs | seconds (median) | per frame | CPU seconds (median) | speed-up vs jobs %d | outputs identical to jobs %d |" % (jobs[0], jobs[0]))
+    print("|---:|---:|---:|---:|---:|---|")
     for j in jobs:
         m = statistics.median(times[j])
-        print(f"| {j} | {m:.2f} | {m / args.frames:.3f} | {base / m:.2f} | {'yes' if hashes[j] == hashes[jobs[0]] else 'NO'} |")
+        c = statistics.median(cpu[j])
+        print(f"| {j} | {m:.2f} | {m / args.frames:.3f} | {c:.2f} | {base / m:.2f} | {'yes' if hashes[j] == hashes[jobs[0]] else 'NO'} |")
 
 
 if __name__ == "__main__":

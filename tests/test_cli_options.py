@@ -23,7 +23,7 @@ WARP_OPTIONS = {
     "--src-boundary", "--dst-boundary", "--save-theta", "--energy", "--theta-start", "--nodes", "--conditions",
     "--max-area", "--antialias", "--outside", "--vacated", "--weights", "--report", "--grid", "--heatmap",
     "--heatmap-measure", "--save-map", "--save-forward-map", "--stmap-t", "--tiled", "--labels", "--verbose", "--quiet",
-    "--version",
+    "--version", "--frame",  # --frame: issue 23
 }  # fmt: skip
 
 

@@ -78,9 +78,9 @@ def test_points_outside_warn_or_fail(tmp_path, polys, capsys):
 @pytest.mark.parametrize(
     "name, content, extra, match",
     [
-        ("p.txt", "1,2", [], "must be a .json, .csv or .obj"),
+        ("p.dat", "1,2", [], "must be a .json, .csv, .txt or .obj"),
         ("p.json", "[[1, 2], [3]]", [], "pairs"),
-        ("p.csv", "1,2\nx,y\n", [], "x,y numbers"),
+        ("p.csv", "1,2\nx,y\n", [], "must be numbers"),
         ("m.obj", "v 0 0 0\n", ["--texture-size", "64x64"], "no texture coordinates"),
         ("m.obj", "vt 0 0\n", [], "texture size"),
     ],

@@ -87,7 +87,7 @@ def test_keyframes_that_self_intersect_between_frames_are_refused_before_any_wor
     [
         (["in/shot.#.png", "in/shot.#.png", "--frames", "1"], "overwritten"),
         (["in/shot.#.png", "out.png", "--frames", "1"], "sequence patterns"),
-        (["in/shot.#.png", "out.#.png"], "--frames"),
+        (["in/none.#.png", "out.#.png"], "--frames"),  # no --frames, and no frame on disk
         (["in/shot.#.png", "out.#.png", "--frames", "1-0x0"], "--frames"),
         (["in/shot.#.png", "out.#.png", "--frames", "1-999999999999"], "--frames"),
     ],

@@ -89,8 +89,7 @@ class Forked:
                 self._outcome = ("died", _describe(status), [])
         kind, value, records = self._outcome
         self._outcome = (kind, value, [])  # records are logged once
-        for record in records:
-            _log.handle(logging.makeLogRecord(record))
+        replay(records)
         if kind == "died":
             raise ChildDied(value)
         if kind == "error":
@@ -131,8 +130,9 @@ def _describe(status: int) -> str:
     return f"ended with status {os.WEXITSTATUS(status)} without a result"
 
 
-class _Records(logging.Handler):
-    """Keeps the child's log records as dicts, to be logged by the parent."""
+class KeptRecords(logging.Handler):
+    """Keeps a process's log records as dicts, to be logged by another (`replay`): a
+    forked child's, or a worker process's of a pool (`warpcli.batch`)."""
 
     def __init__(self) -> None:
         super().__init__(logging.DEBUG)
@@ -144,13 +144,19 @@ class _Records(logging.Handler):
         self.records.append(d)
 
 
+def replay(records: list[dict]) -> None:
+    """Log, here, records a `KeptRecords` kept in another process, as if logged here."""
+    for record in records:
+        _log.handle(logging.makeLogRecord(record))
+
+
 def _child(fn: Callable[..., Any], args: tuple, fd: int) -> None:
     code = 0
     try:
         if "faulthandler" in sys.modules:
             # A crash here is the parent's to report (`ChildDied`), in one line.
             sys.modules["faulthandler"].disable()
-        keep = _Records()
+        keep = KeptRecords()
         # Records go to the parent, not to the inherited stderr.
         _log.handlers[:] = [keep]
         _log.filters[:] = []

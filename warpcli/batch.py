@@ -1,15 +1,20 @@
-"""Batches and sequences: many images warped with one map (or one per run of frames), on threads.
+"""Batches and sequences: many images warped with one map (or one per run of frames), on threads or processes.
 
 Each output size gets one `warpcli.plan.SamplingPlan`, made once and shared
 by the threads (`PlanCache`); each image is read, rendered through it and
 written (`warp_one`). An image too large for memory goes strip by strip
 (`warpcli.tiled`) with the same map. `warpcli.distributed` runs the same
-`warp_one` on Dask workers with plans shipped to them.
+`warp_one` on Dask workers with plans shipped to them. An animated sequence
+(a new polygon pair every few frames) goes to worker processes run by run
+(`warp_run`): building a map holds the GIL, so threads would take turns.
 """
 
 from __future__ import annotations
 
+import logging
+import math
 import os
+import shutil
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -21,11 +26,14 @@ from .options import WarpOptions, resolve_options
 from .outputs import RunInputs
 from .pipeline import read_header_or_none, write_like
 from .plan import SamplingPlan, background_values, check_paste, plan_for
-from .polygon import check_pair, read_polygon
+from .polygon import Polygon, check_pair, read_polygon
 from .raster.imageio import check_image_output, read_image
 from .tiled import in_parts, warp_file_tiled
 
-__all__ = ["BatchItem", "PlanCache", "output_name", "prepare_batch", "warp_batch", "warp_one", "warp_sequence"]
+__all__ = [
+    "BatchItem", "FrameMaps", "PlanCache", "RunMaps", "apply_map_sequence", "link_or_copy", "output_name", "prepare_batch",
+    "warp_batch", "warp_one", "warp_run", "warp_sequence",
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -214,7 +222,99 @@ class PlanCache:
             return self.plans[size]
 
 
-def warp_one(inp: str, out: str, plans: PlanCache) -> BatchItem:
+@dataclass(frozen=True)
+class FrameMaps:
+    """A sequence's per-frame STMaps (`warpcli.raster.stmap`): where they go, and which way t runs.
+
+    Frames of one run share their map: it is computed and written once per
+    distinct polygon pair (and image size), and the other frames' files are
+    hard links to that file (copies where the file system cannot link).
+
+    Parameters
+    ----------
+    inverse, forward : str or None
+        Sequence patterns (``map.#.exr``) for the inverse map (output pixel ->
+        input point) and the forward map (input pixel -> output point); None:
+        not written.
+    t_up : bool
+        Nuke's orientation of t (up) instead of OpenImageIO's (down).
+    """
+
+    inverse: str | None = None
+    forward: str | None = None
+    t_up: bool = False
+
+    def paths(self, frame: int) -> tuple[str | None, str | None]:
+        """The inverse and forward map files of ``frame`` (None: not written)."""
+        from .sequence import frame_path
+
+        return tuple(None if p is None else frame_path(p, frame) for p in (self.inverse, self.forward))  # type: ignore[return-value]
+
+
+class RunMaps:
+    """The map files of one run of frames (one polygon pair), shared by the threads warping them.
+
+    The first frame of each (input size, output size) writes its maps; the
+    others wait for it and link to them (`link_or_copy`).
+
+    Parameters
+    ----------
+    maps : FrameMaps
+    """
+
+    def __init__(self, maps: FrameMaps) -> None:
+        self.maps = maps
+        self.written: dict[tuple, tuple[str | None, str | None]] = {}
+        self.lock = threading.Lock()
+
+    def save(self, frame: int, fmap: BijectiveMap, plan: SamplingPlan, in_size: tuple[int, int]) -> None:
+        """Write (or link) the maps of ``frame``, warped with ``plan`` from an input of ``in_size``.
+
+        Raises
+        ------
+        ImageIOError
+            If a file cannot be written.
+        """
+        from .raster.stmap import save_stmap
+
+        paths = self.maps.paths(frame)
+        key = (tuple(in_size), tuple(plan.size))
+        with self.lock:  # one thread writes a run's map; the others wait, then link to it
+            first = self.written.get(key)
+            if first is None:
+                if paths[0] is not None:
+                    save_stmap(paths[0], plan.pull.full_points(), in_size, kind="inverse", t_up=self.maps.t_up)
+                if paths[1] is not None:
+                    fwd = fmap.forward_grid(*in_size)
+                    save_stmap(paths[1], fwd, plan.size, kind="forward", t_up=self.maps.t_up)
+                self.written[key] = paths
+                return
+        for target, source in zip(paths, first):
+            if target is not None and os.path.abspath(target) != os.path.abspath(source):
+                link_or_copy(source, target)
+
+
+def link_or_copy(source: str, target: str) -> None:
+    """``target`` becomes the file ``source`` (atomically): a hard link, or a copy where links are refused.
+
+    Raises
+    ------
+    ImageIOError
+        If neither works.
+    """
+    from .outputs import atomic_path
+
+    with atomic_path(target) as tmp:
+        os.unlink(tmp)
+        try:
+            os.link(source, tmp)
+        except OSError:  # another file system, or one without hard links (FAT, some network mounts)
+            shutil.copyfile(source, tmp)
+
+
+def warp_one(
+    inp: str, out: str, plans: PlanCache, *, frame: int | None = None, maps: RunMaps | None = None
+) -> BatchItem:
     """One image of a batch or sequence: read, render through its size's plan, write; its error in the item.
 
     An image too large for memory is warped in strips (`warpcli.tiled`) with the same map.
@@ -224,6 +324,11 @@ def warp_one(inp: str, out: str, plans: PlanCache) -> BatchItem:
     inp, out : str
         The input image and the output path (checked already, `prepare_batch`).
     plans : PlanCache
+    frame : int or None
+        The frame number, in a sequence writing maps.
+    maps : RunMaps or None
+        A run's map files (`warp_run`), written (or linked) before the frame
+        (which is then warped whole, never in strips).
 
     Returns
     -------
@@ -232,7 +337,7 @@ def warp_one(inp: str, out: str, plans: PlanCache) -> BatchItem:
     opts, fmap = plans.opts, plans.fmap
     try:
         header = read_header_or_none(inp) if fmap is not None else None
-        if header is not None and in_parts(inp, header, opts.size, None):
+        if header is not None and maps is None and in_parts(inp, header, opts.size, None):
             warp_file_tiled(inp, out, fmap.src, fmap.dst, opts, fmap=fmap, header=header)
             return BatchItem(inp, out)
         image = read_image(inp)
@@ -242,8 +347,10 @@ def warp_one(inp: str, out: str, plans: PlanCache) -> BatchItem:
             background_values(opts.background, image.pixels)
         except InputError as err:
             raise naming(err, inp) from err
-        px = plans.get(shape).render(image.pixels, alpha_channel=image.alpha_channel,
-                                     associated_alpha=image.associated_alpha)  # fmt: skip
+        plan = plans.get(shape)
+        if maps is not None:
+            maps.save(frame, fmap, plan, (image.width, image.height))
+        px = plan.render(image.pixels, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha)
         write_like(out, image, px, opts.dtype)
         return BatchItem(inp, out)
     except WarpError as err:
@@ -274,10 +381,65 @@ def _each(work: Callable, tasks: list, jobs: int, on_item: Callable[[BatchItem],
     return items
 
 
+def warp_run(
+    src: Polygon, dst: Polygon, tasks: Sequence[tuple[str, str, int]], opts: WarpOptions, *,
+    maps: FrameMaps | None = None, jobs: int = 1, on_item: Callable[[BatchItem], None] | None = None,
+) -> list[BatchItem]:  # fmt: skip
+    """A run of frames that share one polygon pair: its map, then each frame through it.
+
+    Parameters
+    ----------
+    src, dst : Polygon
+        The run's pair (checked already).
+    tasks : sequence of (str, str, int)
+        Input, output and frame number of each frame, in order.
+    opts : WarpOptions
+    maps : FrameMaps or None
+        Per-frame STMaps to write.
+    jobs : int
+        Threads warping the run's frames at once.
+    on_item : callable or None
+        Called with each `BatchItem`, in frame order.
+
+    Returns
+    -------
+    list of BatchItem
+        In frame order; a map that cannot be built fails every frame of the run.
+    """
+    try:
+        plans = PlanCache(BijectiveMap.between(src, dst, opts.map), opts)
+    except WarpError as err:  # a map that cannot be built fails its frames, not the others
+        done = [BatchItem(inp, out, err) for inp, out, _ in tasks]
+        for item in done:
+            if on_item is not None:
+                on_item(item)
+        return done
+    run_maps = None if maps is None else RunMaps(maps)
+    return _each(lambda task: warp_one(task[0], task[1], plans, frame=task[2], maps=run_maps), list(tasks), jobs, on_item)
+
+
+def _warp_run_in_worker(src, dst, tasks, opts, maps, level, filters):
+    """`warp_run` in a worker process: its items, and its log records for the parent to log in order."""
+    import warnings
+
+    from ._fork import KeptRecords
+
+    warnings.filters[:] = filters  # the parent's: the CLI shows no library's warnings
+    log = logging.getLogger("warpcli")
+    keep = KeptRecords()
+    log.handlers[:] = [keep]
+    log.propagate = False
+    log.setLevel(level)
+    try:
+        return warp_run(src, dst, tasks, opts, maps=maps), keep.records
+    finally:
+        log.handlers[:] = []
+
+
 def warp_sequence(
     input_pattern: str,
     output_pattern: str,
-    frames: Sequence[int],
+    frames: Sequence[int] | None,
     src_path: str | os.PathLike[str],
     dst_path: str | os.PathLike[str],
     options: WarpOptions | None = None,
@@ -286,6 +448,7 @@ def warp_sequence(
     dst_label: str | None = None,
     on_item: Callable[[BatchItem], None] | None = None,
     jobs: int = 1,
+    maps: FrameMaps | None = None,
     **changes: Any,
 ) -> list[BatchItem]:
     """Warp the frames of an image sequence; the polygon files may hold keyframes.
@@ -298,12 +461,21 @@ def warp_sequence(
     the whole sequence (the paper's §6: with one Theta, the maps of
     successive steps compose to the map of the whole step).
 
+    With ``jobs`` > 1, one run of frames (still polygons) is warped by
+    threads sharing its map; several runs (animated polygons) go to
+    ``jobs`` worker processes, a run each, as many at once as the memory
+    budget holds (`warpcli.budget`): building a map holds the GIL, so on
+    threads the builds would take turns. Items, messages and output bytes
+    are those of ``jobs=1``, in frame order.
+
     Parameters
     ----------
     input_pattern, output_pattern : str
         Sequence patterns; the output's must differ from the input's.
-    frames : sequence of int
-        The frames, in order (`warpcli.sequence.parse_frames`).
+    frames : sequence of int, or None
+        The frames, in order (`warpcli.sequence.parse_frames`); None: those
+        of the input pattern on disk (`warpcli.sequence.frames_from_disk`,
+        which logs how many as a warning).
     src_path, dst_path : path-like
         Polygon files, still or keyframed.
     options : WarpOptions or None
@@ -313,7 +485,9 @@ def warp_sequence(
     on_item : callable or None
         Called with each `BatchItem` as it is done, in frame order.
     jobs : int
-        Threads warping frames at once (as in `warp_batch`).
+        Threads or processes warping frames at once.
+    maps : FrameMaps or None
+        Per-frame STMaps to write beside the frames (`FrameMaps`).
 
     Returns
     -------
@@ -324,24 +498,54 @@ def warp_sequence(
     ------
     InputError
         At once, before any work: bad patterns, polygons (at any frame) or
-        options, an output that is an input. A frame that fails later (a
-        missing or unreadable image, a write error) is reported through
-        ``on_item`` and in its item, and the rest go on.
+        options, an output that is an input, an input pattern that finds no
+        frame where Nuke's reading of ``####`` would (the message says so). A
+        frame that fails later (a missing or unreadable image, a write
+        error) is reported through ``on_item`` and in its item, and the
+        rest go on.
     """
     from .keyframes import read_animated
-    from .sequence import expand, parse_pattern
+    from .sequence import expand, frames_from_disk, other_reading_hint, parse_pattern
 
     opts = resolve_options(options, changes)
-    if parse_pattern(os.fspath(output_pattern)) is None:
-        raise InputError(f"{output_pattern}: the output of a sequence must be a pattern too (#, @ or %04d)")
-    if parse_pattern(os.fspath(output_pattern)).pattern == parse_pattern(os.fspath(input_pattern)).pattern:
-        raise InputError(f"{output_pattern}: the output pattern is the input pattern; frames would be overwritten")
+    if frames is None:
+        frames, message = frames_from_disk(input_pattern)
+        logging.getLogger("warpcli").warning("%s", message)
+    if not (isinstance(jobs, int) and jobs >= 1):
+        raise InputError(f"jobs must be a whole number of at least 1, got {jobs!r}")
+    patterns = {"input": parse_pattern(os.fspath(input_pattern))}
+    outputs = {"output": output_pattern}
+    if maps is not None:
+        outputs.update({"map": maps.inverse, "forward map": maps.forward})
+    for what, pattern in outputs.items():
+        if pattern is None:
+            continue
+        parsed = parse_pattern(os.fspath(pattern))
+        if parsed is None:
+            raise InputError(f"{pattern}: the {what} of a sequence must be a pattern too (#, @ or %04d)")
+        for other, known in patterns.items():
+            if parsed.pattern == known.pattern:
+                raise InputError(f"{pattern}: the {what} pattern is the {other} pattern; frames would be overwritten")
+        patterns[what] = parsed
+    if maps is not None:
+        from .raster.stmap import check_stmap_path
+
+        for pattern in (maps.inverse, maps.forward):
+            if pattern is not None:
+                check_stmap_path(pattern)
     ins = expand(os.fspath(input_pattern), frames)
     outs = expand(os.fspath(output_pattern), frames)
+    hint = other_reading_hint(input_pattern, frames)  # shot.####.exr typed as in Nuke
+    if hint is not None:
+        raise InputError(hint)
+    _warn_about_outputs([output_pattern, *((maps.inverse, maps.forward) if maps is not None else ())], frames)
     # Every output against every input of the run: f.1@.png's frame 1 is f.@.png's frame 11.
     inputs = RunInputs(p for p in (*(inp for _, inp in ins), src_path, dst_path, opts.map.theta_file) if p is not None)
-    for _, out in outs:
+    for (f, _), (_, out) in zip(ins, outs):
         check_image_output(out, inputs=inputs)
+        for extra in maps.paths(f) if maps is not None else ():
+            if extra is not None:
+                check_image_output(extra, inputs=inputs)
     src_keys = read_animated(src_path, src_label)
     dst_keys = read_animated(dst_path, dst_label)
     # Every frame's polygons first (interpolation can self-intersect): errors before any work.
@@ -350,25 +554,185 @@ def warp_sequence(
         if f not in pairs:
             pairs[f] = (src_keys.at(f), dst_keys.at(f))
             check_pair(*pairs[f])
-    # Runs of frames with the same pair share one map; the frames of a run go to the threads.
-    runs: list[tuple[tuple[bytes, bytes], list[tuple[str, str]]]] = []
+    # Runs of frames with the same pair share one map.
+    runs: list[tuple[tuple[bytes, bytes], list[tuple[str, str, int]]]] = []
     for (f, inp), (_, out) in zip(ins, outs):
         src, dst = pairs[f]
         key = (src.points.tobytes(), dst.points.tobytes())
         if not runs or runs[-1][0] != key:
             runs.append((key, []))
         runs[-1][1].append((inp, out, f))
-    items: list[BatchItem] = []
+    width = _processes(jobs, len(runs), ins, opts)
+    if width <= 1:  # the frames of a run go to the threads
+        items: list[BatchItem] = []
+        for _, tasks in runs:
+            items += warp_run(*pairs[tasks[0][2]], tasks, opts, maps=maps, jobs=jobs, on_item=on_item)
+        return items
+    units = []
     for _, tasks in runs:
-        src, dst = pairs[tasks[0][2]]
-        try:
-            plans = PlanCache(BijectiveMap.between(src, dst, opts.map), opts)
-        except WarpError as err:  # a map that cannot be built fails its frames, not the others
-            done = [BatchItem(inp, out, err) for inp, out, _ in tasks]
+        # A long run is cut in pieces, each building the map again, so that
+        # all workers have work; not when its frames share map files.
+        size = len(tasks) if maps is not None else max(1, math.ceil(len(ins) / width))
+        units += [tasks[k : k + size] for k in range(0, len(tasks), size)]
+    return _in_processes(units, pairs, opts, maps, width, on_item)
+
+
+def _warn_about_outputs(patterns, frames) -> None:
+    """One warning per output pattern written with ``##``... (16 digits for ``####`` here, 4 in Nuke)."""
+    from .sequence import output_reading_warning
+
+    for pattern in patterns:
+        line = None if pattern is None or not frames else output_reading_warning(pattern, frames[0])
+        if line is not None:
+            logging.getLogger("warpcli").warning("%s", line)
+
+
+def _processes(jobs: int, runs: int, ins: list[tuple[int, str]], opts: WarpOptions) -> int:
+    """How many worker processes a sequence gets: 1 (threads only) for one run, else
+    ``jobs``, fewer when that many frames would not fit in the memory budget at once."""
+    if jobs <= 1 or runs <= 1:
+        return 1
+    from .budget import max_image_bytes
+
+    header = next((h for h in (read_header_or_none(inp) for _, inp in ins[:8]) if h is not None), None)
+    if header is None:
+        return jobs
+    w, h = opts.size if opts.size is not None else (header.width, header.height)
+    # What `tiled.tiled_needed` counts for one frame: its pixels, and the output with its map.
+    need = header.width * header.height * header.channels * header.dtype.itemsize + w * h * (header.channels + 12) * 4
+    return max(1, min(jobs, runs, max_image_bytes() // max(1, need)))
+
+
+def _in_processes(units, pairs, opts, maps, width, on_item) -> list[BatchItem]:
+    """Runs of frames on ``width`` worker processes; items, log records and ``on_item`` calls in frame order."""
+    import multiprocessing
+    import warnings
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    from ._fork import replay
+
+    level = logging.getLogger("warpcli").getEffectiveLevel()
+    filters = list(warnings.filters)
+    # Spawned, not forked: OpenImageIO's and OpenEXR's thread pools do not survive a fork.
+    pool = ProcessPoolExecutor(max_workers=width, mp_context=multiprocessing.get_context("spawn"))
+    items: list[BatchItem] = []
+    try:
+        futures = [pool.submit(_warp_run_in_worker, *pairs[u[0][2]], u, opts, maps, level, filters) for u in units]
+        for unit, future in zip(units, futures):
+            try:
+                done, records = future.result()
+            except BrokenProcessPool as err:
+                done, records = [BatchItem(inp, out, WarpError(f"{inp}: the process warping it ended: {err}")) for inp, out, _ in unit], []
+            replay(records)
             for item in done:
+                items.append(item)
                 if on_item is not None:
                     on_item(item)
-            items += done
-            continue
-        items += _each(lambda task: warp_one(task[0], task[1], plans), tasks, jobs, on_item)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
     return items
+
+
+def apply_map_sequence(
+    map_path: str | os.PathLike[str],
+    input_pattern: str,
+    output_pattern: str,
+    frames: Sequence[int] | None,
+    options: WarpOptions | None = None,
+    *,
+    t_up: bool | None = None,
+    on_item: Callable[[BatchItem], None] | None = None,
+    jobs: int = 1,
+    **changes: Any,
+) -> list[BatchItem]:
+    """Warp the frames of a sequence with saved STMaps: one per frame (a pattern), or one for all.
+
+    Each frame is what `warpcli.pipeline.apply_map_file` makes of it. A map
+    file is read once for all the frames that use it (per input size): one
+    map over the whole sequence, or the hard links `FrameMaps` writes for
+    frames that share a map.
+
+    Parameters
+    ----------
+    map_path : str or path-like
+        A sequence pattern (``map.#.exr``: frame ``f`` uses ``map.000f.exr``)
+        or one STMap for every frame.
+    input_pattern, output_pattern : str
+        Sequence patterns, different.
+    frames : sequence of int, or None
+        The frames; None: those of the input pattern on disk (logged).
+    options : WarpOptions or None
+        ``interp``, ``background`` and ``dtype`` are used; ``**changes`` change them.
+    t_up : bool or None
+        Which way the maps' t runs; None: as each map's header says.
+    on_item : callable or None
+        Called with each `BatchItem`, in frame order.
+    jobs : int
+        Threads warping frames at once (bytes as with 1).
+
+    Returns
+    -------
+    list of BatchItem
+        In frame order; a frame whose map, input or output fails is reported
+        in its item and the others go on.
+
+    Raises
+    ------
+    InputError
+        At once, for bad patterns or options, or an output that is an input.
+    """
+    from .raster.stmap import check_stmap_path, load_stmap
+    from .sequence import expand, frames_from_disk, other_reading_hint, parse_pattern
+
+    opts = resolve_options(options, changes)
+    if frames is None:
+        frames, message = frames_from_disk(input_pattern)
+        logging.getLogger("warpcli").warning("%s", message)
+    seqs = {}
+    for what, pattern in (("input", input_pattern), ("output", output_pattern), ("map", map_path)):
+        seqs[what] = parse_pattern(os.fspath(pattern))
+        if seqs[what] is None and what != "map":
+            raise InputError(f"{os.fspath(pattern)}: the {what} of a sequence must be a pattern (#, @ or %04d)")
+    if seqs["output"].pattern in (seqs["input"].pattern, seqs["map"] and seqs["map"].pattern):
+        raise InputError(f"{output_pattern}: the output pattern is an input pattern; frames would be overwritten")
+    check_stmap_path(os.fspath(map_path))
+    ins = expand(os.fspath(input_pattern), frames)
+    outs = expand(os.fspath(output_pattern), frames)
+    for seq in (seqs["input"], seqs["map"]):
+        hint = None if seq is None else other_reading_hint(seq.pattern, frames)
+        if hint is not None:
+            raise InputError(hint)
+    _warn_about_outputs([output_pattern], frames)
+    tasks = []
+    for (f, inp), (_, out) in zip(ins, outs):
+        mp = seqs["map"].path(f) if seqs["map"] is not None else os.fspath(map_path)
+        check_image_output(out, inputs=(inp, mp))
+        tasks.append((mp, inp, out))
+    plans: dict[tuple, SamplingPlan] = {}
+    lock = threading.Lock()
+
+    def one(task: tuple[str, str, str]) -> BatchItem:
+        mp, inp, out = task
+        try:
+            image = read_image(inp)
+            try:
+                st = os.stat(mp)
+                key = (st.st_dev, st.st_ino, st.st_mtime_ns, image.width, image.height)
+            except OSError:
+                key = (mp, image.width, image.height)  # load_stmap says what is wrong
+            with lock:  # one load per distinct map file
+                plan = plans.get(key)
+                if plan is None:
+                    points = load_stmap(mp, (image.width, image.height), t_up=t_up)
+                    plan = SamplingPlan.from_points(points, interp=opts.interp, background=opts.background)
+                    if len(plans) > jobs:  # a map per frame: keep those of the frames in flight, not all
+                        del plans[next(iter(plans))]
+                    plans[key] = plan
+            px = plan.render(image.pixels, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha)
+            write_like(out, image, px, opts.dtype)
+            return BatchItem(inp, out)
+        except WarpError as err:
+            return BatchItem(inp, out, err)
+
+    return _each(one, tasks, jobs, on_item)

@@ -17,12 +17,12 @@ from numpy.typing import NDArray
 
 from .errors import InputError, PolygonError
 from .files import read_small_file
-from .polygon import MAX_FILE_BYTES, Polygon
+from .polygon import MAX_FILE_BYTES, Polygon, read_polygon
 from .polygon.formats import parse_int, parse_json, points_of
 from .polygon.messages import short_value
 from .sequence import FRAME_LIMIT
 
-__all__ = ["Keyframes", "read_animated", "read_keyframes"]
+__all__ = ["Keyframes", "read_animated", "read_keyframes", "read_polygon_at"]
 
 # A keyframe's key: a whole number, optionally negative, in ASCII digits
 # ("1001", "-5", "0042"). Not "+5", "1.0", "1e3", " 7" or other scripts' digits.
@@ -412,3 +412,61 @@ def _check_repeated_keys(text: str, name: str) -> None:
     repeated = doc["frames"].repeated
     if repeated is not None:
         raise PolygonError(f'{name}: keyframe {short_value(repeated)} appears twice in "frames"')
+
+
+def read_polygon_at(path: str | os.PathLike[str], label: str | None = None, frame: int | None = None) -> Polygon:
+    """The polygon of a polygon file for one image: a plain file's, or a keyframed file's at ``frame``.
+
+    Parameters
+    ----------
+    path : path-like
+    label : str or None
+        Which polygon of a file holding several (in every keyframe).
+    frame : int or None
+        The frame of a keyframed file (`Keyframes.at`: linear between
+        keyframes, held outside them); a plain file's polygon is the same at
+        every frame. None: the file must be a plain polygon file.
+
+    Returns
+    -------
+    Polygon
+        For a plain file, exactly `polygon.read_polygon`'s.
+
+    Raises
+    ------
+    PolygonError
+        As `polygon.read_polygon` and `read_keyframes`; for a keyframed file
+        without ``frame``, a message naming the fix (``--frame N``).
+
+    Examples
+    --------
+    >>> import json, os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "anim.json")
+    >>> with open(path, "w") as fh:
+    ...     json.dump({"frames": {"1": [[0, 0], [10, 0], [0, 10]], "11": [[0, 0], [20, 0], [0, 20]]}}, fh)
+    >>> read_polygon_at(path, frame=6).points.tolist()
+    [[0.0, 0.0], [15.0, 0.0], [0.0, 15.0]]
+    >>> read_polygon_at(path)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    warpcli.errors.PolygonError: ...anim.json: holds keyframes (frames 1 to 11), not one polygon: choose one frame with --frame N (or warp an image sequence with --frames)
+    """
+    name = os.fspath(path)
+    if frame is None:
+        try:
+            return read_polygon(name, label)
+        except PolygonError:
+            try:
+                keys = read_keyframes(name, label)
+            except PolygonError:
+                keys = None
+            if keys is None:
+                raise
+        raise PolygonError(
+            f"{name}: holds keyframes (frames {_fmt_frame(keys.frames[0])} to {_fmt_frame(keys.frames[-1])}), "
+            "not one polygon: choose one frame with --frame N (or warp an image sequence with --frames)"
+        )
+    if isinstance(frame, bool) or not isinstance(frame, numbers.Integral):
+        raise TypeError(f"a frame number must be an integer, not {type(frame).__name__}")
+    keys = read_keyframes(name, label)
+    return read_polygon(name, label) if keys is None else keys.at(int(frame))

@@ -29,7 +29,8 @@ from .budget import check_fits
 from .options import WarpOptions, resolve_options
 from .outputs import PendingOutputs, check_output_path, write_checked
 from .plan import SamplingPlan, background_values, check_paste, plan_for, warn_if_outside
-from .polygon import Polygon, check_pair, read_polygon
+from .keyframes import read_polygon_at
+from .polygon import Polygon, check_pair
 from .raster.imageio import (
     ImageHeader,
     RasterImage,
@@ -368,6 +369,7 @@ def warp_file(
     progress: Callable[[str], None] | None = None,
     tiled: bool | None = None,
     labels: Sequence[tuple[str | os.PathLike[str], str | os.PathLike[str]]] = (),
+    frame: int | None = None,
     **changes: Any,
 ) -> WarpResult | TiledResult:
     """Read an image and two polygon files, warp, and write the result atomically.
@@ -400,6 +402,8 @@ def warp_file(
         Write STMaps with t running up (Nuke) instead of down (OpenImageIO).
     src_label, dst_label : str or None
         Which polygon to take from a polygon file holding several.
+    frame : int or None
+        The frame to take from keyframed polygon files (`warpcli.keyframes.read_polygon_at`).
     progress : callable or None
         Called with the name of each stage as it starts.
     tiled : bool or None
@@ -456,8 +460,8 @@ def warp_file(
     ]
     if len(set(outputs)) != len(outputs):
         raise InputError(f"{os.fspath(output_path)}: the same path is given for two outputs")
-    src = read_polygon(src_path, src_label)
-    dst = read_polygon(dst_path, dst_label)
+    src = read_polygon_at(src_path, src_label, frame)
+    dst = read_polygon_at(dst_path, dst_label, frame)
     check_pair(src, dst)
     header = read_header_or_none(input_path)
     if in_parts(input_path, header, opts.size, tiled):

@@ -1,4 +1,4 @@
-"""Points and UV layouts through the map (the paper's §4.2): JSON, CSV, and Wavefront OBJ texture coordinates.
+"""Points and UV layouts through the map (the paper's §4.2): JSON, CSV and text tables, and Wavefront OBJ texture coordinates.
 
 ``warp points --src A --dst B IN OUT`` carries points from the source
 polygon's coordinates to the target's (``--inverse``: back). For an OBJ file
@@ -7,6 +7,13 @@ the ``vt`` lines are texture coordinates (u right, v up, 0..1) of a texture of
 mapped, and written back, while every other line stays byte for byte. This
 is the surface cross-parameterization of §4.2 as artists use it: a mesh's
 UVs moved from one texture layout (polygon A) to another (B).
+
+Tables (``.csv``: commas, semicolons or tabs; ``.txt``: whitespace) keep every
+line and column but the two coordinates: x and y are the columns a header
+names ``x`` and ``y``, else those given (``columns``), else the first two.
+Coordinates are written rounded to `PRECISION` decimals (a millionth of a
+pixel, below the accuracy of every method; ``precision`` changes it, 0 to
+`MAX_PRECISION`), in the shortest form that reads back as that value.
 
 Points outside the polygon have no image: they are left as they are with a
 warning (``outside="keep"``), or refused (``outside="error"``).
@@ -28,7 +35,8 @@ from .maps.compose import BijectiveMap
 from .options import MapOptions
 from .files import read_small_file
 from .outputs import PendingOutputs, check_output_path, write_checked
-from .polygon import check_pair, read_polygon
+from .keyframes import read_polygon_at
+from .polygon import check_pair
 
 log = logging.getLogger("warpcli")
 
@@ -36,6 +44,15 @@ log = logging.getLogger("warpcli")
 OUTSIDE = ("keep", "error")
 #: Largest points file read, in bytes.
 MAX_BYTES = 256 << 20
+#: Decimals written by default: a millionth of a pixel. The map is not more
+#: exact than that (the FEM maps' error is far larger, BEM's and MFS's too
+#: near the polygon's corners), and 17 significant digits only show noise.
+PRECISION = 6
+#: Most decimals a caller may ask for: beyond 9, a pixel coordinate's decimals
+#: are float64 rounding noise (2**-30 is about 1e-9 at a coordinate of 1000).
+MAX_PRECISION = 9
+#: The file kinds read, by extension.
+KINDS = (".json", ".csv", ".txt", ".obj")
 
 # A file's first line may start with a UTF-8 byte order mark (kept, byte for byte).
 _VT = re.compile(rb"^((?:\xef\xbb\xbf)?\s*vt\s+)(\S+)(\s+)(\S+)(.*)$", re.S)
@@ -61,6 +78,9 @@ def map_points_file(
     outside: str = "keep",
     src_label: str | None = None,
     dst_label: str | None = None,
+    frame: int | None = None,
+    precision: int = PRECISION,
+    columns: tuple[str, str] | None = None,
 ) -> PointsResult:
     """Map the points of a JSON, CSV or OBJ file through the map between two polygons.
 
@@ -68,8 +88,11 @@ def map_points_file(
     ----------
     input_path, output_path : path-like
         ``.json`` (an array of [x, y], or ``{"points": [...]}``), ``.csv``
-        (x,y per line, an optional header) or ``.obj`` (its ``vt`` lines);
-        the output has the input's format.
+        (a table separated by commas, semicolons or tabs, with an optional
+        header; semicolon and tab tables may use decimal commas), ``.txt`` (a
+        table separated by whitespace) or ``.obj`` (its ``vt`` lines); the
+        output has the input's format, and a table keeps its other columns,
+        its lines, separators and byte order mark.
     src_path, dst_path : path-like
         Polygon files.
     options : MapOptions or None
@@ -82,6 +105,15 @@ def map_points_file(
         Points outside the polygon: left as they are (with a warning) or an error.
     src_label, dst_label : str or None
         Which polygon of a file holding several.
+    frame : int or None
+        The frame of keyframed polygon files (`warpcli.keyframes.read_polygon_at`).
+    precision : int
+        Decimals of the coordinates written to JSON and tables (0 to
+        `MAX_PRECISION`); OBJ texture coordinates keep 9 significant digits.
+    columns : (str, str) or None
+        A table's x and y columns: header names, or 1-based numbers as
+        strings (``("2", "3")``). None: the columns a header names ``x`` and
+        ``y`` (any case), else the first two.
 
     Returns
     -------
@@ -99,10 +131,12 @@ def map_points_file(
     """
     if outside not in OUTSIDE:
         raise InputError(f"unknown choice for points outside {outside!r}; choose one of {', '.join(OUTSIDE)}")
+    if isinstance(precision, bool) or not isinstance(precision, int) or not 0 <= precision <= MAX_PRECISION:
+        raise InputError(f"precision must be a whole number of decimals from 0 to {MAX_PRECISION}, got {precision!r}")
     name = os.fspath(input_path)
     kind = os.path.splitext(name)[1].lower()
-    if kind not in (".json", ".csv", ".obj"):
-        raise InputError(f"{name}: points must be a .json, .csv or .obj file")
+    if kind not in KINDS:
+        raise InputError(f"{name}: points must be a .json, .csv, .txt or .obj file")
     if os.path.splitext(os.fspath(output_path))[1].lower() != kind:
         raise InputError(f"{os.fspath(output_path)}: the output must have the input's format ({kind})")
     theta_file = (options or MapOptions()).theta_file
@@ -110,13 +144,13 @@ def map_points_file(
     if kind == ".obj" and texture_size is None:
         raise InputError(f"{name}: an OBJ file's UVs need the texture size (--texture-size WxH)")
     raw = _read(name)
-    src = read_polygon(src_path, src_label)
-    dst = read_polygon(dst_path, dst_label)
+    src = read_polygon_at(src_path, src_label, frame)
+    dst = read_polygon_at(dst_path, dst_label, frame)
     check_pair(src, dst)
     if kind == ".json":
-        pts, write = _json_points(raw, name)
-    elif kind == ".csv":
-        pts, write = _csv_points(raw, name)
+        pts, write = _json_points(raw, name, precision)
+    elif kind in (".csv", ".txt"):
+        pts, write = _table_points(raw, name, kind, columns, precision)
     else:
         pts, write = _obj_points(raw, name, texture_size)  # type: ignore[arg-type]
     fmap = BijectiveMap.between(src, dst, options or MapOptions())
@@ -151,7 +185,7 @@ def _as_xy(values, name: str) -> NDArray[np.float64]:
     return pts
 
 
-def _json_points(raw: bytes, name: str):
+def _json_points(raw: bytes, name: str, precision: int):
     try:
         doc = json.loads(raw.decode("utf-8-sig"))
     except (UnicodeDecodeError, ValueError, RecursionError) as err:
@@ -160,36 +194,152 @@ def _json_points(raw: bytes, name: str):
     pts = _as_xy(doc.get("points") if wrapped else doc, name)
 
     def write(moved):
-        out = moved.tolist()
+        out = [[_rounded(x, precision), _rounded(y, precision)] for x, y in moved]
         return (json.dumps({**doc, "points": out} if wrapped else out) + "\n").encode()
 
     return pts, write
 
 
-def _csv_points(raw: bytes, name: str):
-    lines = raw.decode("utf-8-sig", errors="replace").splitlines()  # a BOM is not part of the first line
-    header = []
-    if lines and not _numeric(lines[0]):
-        header = [lines[0]]
-        lines = lines[1:]
-    rows = [ln for ln in lines if ln.strip()]
+def _rounded(value: float, precision: int) -> float:
+    """``value`` to ``precision`` decimals; its repr is the shortest text that reads back as it."""
+    out = round(float(value), precision)
+    return 0.0 if out == 0 else out  # not -0.0
+
+
+def format_coordinate(value: float, precision: int = PRECISION) -> str:
+    """A coordinate as `map_points_file` writes it: rounded to ``precision`` decimals, shortest form.
+
+    Examples
+    --------
+    >>> format_coordinate(500.29558820679409), format_coordinate(12.0), format_coordinate(-1e-9)
+    ('500.295588', '12.0', '0.0')
+    >>> format_coordinate(2 / 3, 9)
+    '0.666666667'
+    """
+    return repr(_rounded(value, precision))
+
+
+_SEPARATORS = ("\t", ";", ",")
+
+
+def _table_points(raw: bytes, name: str, kind: str, columns: tuple[str, str] | None, precision: int):
+    """A table's points, and a writer giving the table back with them replaced.
+
+    Every line keeps its other fields and separators, and its line ending;
+    a line with quotes is read and written by the csv module.
+    """
+    bom = raw.startswith(b"\xef\xbb\xbf")
     try:
-        pts = _as_xy([[float(v) for v in ln.split(",")[:2]] for ln in rows], name)
-    except ValueError:
-        raise InputError(f"{name}: every line must be x,y numbers") from None
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise InputError(f"{name}: not a UTF-8 text file (invalid byte at {err.start})") from None
+    lines = text.splitlines(keepends=True)
+    rows = [k for k, ln in enumerate(lines) if ln.strip()]
+    if not rows:
+        raise InputError(f"{name}: no points")
+    sep = None if kind == ".txt" else _separator(lines[rows[0]])
+    split = [_fields(lines[k], sep) for k in rows]
+    decimal_comma = sep in (";", "\t") and any("," in f for fields in split for f in fields) and not any(
+        "." in f for fields in split for f in fields
+    )
+    ix, iy, named = _xy_columns(split[0], columns, name)
+    # The first line is a header when it names the columns, or its x and y are not numbers.
+    numeric = all(i < len(split[0]) and _number(split[0][i], decimal_comma) is not None for i in (ix, iy))
+    header = split[0] if named or not numeric else None
+    body = rows[1:] if header is not None else rows
+    fields_of = split[1:] if header is not None else split
+    pts = []
+    for k, fields in zip(body, fields_of):
+        if max(ix, iy) >= len(fields):
+            raise InputError(f"{name}: line {k + 1} has {len(fields)} field(s), not the x and y of columns {ix + 1} and {iy + 1}")
+        x, y = _number(fields[ix], decimal_comma), _number(fields[iy], decimal_comma)
+        if x is None or y is None:
+            raise InputError(f"{name}: line {k + 1}: x and y (columns {ix + 1} and {iy + 1}) must be numbers, got {fields[ix][:20]!r} and {fields[iy][:20]!r}")
+        pts.append((x, y))
 
     def write(moved):
-        return ("\n".join(header + [f"{x:.17g},{y:.17g}" for x, y in moved]) + "\n").encode()
+        out = list(lines)
+        for k, fields, (x, y) in zip(body, fields_of, moved):
+            fields = list(fields)
+            for i, v in ((ix, x), (iy, y)):
+                text_v = format_coordinate(v, precision)
+                fields[i] = text_v.replace(".", ",") if decimal_comma else text_v
+            out[k] = _joined(lines[k], fields, sep)
+        return ("\ufeff" if bom else "").encode() + "".join(out).encode()
 
-    return pts, write
+    return _as_xy(pts, name), write
 
 
-def _numeric(line: str) -> bool:
+def _separator(line: str) -> str:
+    """The field separator of a CSV line: a tab or semicolon if it has one, else a comma."""
+    for sep in _SEPARATORS:
+        if sep in line:
+            return sep
+    return ","
+
+
+def _fields(line: str, sep: str | None) -> list[str]:
+    body = line.rstrip("\r\n")
+    if sep is None:
+        return body.split()
+    if '"' in body:
+        import csv
+
+        return next(csv.reader([body], delimiter=sep))
+    return body.split(sep)
+
+
+def _joined(line: str, fields: list[str], sep: str | None) -> str:
+    """The line with its fields replaced: separators, spacing and line ending as they were."""
+    body = line.rstrip("\r\n")
+    ending = line[len(body) :]
+    if sep is None:  # whitespace: keep each run of it
+        parts = re.split(r"(\s+)", body)  # tokens at the even places (empty at a leading or trailing space)
+        values = iter(fields)
+        return "".join(next(values) if k % 2 == 0 and p else p for k, p in enumerate(parts)) + ending
+    if '"' in body:
+        import csv
+        import io
+
+        buf = io.StringIO()
+        csv.writer(buf, delimiter=sep, lineterminator="").writerow(fields)
+        return buf.getvalue() + ending
+    return sep.join(fields) + ending
+
+
+def _number(field: str, decimal_comma: bool) -> float | None:
+    text = field.strip().strip('"').strip()
+    if decimal_comma:
+        text = text.replace(",", ".")
     try:
-        [float(v) for v in line.split(",")[:2]]
-        return True
+        return float(text)
     except ValueError:
-        return False
+        return None
+
+
+def _xy_columns(first: list[str], columns: tuple[str, str] | None, name: str) -> tuple[int, int, bool]:
+    """The 0-based x and y columns, and whether the first line names them (a header): as given
+    (names or numbers from 1), else the columns the first line names x and y, else the first two."""
+    names = [h.strip().strip('"').strip().lower() for h in first]
+    if columns is not None:
+        picked, named = [], False
+        for col in columns:
+            key = str(col).strip()
+            if key.isdigit() and int(key) >= 1:
+                picked.append(int(key) - 1)
+            elif key.lower() in names:
+                picked.append(names.index(key.lower()))
+                named = True
+            else:
+                raise InputError(
+                    f"{name}: no column {key!r} (the first line has {', '.join(first)[:60]}); give header names or numbers from 1"
+                )
+        if picked[0] == picked[1]:
+            raise InputError(f"{name}: x and y are the same column ({picked[0] + 1})")
+        return picked[0], picked[1], named
+    if "x" in names and "y" in names:
+        return names.index("x"), names.index("y"), True
+    return 0, 1, False
 
 
 def _obj_points(raw: bytes, name: str, size: tuple[int, int]):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import glob
 import numbers
 import os
 import re
@@ -15,10 +16,16 @@ __all__ = [
     "MAX_FRAMES",
     "MAX_PADDING",
     "SequencePattern",
+    "describe_frames",
     "expand",
+    "find_frames",
+    "frames_from_disk",
     "frame_path",
     "is_pattern",
     "missing_frames_error",
+    "nuke_reading",
+    "other_reading_hint",
+    "output_reading_warning",
     "parse_frames",
     "parse_pattern",
 ]
@@ -443,3 +450,228 @@ def _frame_number(digits: str, where: str) -> int:
 def _quote(text: str) -> str:
     """A piece of a spec for a message: quoted, and cut to 40 characters."""
     return repr(text if len(text) <= 40 else text[:37] + "...")
+
+
+def find_frames(pattern: str | os.PathLike[str]) -> tuple[int, ...]:
+    """The frames of a sequence that exist on disk, in increasing order.
+
+    A file counts when its name is exactly what the pattern gives for its
+    frame number: with ``#`` (4 digits) ``a.0007.exr`` is frame 7 but
+    ``a.7.exr`` and ``a.00007.exr`` are not frames of it; a number wider than
+    the padding counts (``a.12345.exr``). Only regular files (or links to
+    them) count, and frame numbers within +-`FRAME_LIMIT`.
+
+    Parameters
+    ----------
+    pattern : str or path-like
+        A path with one wildcard (see `parse_pattern`).
+
+    Returns
+    -------
+    tuple of int
+        At most `MAX_FRAMES`; empty when no file matches.
+
+    Raises
+    ------
+    InputError
+        If ``pattern`` has no wildcard or a malformed one, or more than
+        `MAX_FRAMES` files match.
+    """
+    seq = _require_pattern(pattern)
+    found = _scan(seq)
+    if len(found) > MAX_FRAMES:
+        raise InputError(f"{seq.pattern}: more than {MAX_FRAMES:,} frames on disk; choose some with --frames")
+    return found
+
+
+def _scan(seq: SequencePattern, most: int = MAX_FRAMES) -> tuple[int, ...]:
+    """The frames of ``seq`` on disk, sorted; stops after ``most`` + 1."""
+    found: set[int] = set()
+    head, tail = len(seq.prefix), len(seq.suffix)
+    for name in glob.iglob(glob.escape(seq.prefix) + "*" + glob.escape(seq.suffix)):
+        digits = name[head : len(name) - tail]
+        if _NUMBER.fullmatch(digits) is None or len(digits.lstrip("-")) > 10:
+            continue
+        frame = int(digits)
+        if abs(frame) > FRAME_LIMIT or seq.path(frame) != name or not os.path.isfile(name):
+            continue
+        found.add(frame)
+        if len(found) > most:
+            break
+    return tuple(sorted(found))
+
+
+_NUMBER = re.compile(r"-?[0-9]+")
+
+
+def nuke_reading(pattern: str | os.PathLike[str]) -> SequencePattern | None:
+    """The pattern as Nuke, Houdini and fileseq read it, where that differs from oiiotool's.
+
+    There a run of ``#`` pads to one digit per ``#`` (``####`` is 4 digits, ``#``
+    is unpadded); in oiiotool's reading, warpcli's, each ``#`` is 4 digits.
+
+    Parameters
+    ----------
+    pattern : str or path-like
+
+    Returns
+    -------
+    SequencePattern or None
+        None when the pattern has no wildcard made of ``#`` alone.
+
+    Raises
+    ------
+    InputError
+        If the pattern is malformed (`parse_pattern`).
+
+    Examples
+    --------
+    >>> nuke_reading("shot.####.exr").path(1001), parse_pattern("shot.####.exr").path(1001)
+    ('shot.1001.exr', 'shot.0000000000001001.exr')
+    >>> nuke_reading("shot.%04d.exr") is None
+    True
+    """
+    seq = parse_pattern(pattern)
+    if seq is None or set(seq.wildcard) != {"#"}:
+        return None
+    return SequencePattern(seq.prefix, seq.wildcard, seq.suffix, len(seq.wildcard))
+
+
+def other_reading_hint(pattern: str | os.PathLike[str], frames: Iterable[int] | None = None) -> str | None:
+    """One line for a pattern that names no existing file when Nuke's reading of ``#`` would.
+
+    Parameters
+    ----------
+    pattern : str or path-like
+    frames : iterable of int, or None
+        The frames asked for; None: any frame on disk.
+
+    Returns
+    -------
+    str or None
+        The message, starting with the pattern; None when a frame exists as
+        the pattern reads, or none would in Nuke's reading either.
+
+    Raises
+    ------
+    InputError
+        If the pattern is malformed (`parse_pattern`).
+    """
+    seq = _require_pattern(pattern)
+    other = nuke_reading(pattern)
+    if other is None or other.padding == seq.padding:
+        return None
+    if frames is None:
+        ours, theirs = _scan(seq, 0), _scan(other, 0)
+    else:
+        wanted = list(frames)
+        ours = [f for f in wanted if os.path.isfile(seq.path(f))]
+        theirs = [f for f in wanted if os.path.isfile(other.path(f))]
+    if ours or not theirs:
+        return None
+    example = theirs[0]
+    simple = f"{seq.prefix}%0{other.padding}d{seq.suffix}" if other.padding > 1 else f"{seq.prefix}%d{seq.suffix}"
+    digits = "digits" if other.padding > 1 else "digit, unpadded"
+    return (
+        f"{seq.pattern}: no frame found: each # is 4 digits here, as in oiiotool "
+        f"({os.path.basename(seq.path(example))}), but {os.path.basename(other.path(example))} exists, as Nuke "
+        f"reads {seq.wildcard}; for {other.padding} {digits} write {simple}"
+    )
+
+
+def describe_frames(frames: Iterable[int]) -> str:
+    """Frames as a frame spec of ranges, for a message: ``1-10,12-24``.
+
+    Examples
+    --------
+    >>> describe_frames([1, 2, 3, 5, 7, 8])
+    '1-3,5,7-8'
+    """
+    ordered = sorted(set(frames))
+    pieces = []
+    k = 0
+    while k < len(ordered):
+        j = k
+        while j + 1 < len(ordered) and ordered[j + 1] == ordered[j] + 1:
+            j += 1
+        pieces.append(str(ordered[k]) if j == k else f"{ordered[k]}-{ordered[j]}")
+        k = j + 1
+    return ",".join(pieces)
+
+
+def frames_from_disk(pattern: str | os.PathLike[str], option: str = "--frames") -> tuple[tuple[int, ...], str]:
+    """The frames of a sequence given without a frame spec: those on disk, and a line saying which.
+
+    Parameters
+    ----------
+    pattern : str or path-like
+        The input pattern.
+    option : str
+        The option that gives frames, as messages name it.
+
+    Returns
+    -------
+    frames : tuple of int
+        `find_frames`: at least one.
+    message : str
+        How many were taken, their ranges and the gaps between them, for the log.
+
+    Raises
+    ------
+    InputError
+        If no frame exists (with `other_reading_hint`'s advice when Nuke's
+        reading of ``#`` finds some).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> d = tempfile.mkdtemp()
+    >>> for f in (1, 2, 3, 5):
+    ...     open(os.path.join(d, f"a.{f:04d}.png"), "w").close()
+    >>> frames, message = frames_from_disk(os.path.join(d, "a.#.png"))
+    >>> frames, message.split(": ", 1)[1]
+    ((1, 2, 3, 5), 'no --frames given: taking the 4 frames on disk, 1-3,5 (1 missing between them: 4)')
+    """
+    text = os.fspath(pattern)
+    frames = find_frames(text)
+    if not frames:
+        hint = other_reading_hint(text)
+        if hint is not None:
+            raise InputError(hint)
+        raise InputError(f"{text}: no frame of this sequence on disk, and no {option} given")
+    missing = frames[-1] - frames[0] + 1 - len(frames)
+    gaps = ""
+    if missing:
+        holes = sorted(set(range(frames[0], frames[-1] + 1)) - set(frames)) if missing <= 10_000 else []
+        shown = describe_frames(holes) if holes else "..."
+        gaps = f" ({missing} missing between them: {_cut_text(shown, 60)})"
+    many = "the frame" if len(frames) == 1 else f"the {len(frames)} frames"
+    return frames, f"{text}: no {option} given: taking {many} on disk, {_cut_text(describe_frames(frames), 60)}{gaps}"
+
+
+def _cut_text(text: str, most: int) -> str:
+    return text if len(text) <= most else text[: most - 3] + "..."
+
+
+def output_reading_warning(pattern: str | os.PathLike[str], frame: int) -> str | None:
+    """A line for an output pattern whose ``##``... would be read otherwise in Nuke (None for any other).
+
+    A run of two or more ``#`` is 4 digits per ``#`` here (``####``: 16), where
+    Nuke writes one digit per ``#``: worth saying before a shot is written
+    under names no compositor expects.
+
+    Examples
+    --------
+    >>> print(output_reading_warning("out.####.exr", 1001))
+    out.####.exr: each # is 4 digits, as in oiiotool, so frames are written as out.0000000000001001.exr; for 4 digits write out.%04d.exr
+    >>> output_reading_warning("out.#.exr", 1001) is None
+    True
+    """
+    seq = _require_pattern(pattern)
+    other = nuke_reading(pattern)
+    if other is None or len(seq.wildcard) < 2:
+        return None
+    return (
+        f"{seq.pattern}: each # is 4 digits, as in oiiotool, so frames are written as "
+        f"{os.path.basename(seq.path(frame))}; for {other.padding} digits write {seq.prefix}%0{other.padding}d{seq.suffix}"
+    )

@@ -1,4 +1,4 @@
-"""The ``warp apply-map`` command: an image warped with a saved map (an STMap)."""
+"""The ``warp apply-map`` command: an image, or a sequence of frames, warped with saved maps (STMaps)."""
 
 from __future__ import annotations
 
@@ -21,18 +21,45 @@ from .options import CONTEXT, background_option, collected, dtype_option, interp
     show_default=True,
     help="Which way the map's t runs; auto: as its header says (warpcli writes it), else down.",
 )
+@click.option(
+    "--frames",
+    metavar="SPEC",
+    help="Sequences: INPUT and OUTPUT are patterns (shot.#.exr), MAP a pattern (one map per frame) or one "
+    "map for all; SPEC the frames (1001-1100); without it, the frames of INPUT on disk.",
+)
+@click.option("--jobs", type=click.IntRange(1, 256), default=1, show_default=True, help="Sequences: frames warped at once, on threads.")
 @quiet_option
-def apply_map(map_path, input_path, output_path, resampling, stmap_t):
+def apply_map(map_path, input_path, output_path, resampling, stmap_t, frames, jobs):
     """Warp INPUT with a map saved by warp --save-map (or any STMap); write OUTPUT.
 
     MAP holds, for each OUTPUT pixel, the normalized point (s, t) of INPUT it
     comes from (OpenImageIO st_warp's convention); OUTPUT has MAP's size.
 
     \b
-    Example:
+    Examples:
       warp apply-map map.exr frame_0002.png warped_0002.png
+      warp apply-map map.#.exr shot.#.exr out.#.exr --frames 1001-1024
+      warp apply-map map.exr shot.#.exr out.#.exr
     """
-    from ..pipeline import apply_map_file
+    from ..sequence import is_pattern
 
     t_up = None if stmap_t == "auto" else stmap_t == "up"
+    if frames is not None or is_pattern(input_path) or is_pattern(output_path):
+        _sequence(map_path, input_path, output_path, resampling, t_up, frames, jobs)
+        return
+    from ..pipeline import apply_map_file
+
     apply_map_file(map_path, input_path, output_path, resampling, t_up=t_up)
+
+
+def _sequence(map_path, input_path, output_path, resampling, t_up, frames, jobs) -> None:
+    """Every frame through its map; failed frames one line each, the others go on."""
+    from ..batch import apply_map_sequence
+    from .warp import exit_for, frames_or_disk, progress_for, reporter
+
+    spec = frames_or_disk(frames, input_path)
+    with progress_for(spec) as progress:
+        items = apply_map_sequence(
+            map_path, input_path, output_path, spec, resampling, t_up=t_up, on_item=reporter(progress), jobs=jobs
+        )
+    exit_for(items, "frames")

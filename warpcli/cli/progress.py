@@ -1,4 +1,4 @@
-"""The one-line progress display on stderr while a long warp runs."""
+"""The one-line progress display on stderr while a long warp runs: its stage, or frames done of a sequence."""
 
 from __future__ import annotations
 
@@ -7,10 +7,12 @@ import time
 
 
 class Progress:
-    """A one-line stage display on stderr for runs longer than ``delay`` seconds.
+    """A one-line display on stderr for runs longer than ``delay`` seconds.
 
     Shown only when the stream is a terminal (never in scripts or logs) and
-    not with -q; the line is cleared when the run ends.
+    not with -q; the line is cleared when the run ends. A single warp shows
+    its stage; a batch or sequence shows items done of the total, the rate
+    and the time left (`item_done`).
 
     Parameters
     ----------
@@ -22,9 +24,16 @@ class Progress:
         Seconds before the line first appears: short runs show nothing.
     interval : float
         Seconds between updates of the elapsed time.
+    total : int or None
+        Items (frames) of a batch or sequence; None: a single warp.
+    what : str
+        What the items are, for the line ("frames").
     """
 
-    def __init__(self, stream, *, enabled: bool = True, delay: float = 1.0, interval: float = 0.2) -> None:
+    def __init__(
+        self, stream, *, enabled: bool = True, delay: float = 1.0, interval: float = 0.2, total: int | None = None,
+        what: str = "frames",
+    ) -> None:  # fmt: skip
         self._stream = stream
         self._enabled = enabled and _isatty(stream)
         self._delay = delay
@@ -34,10 +43,38 @@ class Progress:
         self._start = 0.0
         self._done = threading.Event()
         self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()  # the line and the messages printed above it
+        self.total = total
+        self._what = what
+        self._count = 0
 
     def stage(self, name: str) -> None:
         """Show ``name`` as the stage the run is in from now on."""
         self._stage = name
+
+    def item_done(self) -> None:
+        """One more item (frame) of the total is done."""
+        self._count += 1
+
+    def clear(self) -> None:
+        """Clear the line now, so that a message printed next starts at the left; the next update redraws it."""
+        with self._lock:
+            if self._shown:
+                self._stream.write("\r\x1b[K")
+                self._stream.flush()
+                self._shown = False
+
+    def line(self, elapsed: float) -> str:
+        """The text of the line after ``elapsed`` seconds."""
+        if self.total is None:
+            return f"warp: {self._stage}... {elapsed:.1f} s"
+        done, total = self._count, self.total
+        text = f"warp: {self._what} {done}/{total}"
+        if done and elapsed > 0:
+            rate = done / elapsed
+            left = (total - done) / rate
+            text += f", {rate:.2f}/s, {_clock(left)} left" if rate < 1 else f", {rate:.1f}/s, {_clock(left)} left"
+        return text + f" ({_clock(elapsed)})"
 
     def __enter__(self) -> Progress:
         if self._enabled:
@@ -50,20 +87,26 @@ class Progress:
         if self._thread is not None:
             self._done.set()
             self._thread.join()
-            if self._shown:
-                self._stream.write("\r\x1b[K")
-                self._stream.flush()
+            self.clear()
 
     def _run(self) -> None:
         if self._done.wait(self._delay):
             return
         while True:
-            elapsed = time.monotonic() - self._start
-            self._stream.write(f"\r\x1b[Kwarp: {self._stage}... {elapsed:.1f} s")
-            self._stream.flush()
-            self._shown = True
+            with self._lock:
+                self._stream.write("\r\x1b[K" + self.line(time.monotonic() - self._start))
+                self._stream.flush()
+                self._shown = True
             if self._done.wait(self._interval):
                 return
+
+
+def _clock(seconds: float) -> str:
+    """``m:ss``, or ``h:mm:ss`` from an hour."""
+    s = int(round(seconds))
+    h, rest = divmod(s, 3600)
+    m, s = divmod(rest, 60)
+    return f"{h}:{m:02d}:{s:02d}" if h else f"{m}:{s:02d}"
 
 
 def _isatty(stream) -> bool:

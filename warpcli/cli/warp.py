@@ -107,20 +107,22 @@ single_outputs = collected(
 @click.option(
     "--frames",
     metavar="SPEC",
-    help="Image sequences: INPUT and OUTPUT are patterns (shot.#.exr: # is 4 digits, @ one, or %04d) and SPEC "
-    "the frames: 1001-1100, 1-100x2, 1,5,10-12. Polygon files may hold keyframes; one map per distinct pair.",
+    help="Image sequences: INPUT and OUTPUT are patterns (shot.#.exr: # is 4 digits as in oiiotool, @ one, or %04d) "
+    "and SPEC the frames: 1001-1100, 1-100x2, 1,5,10-12; without it, the frames of INPUT on disk. Polygon files may "
+    "hold keyframes; one map per distinct pair. --save-map map.#.exr writes one STMap per frame.",
 )
+@click.option("--frame", "frame", type=int, metavar="N", help="Keyframed polygon files in a single warp: the polygons at frame N.")
 @click.option("--inverse", is_flag=True, help="Undo the warp from SRC to DST: map DST onto SRC (the same polygon files, swapped).")
 @click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
 @click.option("--scheduler", metavar="ADDRESS|local", help="Batch: run on a Dask cluster (tcp://host:8786), or 'local' for a LocalCluster of --jobs processes; the map is built here once and shipped. Needs warpcli[dask].")
-@click.option("--jobs", type=click.IntRange(1, 256), default=1, show_default=True, help="Batch and sequences: images warped at once, by threads sharing the map (output bytes as with 1).")
+@click.option("--jobs", type=click.IntRange(1, 256), default=1, show_default=True, help="Batch and sequences: images warped at once, by threads sharing the map, or for animated polygons by processes, a run of frames each (output bytes as with 1).")
 @click.option("--out-name", default="{name}", show_default=True, help="Batch output file name: {name}, {stem}, {ext} of the input (the extension picks the format).")
 @resample_options
 @map_options
 @single_outputs
 @verbosity
 @click.version_option(__version__, "--version", prog_name="warp")
-def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, resampling, mapping, outputs):  # fmt: skip
+def warp(paths, polygons, frames, frame, inverse, out_dir, scheduler, jobs, out_name, resampling, mapping, outputs):  # fmt: skip
     """Warp INPUT so that polygon SRC goes onto polygon DST; write OUTPUT.
 
     The map is smooth and bijective (no fold-overs) and takes each edge of SRC
@@ -157,15 +159,19 @@ def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, r
     if frames is not None or (out_dir is None and scheduler is None and _sequence_paths(paths)):
         if out_dir is not None or scheduler is not None:
             raise click.UsageError("--frames takes an OUTPUT pattern, not --out-dir or --scheduler")
+        if frame is not None:
+            raise click.UsageError("--frame N picks one frame of keyframed polygons for a single warp; a sequence takes each frame's")
         if len(paths) != 2:
             raise click.UsageError(f"expected an INPUT and an OUTPUT pattern with --frames, got {len(paths)} path(s)")
-        if used:
-            raise click.UsageError(f"{', '.join(used)} applies to a single warp, not to a sequence")
-        _sequence(paths, frames, polygons, options, jobs)
+        per_frame = ("--save-map", "--save-forward-map")  # sequences write one map per frame
+        if [name for name in used if name not in per_frame]:
+            names = ", ".join(name for name in used if name not in per_frame)
+            raise click.UsageError(f"{names} applies to a single warp, not to a sequence")
+        _sequence(paths, frames, polygons, options, jobs, outputs)
         return
     if out_dir is not None:
-        if used:
-            raise click.UsageError(f"{', '.join(used)} applies to a single warp, not to --out-dir")
+        if used or frame is not None:
+            raise click.UsageError(f"{', '.join(used + (['--frame'] if frame is not None else []))} applies to a single warp, not to --out-dir")
         if not paths:
             raise click.UsageError("no INPUT given")
         _batch(paths, out_dir, out_name, polygons, options, jobs, scheduler)
@@ -174,7 +180,7 @@ def warp(paths, polygons, frames, inverse, out_dir, scheduler, jobs, out_name, r
         raise click.UsageError("--scheduler runs a batch: give --out-dir DIR")
     if len(paths) != 2:
         raise click.UsageError(f"expected INPUT and OUTPUT (or INPUTs with --out-dir DIR), got {len(paths)} path(s)")
-    _single(*paths, polygons, options, outputs)
+    _single(*paths, polygons, options, outputs, frame)
 
 
 def _sequence_paths(paths) -> bool:
@@ -195,7 +201,7 @@ def _numbered(path) -> bool:
     return found is not None and "@" not in found.wildcard.replace("#", "")
 
 
-def _single(input_path, output_path, polygons, options, outputs) -> None:
+def _single(input_path, output_path, polygons, options, outputs, frame=None) -> None:
     """Warp one image, with the extra outputs asked for; log the timings (-v) and the map (-vv)."""
     from ..pipeline import warp_file
 
@@ -221,6 +227,7 @@ def _single(input_path, output_path, polygons, options, outputs) -> None:
             progress=progress.stage,
             tiled=True if outputs.tiled else None,
             labels=outputs.labels,
+            frame=frame,
         )
     if outputs.report_path == "-":
         click.echo(json.dumps(result.report, indent=2))
@@ -230,22 +237,25 @@ def _single(input_path, output_path, polygons, options, outputs) -> None:
         log.debug("%s: %s", key.replace("_", " "), value)
 
 
-def _sequence(paths, frames, polygons, options, jobs=1):
+def _sequence(paths, frames, polygons, options, jobs=1, outputs=None):
     """Warp the frames of a sequence; report failed frames one line each and go on."""
     from ..errors import InputError
-    from ..batch import warp_sequence
-    from ..sequence import is_pattern, missing_frames_error, parse_frames
+    from ..batch import FrameMaps, warp_sequence
+    from ..sequence import is_pattern
 
-    if frames is None:
-        raise missing_frames_error(paths[0])
     for path in paths:
         if not is_pattern(path):
             raise InputError(f"{path}: with --frames, INPUT and OUTPUT are sequence patterns (shot.#.exr, shot.%04d.exr)")
-    items = warp_sequence(
-        paths[0], paths[1], parse_frames(frames), polygons.src_path, polygons.dst_path, options,
-        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=_report_item, jobs=jobs,
-    )  # fmt: skip
-    _exit_for(items, "frames")
+    maps = None
+    if outputs is not None and (outputs.save_map is not None or outputs.save_forward_map is not None):
+        maps = FrameMaps(outputs.save_map, outputs.save_forward_map, outputs.stmap_t == "up")
+    spec = frames_or_disk(frames, paths[0])
+    with progress_for(spec) as progress:
+        items = warp_sequence(
+            paths[0], paths[1], spec, polygons.src_path, polygons.dst_path, options, src_label=polygons.src_label,
+            dst_label=polygons.dst_label, on_item=reporter(progress), jobs=jobs, maps=maps,
+        )  # fmt: skip
+    exit_for(items, "frames")
 
 
 def _batch(paths, out_dir, out_name, polygons, options, jobs=1, scheduler=None):
@@ -255,21 +265,50 @@ def _batch(paths, out_dir, out_name, polygons, options, jobs=1, scheduler=None):
 
         items = warp_batch_dask(
             list(paths), out_dir, polygons.src_path, polygons.dst_path, options, scheduler=scheduler,
-            pattern=out_name, src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=_report_item,
+            pattern=out_name, src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=report_item,
             workers=jobs,
         )  # fmt: skip
-        _exit_for(items, "inputs")
+        exit_for(items, "inputs")
         return
     from ..batch import warp_batch
 
-    items = warp_batch(
-        list(paths), out_dir, polygons.src_path, polygons.dst_path, options, pattern=out_name,
-        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=_report_item, jobs=jobs,
-    )  # fmt: skip
-    _exit_for(items, "inputs")
+    with progress_for(paths, "inputs") as progress:
+        items = warp_batch(
+            list(paths), out_dir, polygons.src_path, polygons.dst_path, options, pattern=out_name,
+            src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=reporter(progress), jobs=jobs,
+        )  # fmt: skip
+    exit_for(items, "inputs")
 
 
-def _report_item(item) -> None:
+def frames_or_disk(frames: str | None, pattern: str) -> tuple[int, ...]:
+    """--frames SPEC, or without it the frames of the input pattern on disk (said in one line)."""
+    from ..sequence import frames_from_disk, parse_frames
+
+    if frames is not None:
+        return parse_frames(frames)
+    spec, message = frames_from_disk(pattern)
+    logging.getLogger("warpcli").warning("%s", message)
+    return spec
+
+
+def progress_for(items, what: str = "frames") -> Progress:
+    """The progress line of a sequence or batch: items done of the total, rate and time left (terminal only, not -q)."""
+    log = logging.getLogger("warpcli")
+    return Progress(sys.stderr, enabled=log.isEnabledFor(logging.WARNING), total=len(items), what=what)
+
+
+def reporter(progress: Progress):
+    """`report_item` under a progress line: the line is cleared before a message and counts the item."""
+
+    def report(item) -> None:
+        progress.clear()
+        report_item(item)
+        progress.item_done()
+
+    return report
+
+
+def report_item(item) -> None:
     """One line per failed input (always), one per written output (with -v)."""
     if item.error is None:
         logging.getLogger("warpcli").info("wrote %s", item.output_path)
@@ -277,7 +316,7 @@ def _report_item(item) -> None:
         click.echo(f"warp: error: {item.error}", err=True)
 
 
-def _exit_for(items, what: str) -> None:
+def exit_for(items, what: str) -> None:
     """Batch exit status: the worst failure's, after every item was tried."""
     failed = [item for item in items if item.error is not None]
     if failed:
