@@ -102,6 +102,13 @@ def zigzag(rng: np.random.Generator, size: float = 300.0) -> np.ndarray:
     return np.concatenate([np.stack([x, y], 1), np.stack([x[::-1], y[::-1] + thick], 1)])
 
 
+def star_like(rng: np.random.Generator, size: float = 300.0) -> np.ndarray:
+    """A milder case: a star-shaped polygon of 6-14 vertices, radii 0.45-1 of R (reflex corners, no slivers)."""
+    n = int(rng.integers(6, 15))
+    th = 2 * np.pi * (np.arange(n) + 0.5 * rng.uniform(-0.6, 0.6, n)) / n
+    return _circle(size / 2 * rng.uniform(0.45, 1.0, n), th)
+
+
 SHAPES = {"spikes": spikes, "slot": slot, "ring_gap": ring_gap, "comb": comb, "wavy": wavy, "zigzag": zigzag}
 
 

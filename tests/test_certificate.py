@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from nasty import SHAPES, c_shape, dense_check, dense_samples, ring_gap
+
 from warpcli import MapOptions, Polygon, build_map, warp_image
 from warpcli.errors import FoldOverError
 from warpcli.maps.certificate import cover

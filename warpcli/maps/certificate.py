@@ -23,8 +23,9 @@ s (reach r = s sqrt 2):
   four, down to cells of half-side `band_floor`; the samples of those are
   counted as they are.
 
-Failures are counted (`Certificate.flipped`); every sample is counted in
-`Certificate.checked`. Points within `ON_BOUNDARY` of the polygon's size of
+Failures are counted (`Certificate.flipped`: at least one for a map that
+is not certified; cells are not split further once one sample failed);
+every sample is counted in `Certificate.checked`. Points within `ON_BOUNDARY` of the polygon's size of
 its boundary are not the closed form's (the maps take the exact boundary
 data there), so cells are not sampled there.
 """
@@ -40,7 +41,7 @@ from numpy.typing import NDArray
 from ..boundary import nearest_edge, on_boundary
 from ..grid import inside_polygon
 
-__all__ = ["BAND", "GRID_CELLS", "MARGIN", "OUTSIDE", "Cover", "band_floor", "cover", "certify_cells"]
+__all__ = ["BAND", "GRID_CELLS", "MARGIN", "OUTSIDE", "Cover", "band_floor", "certify_cells", "cover"]
 
 #: Cells of the uniform grid over the polygon's interior (its step: sqrt(area / GRID_CELLS)).
 GRID_CELLS = 40_000
@@ -55,7 +56,7 @@ ALONG = 5e-4
 #: Rounds of splitting at most (each halves the cells).
 MAX_ROUNDS = 24
 #: Samples at most in one certificate; beyond, unproved cells count as their samples.
-MAX_SAMPLES = 4_000_000
+MAX_SAMPLES = 2_000_000
 
 
 def band_floor(size: float) -> float:
@@ -220,7 +221,8 @@ def certify_cells(solution, vertices, theta, sign: float, near: float) -> tuple[
         failed += int(bad.sum())
         reach = np.hypot(grad[:, 0], grad[:, 1]) * half * math.sqrt(2.0)
         split = np.flatnonzero(~bad & ~(det > MARGIN * reach) & (half > floor))
-        if not split.size or checked + 4 * split.size > MAX_SAMPLES:
+        # a failure decides the verdict: splitting further would only count more
+        if failed or not split.size or checked + 4 * split.size > MAX_SAMPLES:
             break
         q = half[split] / 2
         corners = np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]])

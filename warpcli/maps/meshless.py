@@ -13,7 +13,8 @@ analytic derivatives; this module makes them `ThetaMap`s:
   ||x - phi(y)||^2 with the analytic Jacobian, constrained to the polygon
   (`newton.invert`); points of Theta's boundary go through the exact
   inverse boundary map;
-- certify: the sign of det J at a dense grid of samples (a smooth map has no
+- certify: `warpcli.maps.certificate`, det J and the values cell by cell,
+  refined along every edge and in every corner (a smooth map has no
   triangles to check; Radó-Kneser-Choquet holds for the exact map, and the
   approximations converge to it as m grows).
 """
@@ -21,7 +22,6 @@ analytic derivatives; this module makes them `ThetaMap`s:
 from __future__ import annotations
 
 import logging
-import math
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
