@@ -191,7 +191,7 @@ def dense_check(phi, samples: np.ndarray | None = None) -> dict:
     if k_out.size:
         sigma = np.linalg.svd(j[k_out], compute_uv=False)[:, -1]
         shift = nearest_edge(p[k_out], v)[2] + beyond[k_out] / sigma
-        deep = int((~(shift <= 1e-3 * size)).sum())
+        deep = int((~(shift <= min(1.0, 4e-3 * size))).sum())
     k = int(np.nanargmin(np.where(np.isfinite(det), det, -np.inf)))
     return {
         "samples": len(p), "folds": int(folds.sum()), "outside": int(outside.sum()), "deep": deep,

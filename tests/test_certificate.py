@@ -81,3 +81,14 @@ def test_report_counts_pixels_without_a_jacobian():
     res.pull.jacobian[1 - r0 if r0 <= 1 else 0, 0] = np.nan  # the window's corner: outside the target
     assert unknown_pixels(res) == 2
     assert build_report(res)["flipped_triangles"] == base + 2
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_mild_shapes_are_accepted_and_clean(seed):
+    """Not every polygon is refused: star-shaped ones with reflex corners pass with BEM, and are clean."""
+    v = SHAPES["star_like"](np.random.default_rng(seed))
+    poly = Polygon(v, name="star")
+    phi = BEM.build(poly, regular(poly, poly), MapOptions(method="bem", check=False))
+    assert phi.certify().ok
+    d = _check(phi)
+    assert d["folds"] == 0 and d["deep"] == 0, d

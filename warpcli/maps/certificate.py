@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 from ..boundary import nearest_edge, on_boundary
 from ..grid import inside_polygon
 
-__all__ = ["BAND", "GRID_CELLS", "MARGIN", "OUTSIDE", "Cover", "band_floor", "certify_cells", "cover"]
+__all__ = ["BAND", "BAND_RELATIVE", "GRID_CELLS", "MARGIN", "OUTSIDE", "Cover", "band_floor", "certify_cells", "cover"]
 
 #: Cells of the uniform grid over the polygon's interior (its step: sqrt(area / GRID_CELLS)).
 GRID_CELLS = 40_000
@@ -49,8 +49,11 @@ GRID_CELLS = 40_000
 MARGIN = 2.0
 #: A value further outside Theta than this (times Theta's size) is a failure: beyond rounding.
 OUTSIDE = 1e-9
-#: Values outside Theta are the closed form's boundary error when they move the boundary by less than this (times the size).
-BAND = 1e-3
+#: Values outside Theta are the closed form's boundary error when they move the boundary by less
+#: than ``min(BAND, BAND_RELATIVE * size)``: a pixel (the boundary deviations BEM and MFS have at
+#: 1 MP, bench/methods_table.py), 0.4 % of the size for polygons under 250 px.
+BAND = 1.0
+BAND_RELATIVE = 4e-3
 #: Along edges, cells are no longer than this fraction of the polygon's size.
 ALONG = 5e-4
 #: Rounds of splitting at most (each halves the cells).
@@ -182,7 +185,7 @@ def certify_cells(solution, vertices, theta, sign: float, near: float) -> tuple[
     v = np.asarray(vertices, dtype=np.float64)
     size = float(np.ptp(v, axis=0).max())
     floor = band_floor(size)
-    band = BAND * size
+    band = min(BAND, BAND_RELATIVE * size)
     cells = cover(v, near)
     centres, half = cells.centres, cells.half
     w = theta.points
