@@ -109,7 +109,9 @@ def star_like(rng: np.random.Generator, size: float = 300.0) -> np.ndarray:
     return _circle(size / 2 * rng.uniform(0.45, 1.0, n), th)
 
 
-SHAPES = {"spikes": spikes, "slot": slot, "ring_gap": ring_gap, "comb": comb, "wavy": wavy, "zigzag": zigzag}
+SHAPES = {
+    "spikes": spikes, "slot": slot, "ring_gap": ring_gap, "comb": comb, "wavy": wavy, "zigzag": zigzag, "star_like": star_like,
+}
 
 
 def _segments(v: np.ndarray):

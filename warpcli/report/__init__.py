@@ -90,8 +90,9 @@ def build_report(result: Measurable) -> dict:
         ``target_mesh`` with their vertex and triangle counts);
         ``flipped_triangles`` (elements where either map flips, plus the
         output pixels inside the target whose pull-back or Jacobian is
-        unknown, see `unknown_pixels`: 0 for a bijection); ``min_jacobian_det``; ``conformal`` and ``isometric``
-        (``mean`` and ``max``); ``timings`` (seconds per stage).
+        unknown, see `unknown_pixels`: 0 for a bijection);
+        ``min_jacobian_det``; ``conformal`` and ``isometric`` (``mean`` and
+        ``max``); ``timings`` (seconds per stage).
 
     Raises
     ------
