@@ -368,3 +368,49 @@ def test_command_line_parses_back_to_the_options(monkeypatch):
     assert seen[0][:2] == ("in.png", "out.png") and seen[0][3] == opts
     assert command_args(WarpOptions(), "in.png", "a.json", "b.json", "out.png") == [
         "warp", "in.png", "--src", "a.json", "--dst", "b.json", "out.png"]  # fmt: skip
+
+
+# --- the command ------------------------------------------------------------------------------------------
+
+
+def test_warp_edit_prints_the_address_serves_and_stops_on_ctrl_c(tmp_path):
+    import signal
+    import subprocess
+    import urllib.request
+
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 64, 48)
+    env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "warpcli", "edit", image, "--no-browser"], stderr=subprocess.PIPE, text=True, env=env
+    )
+    try:
+        line = proc.stderr.readline()
+        assert line.startswith(f"warp edit: {image} at http://127.0.0.1:") and "?token=" in line
+        url = line.split(" at ")[1].split()[0]
+        with urllib.request.urlopen(url, timeout=30) as response:
+            assert b"warp edit" in response.read()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 0
+        assert proc.stderr.read().strip() == "warp edit: stopped"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert sorted(os.listdir(tmp_path)) == ["picture.png"]
+
+
+@pytest.mark.parametrize("case", ["missing", "not an image", "bad polygon"])
+def test_warp_edit_bad_input_is_one_line_and_exit_2(tmp_path, case, capsys):
+    from warpcli.cli import main
+
+    image = tmp_path / "picture.png"
+    args = [str(image)]
+    if case == "not an image":
+        image.write_text("hello")
+    elif case == "bad polygon":
+        write_smooth_image(str(image), 32, 32)
+        (tmp_path / "a.json").write_text("[[0, 0], [1, 1]]")
+        args += ["--src", str(tmp_path / "a.json")]
+    assert main(["edit", *args, "--no-browser"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("warp: error: ") and str(tmp_path) in err

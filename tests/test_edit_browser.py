@@ -180,12 +180,15 @@ def test_rotated_start_and_mirror_warnings_are_shown(tmp_path, chromium_browser)
 
 
 def test_screenshot(tmp_path, chromium_browser):
-    """The README's picture: the sample's eye widened, grid on (WARP_EDIT_SCREENSHOT=path keeps it)."""
+    """The README's picture: the sample's eye widened, pasted over the photograph, grid on.
+
+    ``WARP_EDIT_SCREENSHOT=sample_images/edit.png`` keeps it (how the README's was made).
+    """
     repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     samples = os.path.join(repo, "sample_images")
     with served(
         os.path.join(samples, "chelsea.png"), os.path.join(samples, "chelsea_eye.json"),
-        os.path.join(samples, "chelsea_eye_wide.json"), str(tmp_path / "out.png"),
+        os.path.join(samples, "chelsea_eye_wide.json"), str(tmp_path / "out.png"), WarpOptions(outside="input"),
     ) as server:  # fmt: skip
         page = open_editor(chromium_browser, server, 1280, 560)
         wait_idle(page, 0)

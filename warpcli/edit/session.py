@@ -156,6 +156,8 @@ class EditSession:
         self.png = encode_png(self.preview.pixels)
         self.mapper = PreviewMapper()
         self.initial = {side: self._existing(path) for side, path in (("src", paths.src), ("dst", paths.dst))}
+        # The polygons last checked, by side: in a drag one side stays the same and is not checked again.
+        self._checked: dict[str, tuple[tuple, Polygon]] = {}
 
     @staticmethod
     def _existing(path: str) -> list | None:
@@ -231,9 +233,22 @@ class EditSession:
             points = doc.get(side)
             if not isinstance(points, list) or len(points) > MAX_VERTICES:
                 raise InputError(f"{name}: expected a list of at most {MAX_VERTICES} [x, y] pairs")
-            out.append(Polygon(points, name=name))
+            out.append(self._polygon(side, points, name))
         check_pair(out[0], out[1])
         return out[0], out[1]
+
+    def _polygon(self, side: str, points: list, name: str) -> Polygon:
+        """``Polygon(points, name=name)``, reusing the one made last time for this side if nothing changed."""
+        try:
+            key = (side, name, json.dumps(points))
+        except (TypeError, ValueError):
+            return Polygon(points, name=name)  # not JSON numbers: Polygon says what is wrong
+        kept = self._checked.get(side)
+        if kept is not None and kept[0] == key:
+            return kept[1]
+        polygon = Polygon(points, name=name)
+        self._checked[side] = (key, polygon)
+        return polygon
 
     @staticmethod
     def warnings(src: Polygon, dst: Polygon) -> list[str]:
@@ -253,7 +268,7 @@ class EditSession:
             src, dst = self.polygons(doc)
             options = self.options_from(doc.get("options"))
             k = self.preview.factor
-            psrc, pdst = (Polygon(p.points / k, name=p.name) for p in (src, dst))
+            psrc, pdst = (src, dst) if k == 1 else (Polygon(p.points / k, name=p.name) for p in (src, dst))
             mapping = with_preview_density(options.map, psrc, pdst)
             pw, ph = self.preview.preview_size
             mesh = self.mapper.build(psrc, pdst, mapping, (0.0, 0.0, float(pw), float(ph)))
