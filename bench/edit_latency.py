@@ -54,12 +54,12 @@ def start_editor(image: str, src: str, dst: str) -> tuple[subprocess.Popen, str]
 
 
 def measure(browser, url: str, vertex: np.ndarray, moves: int, interval: float, radius: float) -> dict:
-    page = browser.new_page(viewport={"width": 1600, "height": 900}, bypass_csp=True)
+    page = browser.new_page(viewport={"width": 1600, "height": 900})
     page.goto(url)
-    page.wait_for_function("window.warpEditor && window.warpEditor.ready && window.warpEditor.frames > 0 "
+    page.wait_for_function("() => window.warpEditor && window.warpEditor.ready && window.warpEditor.frames > 0 "
                            "&& window.warpEditor.idle()", timeout=300_000)  # fmt: skip
     box = page.locator("#dst-svg").bounding_box()
-    w, h = page.evaluate("[warpEditor.state.preview.width * warpEditor.state.preview.factor,"
+    w, h = page.evaluate("() => [warpEditor.state.preview.width * warpEditor.state.preview.factor,"
                          " warpEditor.state.preview.height * warpEditor.state.preview.factor]")  # fmt: skip
 
     def screen(p):
@@ -67,18 +67,18 @@ def measure(browser, url: str, vertex: np.ndarray, moves: int, interval: float, 
 
     page.mouse.move(*screen(vertex))
     page.mouse.down()
-    page.evaluate("warpEditor.eventLatencies = []; warpEditor.stats = []")
+    page.evaluate("() => { warpEditor.eventLatencies = []; warpEditor.stats = []; }")
     for i in range(moves):
         a = 2 * math.pi * (i + 1) / moves
         p = vertex + radius * np.array([math.cos(a) - 1.0, math.sin(a)])
         page.mouse.move(*screen(p))
         page.wait_for_timeout(interval)
     page.mouse.up()
-    page.wait_for_function("warpEditor.idle()", timeout=300_000)
-    lat = page.evaluate("warpEditor.eventLatencies")
-    stats = page.evaluate("warpEditor.stats")
-    header = page.evaluate("warpEditor.lastHeader")
-    error = page.evaluate("warpEditor.lastError")
+    page.wait_for_function("() => warpEditor.idle()", timeout=300_000)
+    lat = page.evaluate("() => warpEditor.eventLatencies")
+    stats = page.evaluate("() => warpEditor.stats")
+    header = page.evaluate("() => warpEditor.lastHeader")
+    error = page.evaluate("() => warpEditor.lastError")
     page.close()
     return {
         "median": statistics.median(lat), "p95": float(np.percentile(lat, 95)), "moves": len(lat),
@@ -103,6 +103,7 @@ def main(argv=None) -> int:
     from playwright.sync_api import sync_playwright
 
     rows = []
+    load_before = os.getloadavg()[0]  # other work on the machine slows every row: say how much there was
     with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
         browser = p.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
         for mp in (float(s) for s in args.sizes.split(",")):
@@ -125,8 +126,9 @@ def main(argv=None) -> int:
                 rows.append((mp, w, h, pair.name, r))
         browser.close()
     lines = [
-        f"warp edit drag-to-redraw latency ({platform.node()}, {os.cpu_count()} CPUs; Chromium headless, "
-        f"software WebGL; {args.moves} moves every {args.interval:g} ms)",
+        f"warp edit drag-to-redraw latency ({platform.node()}, {os.cpu_count()} CPUs, load average "
+        f"{load_before:.1f} before and {os.getloadavg()[0]:.1f} after; Chromium headless, software WebGL; "
+        f"{args.moves} moves every {args.interval:g} ms)",
         "",
         "| image | cage | moves | frames | median ms | p95 ms | target p95 | server ms (median) | map ms (last) | mesh (vertices) |",
         "|---|---|---|---|---|---|---|---|---|---|",

@@ -72,20 +72,25 @@ def browser():
 
 
 def open_editor(b, server: EditServer, width: int = 1400, height: int = 860):
-    """A page on the editor, once it has started."""
-    # bypass_csp: Playwright evaluates its waits as strings, which the page's CSP (no eval) forbids.
-    page = b.new_page(viewport={"width": width, "height": height}, bypass_csp=True)
+    """A page on the editor, once it has started, under the page's own Content-Security-Policy.
+
+    Playwright's waits and evaluations are given as functions (``"() => ..."``): an expression
+    would be evaluated by ``eval``, which that policy forbids.
+    """
+    page = b.new_page(viewport={"width": width, "height": height})
+    # Scripts' exceptions and the console's errors (a Content-Security-Policy violation, a refused request).
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.goto(server.url)
-    page.wait_for_function("window.warpEditor && window.warpEditor.ready", timeout=60_000)
+    page.wait_for_function("() => window.warpEditor && window.warpEditor.ready", timeout=60_000)
     page.page_errors = errors  # type: ignore[attr-defined]
     return page
 
 
 def wait_idle(page, frames_before: int | None = None) -> None:
     """Wait until no preview is being fetched (and, given ``frames_before``, a new one was drawn)."""
-    cond = "window.warpEditor.idle()"
+    cond = "() => window.warpEditor.idle()"
     if frames_before is not None:
         cond += f" && window.warpEditor.frames > {frames_before}"
     page.wait_for_function(cond, timeout=60_000)
@@ -94,7 +99,7 @@ def wait_idle(page, frames_before: int | None = None) -> None:
 def screen_point(page, side: str, point) -> tuple[float, float]:
     """Where image point ``point`` is on the screen in the ``side`` panel ("src" or "dst")."""
     box = page.locator(f"#{side}-svg").bounding_box()
-    view = page.evaluate("[window.warpEditor.state.preview.width * window.warpEditor.state.preview.factor,"
+    view = page.evaluate("() => [window.warpEditor.state.preview.width * window.warpEditor.state.preview.factor,"
                          " window.warpEditor.state.preview.height * window.warpEditor.state.preview.factor]")
     return box["x"] + point[0] * box["width"] / view[0], box["y"] + point[1] * box["height"] / view[1]
 
@@ -118,8 +123,8 @@ def preview_pixels(page) -> np.ndarray:
     """The preview canvas's RGBA pixels, as the page drew them."""
     import base64
 
-    w, h = page.evaluate("[window.warpEditor.state.preview.width, window.warpEditor.state.preview.height]")
-    raw = base64.b64decode(page.evaluate("window.warpEditor.previewPixels()"))
+    w, h = page.evaluate("() => [window.warpEditor.state.preview.width, window.warpEditor.state.preview.height]")
+    raw = base64.b64decode(page.evaluate("() => window.warpEditor.previewPixels()"))
     return np.frombuffer(raw, np.uint8).reshape(h, w, 4)
 
 

@@ -65,28 +65,28 @@ def test_draw_drag_preview_undo_save_export(tmp_path, chromium_browser):
         points = octagon(160, 120, 90, 70)
         place_polygon(page, points)
         wait_idle(page, 0)
-        src = np.array(page.evaluate("window.warpEditor.src"))
+        src = np.array(page.evaluate("() => window.warpEditor.src"))
         np.testing.assert_allclose(src, points, atol=0.6)  # one screen pixel is about 0.5 image pixel
-        assert page.evaluate("window.warpEditor.closed")
-        np.testing.assert_array_equal(page.evaluate("window.warpEditor.dst"), src)
+        assert page.evaluate("() => window.warpEditor.closed")
+        np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.dst"), src)
         # Numbered vertices on both panels.
         assert page.locator("#src-svg text").all_text_contents() == [str(i) for i in range(8)]
         assert page.locator("#dst-svg text").all_text_contents() == [str(i) for i in range(8)]
 
         # Drag target vertex 2 (the bottom one) down and to the right.
-        frames = page.evaluate("window.warpEditor.frames")
+        frames = page.evaluate("() => window.warpEditor.frames")
         start = src[2]
         drag(page, "dst", start, start + [25, 20])
         wait_idle(page, frames)
-        dst = np.array(page.evaluate("window.warpEditor.dst"))
+        dst = np.array(page.evaluate("() => window.warpEditor.dst"))
         np.testing.assert_allclose(dst[2], start + [25, 20], atol=0.6)
         np.testing.assert_array_equal(np.delete(dst, 2, axis=0), np.delete(src, 2, axis=0))
-        header = page.evaluate("window.warpEditor.lastHeader")
+        header = page.evaluate("() => window.warpEditor.lastHeader")
         assert header["ok"] and header["rebuilt"] == ["target"]  # the source map was kept
 
         # The preview's pixels are the library's warp of the preview image at that size.
         shown = preview_pixels(page)
-        k = page.evaluate("window.warpEditor.state.preview.factor")
+        k = page.evaluate("() => window.warpEditor.state.preview.factor")
         assert k == 1
         from warpcli.raster.imageio import read_image
 
@@ -105,18 +105,18 @@ def test_draw_drag_preview_undo_save_export(tmp_path, chromium_browser):
         assert (shown[outside] == 0).all()
 
         # Undo puts the vertex back and redraws; redo moves it again.
-        frames = page.evaluate("window.warpEditor.frames")
+        frames = page.evaluate("() => window.warpEditor.frames")
         page.keyboard.press("Control+z")
         wait_idle(page, frames)
-        np.testing.assert_array_equal(page.evaluate("window.warpEditor.dst"), src)
-        frames = page.evaluate("window.warpEditor.frames")
+        np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.dst"), src)
+        frames = page.evaluate("() => window.warpEditor.frames")
         page.click("#redo")
         wait_idle(page, frames)
-        np.testing.assert_array_equal(page.evaluate("window.warpEditor.dst"), dst)
+        np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.dst"), dst)
 
         # Save: the two polygon files, read back as the CLI reads them.
         page.click("#save")
-        page.wait_for_function("document.getElementById('status').textContent.startsWith('wrote')")
+        page.wait_for_function("() => document.getElementById('status').textContent.startsWith('wrote')")
         src_file, dst_file = tmp_path / "picture.src.json", tmp_path / "picture.dst.json"
         np.testing.assert_array_equal(read_polygon(src_file).points, src)
         np.testing.assert_array_equal(read_polygon(dst_file).points, dst)
@@ -124,9 +124,9 @@ def test_draw_drag_preview_undo_save_export(tmp_path, chromium_browser):
         # Export, then run the command the page shows: the same bytes.
         page.select_option("#interp", "cubic")
         page.click("#export")
-        page.wait_for_function("document.getElementById('status').textContent.includes('warped')", timeout=120_000)
+        page.wait_for_function("() => document.getElementById('status').textContent.includes('warped')", timeout=120_000)
         command = page.locator("#command").text_content()
-        assert page.evaluate("window.warpEditor.lastError") == ""
+        assert page.evaluate("() => window.warpEditor.lastError") == ""
         assert page.page_errors == []
     args = shlex.split(command)
     assert args[:2] == ["warp", image] and "--interp" in args and args[args.index("--interp") + 1] == "cubic"
@@ -145,19 +145,20 @@ def test_bad_polygon_shows_the_cli_message(tmp_path, chromium_browser):
     with served(image, src=str(tmp_path / "a.json"), dst=str(tmp_path / "b.json")) as server:
         page = open_editor(chromium_browser, server)
         wait_idle(page, 0)
-        frames = page.evaluate("window.warpEditor.frames")
+        frames = page.evaluate("() => window.warpEditor.frames")
         # Vertex 1 dragged past vertex 2's edge: the polygon crosses itself (a bow tie).
         drag(page, "dst", square[1], [100.0, 150.0])
         wait_idle(page, frames)
         shown = page.locator("#error").text_content()
-        dst = page.evaluate("window.warpEditor.dst")
+        dst = page.evaluate("() => window.warpEditor.dst")
         with pytest.raises(Exception) as err:
             Polygon(dst, name=str(tmp_path / "b.json"))
         assert shown == str(err.value) and shown
         # Save refuses it with the same message and writes nothing.
         page.click("#save")
-        page.wait_for_function("window.warpEditor.lastError !== ''")
+        page.wait_for_function("() => window.warpEditor.lastError !== ''")
         assert not (tmp_path / "b.json").exists()
+        assert page.page_errors == []
 
 
 def test_rotated_start_and_mirror_warnings_are_shown(tmp_path, chromium_browser):
@@ -177,12 +178,13 @@ def test_rotated_start_and_mirror_warnings_are_shown(tmp_path, chromium_browser)
         wait_idle(page, 0)
         warnings = page.locator("#warnings li").all_text_contents()
         assert any("mirrors the image" in w for w in warnings)
+        assert page.page_errors == []
 
 
 def test_screenshot(tmp_path, chromium_browser):
     """The README's picture: the sample's eye widened, pasted over the photograph, grid on.
 
-    ``WARP_EDIT_SCREENSHOT=sample_images/edit.png`` keeps it (how the README's was made).
+    ``WARP_EDIT_SCREENSHOT=sample_images/edit.jpg`` keeps it (how the README's was made).
     """
     repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     samples = os.path.join(repo, "sample_images")
@@ -195,6 +197,6 @@ def test_screenshot(tmp_path, chromium_browser):
         page.check("#grid")
         page.wait_for_timeout(100)
         path = os.environ.get("WARP_EDIT_SCREENSHOT") or str(tmp_path / "editor.png")
-        page.screenshot(path=path)
+        page.screenshot(path=path, **({"quality": 85} if path.endswith((".jpg", ".jpeg")) else {}))
         assert os.path.getsize(path) > 10_000
         assert page.page_errors == []
