@@ -414,3 +414,34 @@ def test_warp_edit_bad_input_is_one_line_and_exit_2(tmp_path, case, capsys):
     assert main(["edit", *args, "--no-browser"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("warp: error: ") and str(tmp_path) in err
+
+
+def test_load_reads_what_the_cli_reads(server, tmp_path):
+    """A file chosen on the page (its text) is parsed as `read_polygon` parses the file; nothing is read from disk."""
+    from warpcli.polygon import read_polygon
+
+    docs = {
+        "plain.json": SQUARE,
+        "points.json": {"points": MOVED},
+        "labelme.json": {"shapes": [{"label": "eye", "shape_type": "polygon", "points": MOVED}]},
+        "geo.json": {"type": "Polygon", "coordinates": [SQUARE + [SQUARE[0]]]},
+    }
+    for name, doc in docs.items():
+        path = tmp_path / name
+        path.write_text(json.dumps(doc))
+        text = path.read_text()
+        _opened.clear()
+        _watching.set()
+        try:
+            status, body = json_post(server, "/api/load", {"name": name, "text": text})
+        finally:
+            _watching.clear()
+        assert _opened == []
+        assert json.loads(body) == {"ok": True, "points": read_polygon(path).points.tolist()}
+    for text in ("[[0, 0], [1, 1]]", "{", '{"shapes": []}', '{"points": [[0, 0], [1, 0], [0, 1], [1, 1]]}'):
+        path = tmp_path / "bad.json"
+        path.write_text(text)
+        with pytest.raises(Exception) as err:
+            read_polygon(path)
+        status, body = json_post(server, "/api/load", {"name": "/somewhere/bad.json", "text": text})
+        assert json.loads(body) == {"ok": False, "error": str(err.value).replace(str(path), "bad.json")}

@@ -200,3 +200,28 @@ def test_screenshot(tmp_path, chromium_browser):
         page.screenshot(path=path, **({"quality": 85} if path.endswith((".jpg", ".jpeg")) else {}))
         assert os.path.getsize(path) > 10_000
         assert page.page_errors == []
+
+
+def test_load_polygon_files_on_the_page(tmp_path, chromium_browser):
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 200, 160)
+    pts = np.array(octagon(100, 80, 60, 50))
+    (tmp_path / "a.json").write_text(json.dumps(pts.tolist()))
+    labelme = {"shapes": [{"label": "x", "shape_type": "polygon", "points": (pts * 0.8 + 10).tolist()}]}
+    (tmp_path / "b.json").write_text(json.dumps(labelme))
+    with served(image) as server:
+        page = open_editor(chromium_browser, server)
+        page.set_input_files("#load-src", str(tmp_path / "a.json"))
+        wait_idle(page, 0)
+        np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.src"), pts)
+        frames = page.evaluate("() => window.warpEditor.frames")
+        page.set_input_files("#load-dst", str(tmp_path / "b.json"))
+        wait_idle(page, frames)
+        np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.dst"), pts * 0.8 + 10)
+        assert page.evaluate("() => window.warpEditor.lastHeader.ok")
+        (tmp_path / "c.json").write_text("[[0, 0], [1, 1]]")
+        page.set_input_files("#load-dst", str(tmp_path / "c.json"))
+        page.wait_for_function("() => window.warpEditor.lastError !== ''")
+        assert page.locator("#error").text_content().startswith("c.json: ")
+        np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.dst"), pts * 0.8 + 10)
+        assert page.page_errors == []

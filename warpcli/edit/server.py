@@ -14,7 +14,8 @@ every web page the user opens, through the browser):
   cross-site ``Sec-Fetch-Site`` is refused: no other site's page can call it;
 - it serves a fixed list of paths: the page, its assets (read from the
   package, by name, from a fixed list) and the image's preview, never a
-  path taken from the request;
+  path taken from the request (a polygon file loaded on the page arrives
+  as its text: the server reads nothing for it);
 - bodies are JSON of at most `MAX_BODY` bytes, with a Content-Length, read
   only once every header check passed;
 - it writes only through `EditSession.save` and `EditSession.export`: the
@@ -182,7 +183,10 @@ def _handler(server: EditServer) -> type[BaseHTTPRequestHandler]:
             if why is not None:
                 return self.fail(why)
             path = urlsplit(self.path).path
-            calls = {"/api/preview": None, "/api/save": server.session.save, "/api/export": server.session.export}
+            calls = {
+                "/api/preview": None, "/api/load": server.session.load, "/api/save": server.session.save,
+                "/api/export": server.session.export,
+            }  # fmt: skip
             if path not in calls:
                 return self.fail("404 not found")
             if "chunked" in self.headers.get("Transfer-Encoding", "").lower():

@@ -283,6 +283,28 @@ class EditSession:
         }  # fmt: skip
         return mesh.to_bytes(header)
 
+    @staticmethod
+    def load(doc: dict) -> dict:
+        """A polygon file's text from the page (a file the user chose), read as `read_polygon` reads a file.
+
+        ``doc``: ``name`` (the file's name, for messages), ``text`` and
+        ``label`` (which polygon of a labelme or GeoJSON file holding
+        several; optional). Nothing is read from the disk.
+
+        Returns
+        -------
+        dict
+            ``points``: the polygon's vertices.
+        """
+        from ..polygon.formats import parse_json, points_of
+
+        name, text, label = doc.get("name"), doc.get("text"), doc.get("label")
+        if not isinstance(name, str) or not isinstance(text, str) or not (label is None or isinstance(label, str)):
+            raise InputError("load: expected a file name, its text and an optional label")
+        name = os.path.basename(name) or "polygon"
+        points = points_of(parse_json(text.lstrip("\ufeff"), name), name, label)
+        return {"points": Polygon(points, name=name).points.tolist()}
+
     # --- saving and exporting -------------------------------------------------------
 
     def save(self, doc: dict) -> dict:

@@ -329,6 +329,29 @@ async function saveOrExport(path, what) {
   } catch (err) { showError(String(err.message || err)); $("status").textContent = ""; return null; }
 }
 
+// A polygon file chosen on the page: read here, parsed by the server as the CLI parses files.
+async function loadFile(side, input) {
+  const file = input.files[0];
+  input.value = "";
+  if (!file) return null;
+  try {
+    const result = await (await call("/api/load", { name: file.name, text: await file.text() })).json();
+    if (!result.ok) { showError(result.error); return result; }
+    remember();
+    if (side === "src") {
+      editor.src = result.points;
+      if (!editor.dst || editor.dst.length !== editor.src.length) editor.dst = editor.src.map((p) => p.slice());
+    } else {
+      editor.dst = result.points;
+      if (editor.src.length !== editor.dst.length) editor.src = editor.dst.map((p) => p.slice());
+    }
+    editor.closed = true;
+    showError("");
+    changed();
+    return result;
+  } catch (err) { showError(String(err.message || err)); return null; }
+}
+
 // --- start ---------------------------------------------------------------------------------------
 
 async function start() {
@@ -364,6 +387,7 @@ async function start() {
   }
   $("undo").onclick = undo; $("redo").onclick = redo; $("close").onclick = closePolygon; $("restart").onclick = restart;
   $("heatmap").onchange = render;
+  for (const side of ["src", "dst"]) $(`load-${side}`).onchange = (e) => loadFile(side, e.currentTarget);
   $("grid").onchange = () => { drawSource(); render(); };
   $("save").onclick = () => saveOrExport("/api/save", "saving");
   $("export").onclick = () => saveOrExport("/api/export", "exporting");
