@@ -445,3 +445,17 @@ def test_load_reads_what_the_cli_reads(server, tmp_path):
             read_polygon(path)
         status, body = json_post(server, "/api/load", {"name": "/somewhere/bad.json", "text": text})
         assert json.loads(body) == {"ok": False, "error": str(err.value).replace(str(path), "bad.json")}
+
+
+def test_warp_edit_on_a_taken_port_is_bad_input(tmp_path, capsys):
+    from warpcli.cli import main
+
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 16, 16)
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        assert main(["edit", image, "--no-browser", "--port", str(port)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"warp: error: 127.0.0.1:{port}: cannot listen there: Address already in use\n"

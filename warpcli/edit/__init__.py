@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 
+from ..errors import InputError
 from ..options import WarpOptions
 from .server import EditServer
 from .session import EditPaths, EditSession
@@ -53,11 +54,16 @@ def serve(
     Raises
     ------
     WarpError
-        If the image or a polygon file cannot be read.
+        If the image or a polygon file cannot be read (`InputError`: also
+        if the port cannot be listened on).
     """
     fs = (lambda p: None if p is None else os.fspath(p))
     paths = EditPaths.defaults(os.fspath(image), fs(src), fs(dst), fs(output))
-    server = EditServer(EditSession(paths, options), port=port)
+    session = EditSession(paths, options)
+    try:
+        server = EditServer(session, port=port)
+    except OSError as err:  # the port is taken, or needs privileges
+        raise InputError(f"127.0.0.1:{port}: cannot listen there: {err.strerror or err}") from err
     if announce is not None:
         announce(server.url)
     if browser:
