@@ -269,7 +269,7 @@ def assert_inverse(texcoords, positions, fmap, atol=1e-4):
 def test_preview_map_is_build_map(server):
     """The kept-side builder gives the map `BijectiveMap.between` builds, value for value."""
     src, dst = Polygon(star(5), name="a"), Polygon(star(5, r_in=30, phase=0.1), name="b")
-    opts = MapOptions(max_area=preview_areas(src, dst))
+    opts = MapOptions(max_area=preview_areas(src, dst), grade=False)
     region = (0.0, 0.0, 128.0, 128.0)
     mapper = PreviewMapper()
     mesh = mapper.build(src, dst, opts, region)
@@ -279,7 +279,7 @@ def test_preview_map_is_build_map(server):
     assert_inverse(mesh.texcoords, mesh.positions, ref)
     # Only the target moves: the source map is kept, the target's rebuilt.
     dst2 = Polygon(star(5, r_in=33, phase=0.1), name="b")
-    opts2 = MapOptions(max_area=preview_areas(src, dst2))
+    opts2 = MapOptions(max_area=preview_areas(src, dst2), grade=False)
     again = mapper.build(src, dst2, opts2, region)
     assert again.rebuilt == ("target",) and again.map.phi0 is mesh.map.phi0
     ref2 = BijectiveMap.between(src, dst2, opts2, regions=(region, region))
@@ -459,3 +459,23 @@ def test_warp_edit_on_a_taken_port_is_bad_input(tmp_path, capsys):
         assert main(["edit", image, "--no-browser", "--port", str(port)]) == 2
     err = capsys.readouterr().err
     assert err == f"warp: error: 127.0.0.1:{port}: cannot listen there: Address already in use\n"
+
+
+def test_preview_density_coarsens_the_grading_not_the_map():
+    """Ungraded preview meshes have several times fewer vertices, and the map stays within a tenth of a pixel."""
+    src, dst = Polygon(star(6), name="a"), Polygon(star(6, r_in=30, phase=0.2), name="b")
+    region = (0.0, 0.0, 128.0, 128.0)
+    from warpcli.edit.preview import with_preview_density
+
+    preview = BijectiveMap.between(src, dst, with_preview_density(MapOptions(), src, dst), regions=(region, region))
+    graded = BijectiveMap.between(src, dst, MapOptions(max_area=preview_areas(src, dst)), regions=(region, region))
+    fine = BijectiveMap.between(src, dst, regions=(region, region))
+    assert len(graded.phi1.mesh.vertices) > 3 * len(preview.phi1.mesh.vertices)
+    y, x = np.mgrid[20:108:3, 20:108:3] + 0.5
+    q = np.stack([x.ravel(), y.ravel()], axis=1)
+    a, b = preview.inverse(q), fine.inverse(q)
+    ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+    assert ok.sum() > 200
+    assert np.percentile(np.hypot(*(a[ok] - b[ok]).T), 95) < 0.1
+    with pytest.raises(ValueError, match="grade must be True or False"):
+        MapOptions(grade="no")

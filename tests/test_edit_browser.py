@@ -92,7 +92,7 @@ def test_draw_drag_preview_undo_save_export(tmp_path, chromium_browser):
 
         pixels = read_image(image).pixels
         want = warp_image(
-            pixels, src / k, dst / k, WarpOptions(antialias=False), max_area=tuple(header["max_area"])
+            pixels, src / k, dst / k, WarpOptions(antialias=False), max_area=tuple(header["max_area"]), grade=False
         ).pixels
         mask = inside_mask(dst / k, 320, 240, margin=1.5)
         assert mask.sum() > 10_000

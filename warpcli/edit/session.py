@@ -367,8 +367,8 @@ def command_args(options: WarpOptions, image: str, src: str, dst: str, output: s
     """
     args = ["warp", image, "--src", src, "--dst", dst, output]
     m, d = options.map, MapOptions()
-    if isinstance(m.max_area, tuple):
-        raise InputError("max_area as a (source, target) pair has no command-line form")
+    if isinstance(m.max_area, tuple) or not m.grade:
+        raise InputError("max_area as a (source, target) pair, and grade=False, have no command-line form")
     flags = [
         ("--method", m.method, d.method), ("--theta", m.theta, d.theta),
         ("--max-area", None if m.max_area is None else repr(m.max_area), None), ("--weights", m.weights, d.weights),
