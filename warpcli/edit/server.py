@@ -124,6 +124,9 @@ def _handler(server: EditServer) -> type[BaseHTTPRequestHandler]:
         server_version = "warp-edit"
         sys_version = ""
         protocol_version = "HTTP/1.1"
+        # The headers and the body go out as two writes: with Nagle's algorithm the second waits
+        # for the browser's delayed ACK of the first (up to 40 ms a preview).
+        disable_nagle_algorithm = True
 
         def log_message(self, format: str, *args) -> None:  # noqa: A002 - the base class's name
             log.debug("edit: " + format, *args)

@@ -143,7 +143,10 @@ async function sendPreview() {
     gl.finish();
     const drawn = performance.now();
     for (const t of events) editor.eventLatencies.push(drawn - t);
-    editor.stats.push({ latency: drawn - t0, server: t1 - t0, events: events.length });
+    // waited: from the newest event to the request (a preview was in flight); server: the request's
+    // round trip; latency: from the request to the end of drawing.
+    editor.stats.push({ latency: drawn - t0, server: t1 - t0, events: events.length,
+      waited: events.length ? t0 - Math.max(...events) : 0 });
     editor.frames += 1;
   } catch (err) {
     showError(String(err.message || err));
@@ -381,7 +384,8 @@ async function start() {
   for (const side of ["src", "dst"]) {
     const svg = $(`${side}-svg`);
     svg.addEventListener("pointerdown", (e) => onDown(side, e));
-    svg.addEventListener("pointermove", (e) => onMove(side, e));
+    // pointerrawupdate (where there is one) comes as soon as the mouse moves, not at the next frame.
+    svg.addEventListener("onpointerrawupdate" in window ? "pointerrawupdate" : "pointermove", (e) => onMove(side, e));
     svg.addEventListener("pointerup", onUp);
     svg.addEventListener("pointercancel", onUp);
   }
