@@ -181,22 +181,22 @@ def test_rotated_start_and_mirror_warnings_are_shown(tmp_path, chromium_browser)
         assert page.page_errors == []
 
 
-def test_screenshot(tmp_path, chromium_browser):
+def test_screenshot(tmp_path, chromium_browser, monkeypatch):
     """The README's picture: the sample's eye widened, pasted over the photograph, grid on.
 
     ``WARP_EDIT_SCREENSHOT=sample_images/edit.jpg`` keeps it (how the README's was made).
     """
-    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    samples = os.path.join(repo, "sample_images")
+    path = os.path.abspath(os.environ.get("WARP_EDIT_SCREENSHOT") or str(tmp_path / "editor.png"))
+    monkeypatch.chdir(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # paths as the README's
+    samples = "sample_images"
     with served(
         os.path.join(samples, "chelsea.png"), os.path.join(samples, "chelsea_eye.json"),
-        os.path.join(samples, "chelsea_eye_wide.json"), str(tmp_path / "out.png"), WarpOptions(outside="input"),
+        os.path.join(samples, "chelsea_eye_wide.json"), "wide_eye.png", WarpOptions(outside="input"),
     ) as server:  # fmt: skip
-        page = open_editor(chromium_browser, server, 1280, 560)
+        page = open_editor(chromium_browser, server, 1280, 680)
         wait_idle(page, 0)
         page.check("#grid")
         page.wait_for_timeout(100)
-        path = os.environ.get("WARP_EDIT_SCREENSHOT") or str(tmp_path / "editor.png")
         page.screenshot(path=path, **({"quality": 85} if path.endswith((".jpg", ".jpeg")) else {}))
         assert os.path.getsize(path) > 10_000
         assert page.page_errors == []

@@ -180,7 +180,7 @@ class EditSession:
             "help": {"method": {k: v.help for k, v in METHODS.items()}, "theta": {k: v.help for k, v in THETAS.items()}},
             "options": self.page_options(self.options),
             "names": {"src": self.paths.src, "dst": self.paths.dst, "output": self.paths.output},
-            "directory": self.paths.directory,
+            "directory": os.path.dirname(self.paths.image) or os.curdir,  # as the user named it
         }
 
     @staticmethod
