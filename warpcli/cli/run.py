@@ -17,7 +17,7 @@ from .points import points
 from .volume import volume
 from .warp import warp
 
-#: The ``warp`` command line: ``warp ...`` warps, ``warp apply-map|points|volume ...`` the others.
+#: The ``warp`` command line: ``warp ...`` warps, ``warp apply-map|edit|points|volume ...`` the others.
 cli = DefaultGroup(
     "warp", commands={"warp": warp, "apply-map": apply_map, "edit": edit, "points": points, "volume": volume}, default="warp", context_settings=CONTEXT
 )
