@@ -93,6 +93,11 @@ class MapOptions:
         square with natural boundary conditions, each coordinate prescribed on
         the two edges where it is constant and free to slide along the others;
         the result is still certified, never folded.
+    grade : bool
+        FEM: refine the meshes geometrically towards reflex vertices, where
+        the map's gradient is singular (the default, for accuracy there);
+        False: meshes of ``max_area`` alone, several times fewer vertices,
+        for previews (`warpcli.edit`).
 
     Raises
     ------
@@ -111,6 +116,7 @@ class MapOptions:
     theta_start: str = "regular"
     conditions: str = "dirichlet"
     nodes: int | None = None
+    grade: bool = True
 
     @property
     def theta_file(self) -> str | None:
@@ -119,6 +125,8 @@ class MapOptions:
 
     def __post_init__(self) -> None:
         _choice("method", self.method, METHODS)
+        if not isinstance(self.grade, bool):
+            raise InputError(f"grade must be True or False, got {self.grade!r}")
         if self.theta not in THETAS and not str(self.theta).lower().endswith(".json"):
             raise InputError(
                 f"unknown Theta {self.theta!r}; choose one of {', '.join(THETAS)} or give a JSON file (.json)"

@@ -11,6 +11,7 @@ import click
 from ..errors import WarpError
 from ..outputs import end_when_consistent, remove_temporaries
 from .apply_map import apply_map
+from .edit import edit
 from .exits import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, exit_code
 from .group import DefaultGroup
 from .options import CONTEXT
@@ -18,9 +19,9 @@ from .points import points
 from .volume import volume
 from .warp import warp
 
-#: The ``warp`` command line: ``warp ...`` warps, ``warp apply-map|points|volume ...`` the others.
+#: The ``warp`` command line: ``warp ...`` warps, ``warp apply-map|edit|points|volume ...`` the others.
 cli = DefaultGroup(
-    "warp", commands={"warp": warp, "apply-map": apply_map, "points": points, "volume": volume}, default="warp", context_settings=CONTEXT
+    "warp", commands={"warp": warp, "apply-map": apply_map, "edit": edit, "points": points, "volume": volume}, default="warp", context_settings=CONTEXT
 )
 
 

@@ -19,8 +19,9 @@ from .progress import Progress
 
 WARP_EPILOG = EXIT_CODES + """
 \b
-Also: warp apply-map MAP.exr INPUT OUTPUT applies a saved map; warp points maps points and OBJ UVs
-(see warp apply-map --help, warp points --help).
+Also: warp apply-map MAP.exr INPUT OUTPUT applies a saved map; warp points maps points and OBJ UVs;
+warp edit IMAGE draws the polygons in the browser (see warp apply-map --help, warp points --help,
+warp edit --help).
 """
 
 

@@ -306,7 +306,7 @@ def build(
     polygon : Polygon
     theta : Theta
     options : MapOptions
-        ``max_area`` and the boundary behaviour (for this ``role``),
+        ``max_area``, ``grade`` and the boundary behaviour (for this ``role``),
         ``weights`` and ``check`` are used.
     role : {"source", "target"}
         Which of the pair ``polygon`` is (picks its ``max_area``).
@@ -333,7 +333,10 @@ def build(
     clock = time.perf_counter
     t0 = clock()
     boundary = options.src_boundary if role == "source" else options.dst_boundary
-    mesh = mesh_polygon(polygon, auto_max_area(polygon, region) if area is None else area, region=region, boundary=boundary)
+    mesh = mesh_polygon(
+        polygon, auto_max_area(polygon, region) if area is None else area, region=region, boundary=boundary,
+        grade=options.grade,
+    )
     t1 = clock()
     # Mixed conditions (§5.2; Theta the unit square): each coordinate is
     # prescribed on the two edges where it is constant (x on the vertical

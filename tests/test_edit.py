@@ -1,0 +1,488 @@
+"""warp edit without a browser: the server's refusals, the session's saves and exports, the warnings, the preview map."""
+
+from __future__ import annotations
+
+import http.client
+import json
+import os
+import socket
+import sys
+import threading
+
+import numpy as np
+import pytest
+from edit_helpers import served, smooth_image, snapshot_dir, write_smooth_image
+from helpers import l_shape, regular, star
+from hypothesis import given
+from hypothesis import strategies as st
+
+from warpcli.edit.preview import PreviewMapper, encode_png, preview_areas, preview_image
+from warpcli.edit.server import MAX_BODY
+from warpcli.edit.session import EditPaths, EditSession, command_args, mirror_warning, rotated_start
+from warpcli.maps.compose import BijectiveMap
+from warpcli.options import MapOptions, WarpOptions
+from warpcli.polygon import Polygon
+from warpcli.raster.imageio import RasterImage, read_image
+
+SECRET = b"do-not-serve-me"
+
+# --- what the server opens: an audit hook records every file opened while `_watching` is set ---------
+
+_watching = threading.Event()
+_opened: list[str] = []
+
+
+def _audit(event: str, args: tuple) -> None:
+    if event == "open" and _watching.is_set() and isinstance(args[0], (str, bytes, os.PathLike)):
+        _opened.append(os.fsdecode(args[0]))
+
+
+sys.addaudithook(_audit)
+
+
+@pytest.fixture()
+def server(tmp_path):
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 64, 48)
+    (tmp_path / "secret.txt").write_bytes(SECRET)
+    (tmp_path / "a.json").write_text(json.dumps([[8, 8], [56, 8], [56, 40], [8, 40]]))
+    with served(image, src=str(tmp_path / "a.json")) as s:
+        yield s
+
+
+def request(server, method, path, body=None, headers=None, host=None):
+    """One request; ``host`` None: the server's own Host header."""
+    conn = http.client.HTTPConnection("127.0.0.1", server.port, timeout=30)
+    conn.putrequest(method, path, skip_host=True, skip_accept_encoding=True)
+    conn.putheader("Host", host if host is not None else f"127.0.0.1:{server.port}")
+    for key, value in (headers or {}).items():
+        conn.putheader(key, value)
+    data = b"" if body is None else body
+    if body is not None and "Content-Length" not in (headers or {}):
+        conn.putheader("Content-Length", str(len(data)))
+    conn.endheaders(data if body is not None else None)
+    response = conn.getresponse()
+    out = response.status, response.read()
+    conn.close()
+    return out
+
+
+def token(server):
+    return {"X-Warp-Token": server.token}
+
+
+def json_post(server, path, doc, **extra):
+    headers = dict(token(server), **{"Content-Type": "application/json"})
+    headers.update(extra.pop("headers", {}))
+    return request(server, "POST", path, json.dumps(doc).encode(), headers, **extra)
+
+
+SQUARE = [[8, 8], [56, 8], [56, 40], [8, 40]]
+MOVED = [[8, 8], [60, 4], [56, 40], [8, 40]]
+
+
+# --- the token, Host, Origin -----------------------------------------------------------------
+
+
+def test_the_page_assets_and_image_with_the_token(server):
+    status, body = request(server, "GET", f"/?token={server.token}")
+    assert status == 200 and b"editor.js?token=" + server.token.encode() in body
+    for path in ("/static/editor.js", "/static/editor.css", "/image.png", "/api/state"):
+        status, body = request(server, "GET", f"{path}?token={server.token}")
+        assert status == 200 and body, path
+    status, body = request(server, "GET", "/image.png", headers=token(server))
+    assert status == 200 and body.startswith(b"\x89PNG")
+
+
+REFUSALS = [
+    # (what, method, path template, headers, host) -> refused
+    ("no token", "GET", "/", {}, None),
+    ("no token", "GET", "/image.png", {}, None),
+    ("no token", "GET", "/api/state", {}, None),
+    ("wrong token", "GET", "/?token=wrong", {}, None),
+    ("wrong token", "GET", "/image.png?token=x{token}", {}, None),
+    ("wrong token header", "GET", "/api/state", {"X-Warp-Token": "nope"}, None),
+    ("token prefix", "GET", "/?token={token_prefix}", {}, None),
+    ("foreign Host", "GET", "/?token={token}", {}, "evil.example:{port}"),
+    ("DNS rebinding", "GET", "/?token={token}", {}, "rebind.attacker.test:{port}"),
+    ("other port", "GET", "/?token={token}", {}, "127.0.0.1:1"),
+    ("no port", "GET", "/?token={token}", {}, "127.0.0.1"),
+    ("empty Host", "GET", "/?token={token}", {}, ""),
+    ("foreign Origin", "GET", "/api/state?token={token}", {"Origin": "http://evil.example"}, None),
+    ("null Origin", "GET", "/api/state?token={token}", {"Origin": "null"}, None),
+    ("https Origin", "GET", "/api/state?token={token}", {"Origin": "https://127.0.0.1:{port}"}, None),
+    ("cross-site fetch", "GET", "/api/state?token={token}", {"Sec-Fetch-Site": "cross-site"}, None),
+    ("same-site fetch", "GET", "/api/state?token={token}", {"Sec-Fetch-Site": "same-site"}, None),
+    ("traversal", "GET", "/static/../secret.txt?token={token}", {}, None),
+    ("traversal", "GET", "/../secret.txt?token={token}", {}, None),
+    ("traversal", "GET", "/static/%2e%2e/%2e%2e/secret.txt?token={token}", {}, None),
+    ("traversal", "GET", "/static/..%2f..%2fsecret.txt?token={token}", {}, None),
+    ("traversal", "GET", "//etc/passwd?token={token}", {}, None),
+    ("traversal", "GET", "/image.png/../secret.txt?token={token}", {}, None),
+    ("other file", "GET", "/secret.txt?token={token}", {}, None),
+    ("other file", "GET", "/static/index.html?token={token}", {}, None),
+    ("other file", "GET", "/static/?token={token}", {}, None),
+    ("absolute URL", "GET", "http://evil.example/secret.txt?token={token}", {}, None),
+    ("method", "PUT", "/?token={token}", {}, None),
+    ("method", "DELETE", "/image.png?token={token}", {}, None),
+    ("method", "OPTIONS", "/api/save?token={token}", {"Origin": "http://evil.example"}, None),
+]
+
+
+@pytest.mark.parametrize("what, method, path, headers, host", REFUSALS, ids=[r[0] for r in REFUSALS])
+def test_refused_and_nothing_read_or_written(server, tmp_path, what, method, path, headers, host):
+    fill = {"token": server.token, "token_prefix": server.token[:-1], "port": server.port}
+    path = path.format(**fill)
+    headers = {k: v.format(**fill) for k, v in headers.items()}
+    before = snapshot_dir(str(tmp_path))
+    _opened.clear()
+    _watching.set()
+    try:
+        status, body = request(server, method, path, headers=headers, host=None if host is None else host.format(**fill))
+    finally:
+        _watching.clear()
+    assert status in (403, 404, 405, 421), (status, body)
+    assert SECRET not in body and b"warpEditor" not in body and not body.startswith(b"\x89PNG")
+    assert b"root:" not in body
+    assert _opened == [], _opened
+    assert snapshot_dir(str(tmp_path)) == before
+
+
+@pytest.mark.parametrize("path", ["/api/save", "/api/export", "/api/preview"])
+def test_posts_refused_without_token_or_from_another_origin(server, tmp_path, path):
+    doc = {"src": SQUARE, "dst": MOVED}
+    before = snapshot_dir(str(tmp_path))
+    cases = [
+        {"Content-Type": "application/json"},  # no token
+        {"Content-Type": "application/json", "X-Warp-Token": server.token + "x"},
+        {"Content-Type": "application/json", "X-Warp-Token": server.token, "Origin": "http://evil.example"},
+        {"Content-Type": "text/plain", "X-Warp-Token": server.token},  # a simple (CORS-free) request's type
+    ]
+    for headers in cases:
+        status, _ = request(server, "POST", path, json.dumps(doc).encode(), headers)
+        assert status in (403, 415), headers
+    assert request(server, "POST", path, json.dumps(doc).encode(), {"Content-Type": "application/json",
+                   "X-Warp-Token": server.token}, host="evil.example")[0] == 421  # fmt: skip
+    assert snapshot_dir(str(tmp_path)) == before
+
+
+def test_oversized_and_unbounded_bodies_refused_unread(server, tmp_path):
+    before = snapshot_dir(str(tmp_path))
+    headers = dict(token(server), **{"Content-Type": "application/json"})
+    # Only the headers are sent: the answer comes without the server waiting for (reading) the body.
+    with socket.create_connection(("127.0.0.1", server.port), timeout=10) as sock:
+        sock.sendall(
+            f"POST /api/save HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\nX-Warp-Token: {server.token}\r\n"
+            f"Content-Type: application/json\r\nContent-Length: {MAX_BODY + 1}\r\n\r\n".encode()
+        )
+        answer = sock.recv(4096)
+    assert answer.startswith(b"HTTP/1.1 413")
+    with socket.create_connection(("127.0.0.1", server.port), timeout=10) as sock:
+        sock.sendall(
+            f"POST /api/save HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\nX-Warp-Token: {server.token}\r\n"
+            "Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\n".encode()
+        )
+        assert sock.recv(4096).startswith(b"HTTP/1.1 411")
+    assert request(server, "POST", "/api/save", b"{}", dict(headers, **{"Content-Length": "-5"}))[0] == 413
+    assert request(server, "POST", "/api/save", b"{}", dict(headers, **{"Content-Length": "x"}))[0] == 411
+    assert request(server, "POST", "/api/save", b"[" * 100_000, headers)[0] == 400
+    assert request(server, "POST", "/api/save", b"[1, 2]", headers)[0] == 400
+    # Over 1 MB of JSON: refused from its Content-Length alone, answered before the body is sent
+    # (sending it would race with the server closing the connection).
+    big = json.dumps({"src": [[1.0, 2.0]] * 100_000, "dst": SQUARE}).encode()
+    assert len(big) > MAX_BODY
+    with socket.create_connection(("127.0.0.1", server.port), timeout=10) as sock:
+        sock.sendall(
+            f"POST /api/save HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\nX-Warp-Token: {server.token}\r\n"
+            f"Content-Type: application/json\r\nContent-Length: {len(big)}\r\n\r\n".encode()
+        )
+        assert sock.recv(4096).startswith(b"HTTP/1.1 413")
+    status, body = json_post(server, "/api/save", {"src": [[1.0, 2.0]] * 30_000, "dst": SQUARE})
+    assert status == 200 and not json.loads(body)["ok"]  # under the size, over the vertex count
+    assert snapshot_dir(str(tmp_path)) == before
+
+
+# --- saving: only where the user says, never the input ----------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["../x.json", "/tmp/x.json", "sub/x.json", ".hidden.json", "x.png", "..", "a\\b.json", "x\n.json", "", 7],
+)
+def test_save_names_only_plain_json_files_in_the_image_directory(server, tmp_path, name):
+    before = snapshot_dir(str(tmp_path))
+    status, body = json_post(server, "/api/save", {"src": SQUARE, "dst": MOVED, "dst_name": name})
+    result = json.loads(body)
+    if name == "":  # the default: the path of the command line
+        assert result["ok"]
+        assert result["saved"] == [str(tmp_path / "a.json"), str(tmp_path / "picture.dst.json")]
+        return
+    assert status == 200 and not result["ok"] and result["error"]
+    assert snapshot_dir(str(tmp_path)) == before
+    assert not os.path.exists("/tmp/x.json") or name != "/tmp/x.json"
+
+
+def test_save_writes_files_the_cli_reads(server, tmp_path):
+    status, body = json_post(server, "/api/save", {"src": SQUARE, "dst": MOVED, "dst_name": "moved.json"})
+    result = json.loads(body)
+    assert result["ok"], result
+    from warpcli.polygon import read_polygon
+
+    np.testing.assert_array_equal(read_polygon(tmp_path / "a.json").points, SQUARE)
+    np.testing.assert_array_equal(read_polygon(tmp_path / "moved.json").points, MOVED)
+    assert f"--dst {tmp_path / 'moved.json'}" in result["command"]
+    assert not [n for n in os.listdir(tmp_path) if "warpcli-" in n]  # no temporary left
+
+
+def test_export_never_overwrites_the_input(server, tmp_path):
+    before = snapshot_dir(str(tmp_path))
+    status, body = json_post(server, "/api/export", {"src": SQUARE, "dst": MOVED, "output_name": "picture.png"})
+    result = json.loads(body)
+    assert not result["ok"] and "overwrite the input" in result["error"]
+    assert snapshot_dir(str(tmp_path)) == before
+
+
+def test_bad_polygons_get_the_cli_messages(server, tmp_path):
+    bow_tie = [[8, 8], [56, 40], [56, 8], [8, 40]]
+    for doc in ({"src": SQUARE, "dst": bow_tie}, {"src": SQUARE, "dst": SQUARE[:3]}, {"src": SQUARE, "dst": [[0, "a"]] * 4}):
+        name = str(tmp_path / "picture.dst.json")
+        with pytest.raises(Exception) as err:
+            Polygon(doc["dst"], name=name)
+            from warpcli.polygon import check_pair
+
+            check_pair(Polygon(doc["src"], name=str(tmp_path / "a.json")), Polygon(doc["dst"], name=name))
+        status, body = json_post(server, "/api/save", doc)
+        assert json.loads(body) == {"ok": False, "error": str(err.value)}
+        status, body = json_post(server, "/api/preview", doc)
+        n = int.from_bytes(body[:4], "little")
+        assert json.loads(body[4 : 4 + n])["error"] == str(err.value)
+
+
+# --- the preview is the map ------------------------------------------------------------------------------
+
+
+def assert_inverse(texcoords, positions, fmap, atol=1e-4):
+    """``texcoords`` are f^-1 of ``positions``: where `BijectiveMap.inverse` answers (it may leave
+    points on the target's edge out, as outside), and on the edge inside the source polygon's box."""
+    want = fmap.inverse(positions)
+    found = np.isfinite(want).all(axis=1)
+    assert found.mean() > 0.8
+    np.testing.assert_allclose(texcoords[found], want[found], atol=atol)
+    x0, y0, x1, y1 = fmap.src.bounds
+    edge = texcoords[~found]
+    assert np.isfinite(edge).all() and (edge >= [x0 - 1e-3, y0 - 1e-3]).all() and (edge <= [x1 + 1e-3, y1 + 1e-3]).all()
+
+
+def test_preview_map_is_build_map(server):
+    """The kept-side builder gives the map `BijectiveMap.between` builds, value for value."""
+    src, dst = Polygon(star(5), name="a"), Polygon(star(5, r_in=30, phase=0.1), name="b")
+    opts = MapOptions(max_area=preview_areas(src, dst), grade=False)
+    region = (0.0, 0.0, 128.0, 128.0)
+    mapper = PreviewMapper()
+    mesh = mapper.build(src, dst, opts, region)
+    ref = BijectiveMap.between(src, dst, opts, regions=(region, region))
+    np.testing.assert_array_equal(mesh.map.phi1.values, ref.phi1.values)
+    np.testing.assert_array_equal(mesh.map.phi0.values, ref.phi0.values)
+    assert_inverse(mesh.texcoords, mesh.positions, ref)
+    # Only the target moves: the source map is kept, the target's rebuilt.
+    dst2 = Polygon(star(5, r_in=33, phase=0.1), name="b")
+    opts2 = MapOptions(max_area=preview_areas(src, dst2), grade=False)
+    again = mapper.build(src, dst2, opts2, region)
+    assert again.rebuilt == ("target",) and again.map.phi0 is mesh.map.phi0
+    ref2 = BijectiveMap.between(src, dst2, opts2, regions=(region, region))
+    np.testing.assert_array_equal(again.map.phi1.values, ref2.phi1.values)
+    # Theta cyclic depends on both polygons: both are rebuilt.
+    cyc = mapper.build(src, dst, MapOptions(theta="cyclic", max_area=preview_areas(src, dst)), region)
+    assert cyc.rebuilt == ("source", "target")
+
+
+@pytest.mark.parametrize("method", ["bem", "mfs"])
+def test_preview_of_meshless_methods(method):
+    src, dst = Polygon(l_shape(), name="a"), Polygon(l_shape(notch=0.4), name="b")
+    mesh = PreviewMapper().build(src, dst, MapOptions(method=method, max_area=preview_areas(src, dst)), (0, 0, 128, 128))
+    # Near the edge the meshless inverse (Newton's method) stops within its tolerance: a thousandth of a pixel.
+    assert_inverse(mesh.texcoords, mesh.positions, mesh.map, atol=5e-3)
+
+
+def test_session_preview_is_scaled_by_a_whole_factor(tmp_path):
+    image = str(tmp_path / "big.png")
+    write_smooth_image(image, 2100, 900)
+    session = EditSession(EditPaths.defaults(image))
+    assert session.preview.factor == 3 and session.preview.preview_size == (700, 300)
+    px = read_image(image).pixels.astype(float) / 255
+    block = px[:3, 6:9].mean(axis=(0, 1))
+    np.testing.assert_allclose(session.preview.pixels[0, 2, :3], np.round(block * 255), atol=1)
+
+
+def test_encode_png_round_trips(tmp_path):
+    rgba = np.concatenate([smooth_image(37, 23), np.full((23, 37, 1), 200, np.uint8)], axis=2)
+    path = tmp_path / "x.png"
+    path.write_bytes(encode_png(rgba))
+    np.testing.assert_array_equal(read_image(path).pixels, rgba)
+
+
+def test_preview_image_of_grey_alpha_and_float():
+    grey = RasterImage(np.linspace(0, 1, 12, dtype=np.float32).reshape(3, 4, 1), ("Y",))
+    out = preview_image(grey).pixels
+    assert out.shape == (3, 4, 4) and (out[..., 0] == out[..., 1]).all() and (out[..., 3] == 255).all()
+    la = RasterImage(np.full((2, 2, 2), 128, np.uint8), ("Y", "A"), alpha_channel=1, associated_alpha=False)
+    assert preview_image(la).pixels[0, 0].tolist() == [128, 128, 128, 128]
+
+
+# --- warnings -----------------------------------------------------------------------------------------
+
+
+@given(n=st.integers(3, 40), shift=st.integers(1, 39), scale=st.floats(0.3, 3.0), dx=st.floats(-50, 50))
+def test_rotated_start_found_for_any_shift(n, shift, scale, dx):
+    shift %= n
+    pts = regular(n, phase=0.3) if n % 2 else star(n // 2 + 2)
+    src = Polygon(pts, name="a")
+    moved = np.roll(pts * scale + dx, shift, axis=0)
+    assert rotated_start(src, Polygon(moved, name="b")) == shift
+    assert rotated_start(src, Polygon(pts * scale + dx, name="b")) == 0
+
+
+def test_no_rotated_start_for_ordinary_edits():
+    src = Polygon(star(6), name="a")
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        pts = star(6) + rng.normal(0, 3, (12, 2))
+        assert rotated_start(src, Polygon(pts, name="b")) == 0
+
+
+def test_mirror_warning_is_the_cli_one():
+    a = Polygon(regular(6), name="a.json")
+    assert mirror_warning(a, Polygon(regular(6) * 2, name="b.json")) is None
+    text = mirror_warning(a, Polygon(regular(6)[::-1], name="b.json"))
+    assert text.startswith("a.json and b.json run in opposite directions: the warp mirrors the image")
+
+
+# --- the command line -----------------------------------------------------------------------------------
+
+
+def test_command_line_parses_back_to_the_options(monkeypatch):
+    """Every option of the printed command reaches ``warp`` as the session's options."""
+    from warpcli.cli import main
+
+    warp_command = sys.modules["warpcli.cli.warp"]  # the package's name ``warp`` is the command
+
+    opts = WarpOptions(map=MapOptions(method="bem", theta="cyclic", dst_boundary="quadratic", max_area=4.0), interp="cubic",
+                       outside="input", antialias=False, background=(1.0, 0.5, 0.25))  # fmt: skip
+    seen = []
+    monkeypatch.setattr(warp_command, "_single", lambda *args: seen.append(args))
+    args = command_args(opts, "in.png", "a.json", "b.json", "out.png")
+    assert main(args[1:]) == 0
+    assert seen[0][:2] == ("in.png", "out.png") and seen[0][3] == opts
+    assert command_args(WarpOptions(), "in.png", "a.json", "b.json", "out.png") == [
+        "warp", "in.png", "--src", "a.json", "--dst", "b.json", "out.png"]  # fmt: skip
+
+
+# --- the command ------------------------------------------------------------------------------------------
+
+
+def test_warp_edit_prints_the_address_serves_and_stops_on_ctrl_c(tmp_path):
+    import signal
+    import subprocess
+    import urllib.request
+
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 64, 48)
+    env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "warpcli", "edit", image, "--no-browser"], stderr=subprocess.PIPE, text=True, env=env
+    )
+    try:
+        line = proc.stderr.readline()
+        assert line.startswith(f"warp edit: {image} at http://127.0.0.1:") and "?token=" in line
+        url = line.split(" at ")[1].split()[0]
+        with urllib.request.urlopen(url, timeout=30) as response:
+            assert b"warp edit" in response.read()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 0
+        assert proc.stderr.read().strip() == "warp edit: stopped"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert sorted(os.listdir(tmp_path)) == ["picture.png"]
+
+
+@pytest.mark.parametrize("case", ["missing", "not an image", "bad polygon"])
+def test_warp_edit_bad_input_is_one_line_and_exit_2(tmp_path, case, capsys):
+    from warpcli.cli import main
+
+    image = tmp_path / "picture.png"
+    args = [str(image)]
+    if case == "not an image":
+        image.write_text("hello")
+    elif case == "bad polygon":
+        write_smooth_image(str(image), 32, 32)
+        (tmp_path / "a.json").write_text("[[0, 0], [1, 1]]")
+        args += ["--src", str(tmp_path / "a.json")]
+    assert main(["edit", *args, "--no-browser"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("warp: error: ") and str(tmp_path) in err
+
+
+def test_load_reads_what_the_cli_reads(server, tmp_path):
+    """A file chosen on the page (its text) is parsed as `read_polygon` parses the file; nothing is read from disk."""
+    from warpcli.polygon import read_polygon
+
+    docs = {
+        "plain.json": SQUARE,
+        "points.json": {"points": MOVED},
+        "labelme.json": {"shapes": [{"label": "eye", "shape_type": "polygon", "points": MOVED}]},
+        "geo.json": {"type": "Polygon", "coordinates": [SQUARE + [SQUARE[0]]]},
+    }
+    for name, doc in docs.items():
+        path = tmp_path / name
+        path.write_text(json.dumps(doc))
+        text = path.read_text()
+        _opened.clear()
+        _watching.set()
+        try:
+            status, body = json_post(server, "/api/load", {"name": name, "text": text})
+        finally:
+            _watching.clear()
+        assert _opened == []
+        assert json.loads(body) == {"ok": True, "points": read_polygon(path).points.tolist()}
+    for text in ("[[0, 0], [1, 1]]", "{", '{"shapes": []}', '{"points": [[0, 0], [1, 0], [0, 1], [1, 1]]}'):
+        path = tmp_path / "bad.json"
+        path.write_text(text)
+        with pytest.raises(Exception) as err:
+            read_polygon(path)
+        status, body = json_post(server, "/api/load", {"name": "/somewhere/bad.json", "text": text})
+        assert json.loads(body) == {"ok": False, "error": str(err.value).replace(str(path), "bad.json")}
+
+
+def test_warp_edit_on_a_taken_port_is_bad_input(tmp_path, capsys):
+    from warpcli.cli import main
+
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 16, 16)
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        assert main(["edit", image, "--no-browser", "--port", str(port)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"warp: error: 127.0.0.1:{port}: cannot listen there: Address already in use\n"
+
+
+def test_preview_density_coarsens_the_grading_not_the_map():
+    """Ungraded preview meshes have several times fewer vertices, and the map stays within a tenth of a pixel."""
+    src, dst = Polygon(star(6), name="a"), Polygon(star(6, r_in=30, phase=0.2), name="b")
+    region = (0.0, 0.0, 128.0, 128.0)
+    from warpcli.edit.preview import with_preview_density
+
+    preview = BijectiveMap.between(src, dst, with_preview_density(MapOptions(), src, dst), regions=(region, region))
+    graded = BijectiveMap.between(src, dst, MapOptions(max_area=preview_areas(src, dst)), regions=(region, region))
+    fine = BijectiveMap.between(src, dst, regions=(region, region))
+    assert len(graded.phi1.mesh.vertices) > 3 * len(preview.phi1.mesh.vertices)
+    y, x = np.mgrid[20:108:3, 20:108:3] + 0.5
+    q = np.stack([x.ravel(), y.ravel()], axis=1)
+    a, b = preview.inverse(q), fine.inverse(q)
+    ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+    assert ok.sum() > 200
+    assert np.percentile(np.hypot(*(a[ok] - b[ok]).T), 95) < 0.1
+    with pytest.raises(ValueError, match="grade must be True or False"):
+        MapOptions(grade="no")

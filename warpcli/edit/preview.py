@@ -1,0 +1,266 @@
+"""The editor's preview: the image at preview size, and the real map at preview density, sent as a textured mesh."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import struct
+import threading
+import time
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..maps.base import ThetaMap
+from ..maps.compose import BijectiveMap
+from ..maps.registry import METHODS
+from ..maps.theta import theta_for
+from ..options import MapOptions
+from ..polygon import Polygon, check_pair
+from ..raster.imageio import RasterImage, convert_pixels
+
+__all__ = [
+    "PREVIEW_SIDE", "PREVIEW_TRIANGLES", "PreviewImage", "PreviewMapper", "PreviewMesh", "encode_png", "preview_areas",
+    "preview_image",
+]  # fmt: skip
+
+#: Longest side of the preview, in pixels: larger images are shown shrunk by a whole factor.
+PREVIEW_SIDE = 1024
+#: About how many triangles of the largest size each preview mesh has: the
+#: preview's density (`preview_areas`), coarse enough to rebuild during a drag.
+PREVIEW_TRIANGLES = 1500
+
+
+@dataclass(frozen=True)
+class PreviewImage:
+    """The image as the page shows it: RGBA bytes, shrunk by a whole ``factor``.
+
+    Attributes
+    ----------
+    pixels : (h, w, 4) ndarray of uint8
+        Straight (not premultiplied) RGBA; opaque where the image has no alpha.
+    factor : int
+        Preview pixel (r, c) is the mean of the image's ``factor`` x ``factor``
+        block at (r * factor, c * factor); image point p is preview point p / factor.
+    size : (int, int)
+        The whole image's (width, height).
+    """
+
+    pixels: NDArray[np.uint8]
+    factor: int
+    size: tuple[int, int]
+
+    @property
+    def preview_size(self) -> tuple[int, int]:
+        """The preview's (width, height)."""
+        return int(self.pixels.shape[1]), int(self.pixels.shape[0])
+
+
+def preview_image(image: RasterImage, side: int = PREVIEW_SIDE) -> PreviewImage:
+    """Shrink an image by the smallest whole factor that brings its longest side to at most ``side``.
+
+    Block means keep the preview a faithful picture of the image (no
+    aliasing); a whole factor keeps the coordinates exact (image point p is
+    preview point p / factor). The last ``width % factor`` columns and
+    ``height % factor`` rows, less than a block, are left out.
+    """
+    px = convert_pixels(image.pixels, "float")
+    h, w = px.shape[:2]
+    factor = max(1, math.ceil(max(w, h) / side))
+    ph, pw = max(1, h // factor), max(1, w // factor)
+    if factor > 1:
+        block = px[: ph * factor, : pw * factor]
+        px = block.reshape(ph, factor, pw, factor, -1).mean(axis=(1, 3), dtype=np.float32)
+    channels = px.shape[2]
+    alpha = image.alpha_channel
+    colour = [c for c in range(channels) if c != alpha][:3]
+    rgb = px[:, :, colour]
+    if rgb.shape[2] == 1:
+        rgb = np.repeat(rgb, 3, axis=2)
+    elif rgb.shape[2] == 2:
+        rgb = np.concatenate([rgb, rgb[:, :, :1] * 0], axis=2)
+    a = px[:, :, alpha : alpha + 1] if alpha is not None else np.ones((ph, pw, 1), np.float32)
+    if alpha is not None and image.associated_alpha:  # the page draws straight colour
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rgb = np.where(a > 0, rgb / np.where(a > 0, a, 1), 0)
+    rgba = np.concatenate([rgb, a], axis=2)
+    return PreviewImage(np.ascontiguousarray(convert_pixels(rgba.astype(np.float32), "uint8")), factor, (w, h))
+
+
+def encode_png(rgba: NDArray[np.uint8]) -> bytes:
+    """An 8-bit RGBA image as PNG bytes (the standard library's zlib; no filter).
+
+    >>> encode_png(np.zeros((1, 1, 4), np.uint8))[:8]
+    b'\\x89PNG\\r\\n\\x1a\\n'
+    """
+    h, w = rgba.shape[:2]
+    raw = np.zeros((h, 1 + 4 * w), np.uint8)
+    raw[:, 1:] = rgba.reshape(h, 4 * w)
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    header = struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw.tobytes(), 1)) + chunk(b"IEND", b"")
+
+
+def preview_areas(src: Polygon, dst: Polygon, triangles: int = PREVIEW_TRIANGLES) -> tuple[float, float]:
+    """The preview's ``max_area`` (source, target): each polygon's area over ``triangles``, at least 1 px²."""
+    return tuple(max(1.0, abs(p.signed_area) / triangles) for p in (src, dst))  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class PreviewMesh:
+    """The map's pull-back as a textured mesh of the target, in preview pixels.
+
+    Attributes
+    ----------
+    positions : (N, 2) ndarray of float32
+        Vertices of a triangle mesh of the target polygon.
+    texcoords : (N, 2) ndarray of float32
+        f^-1 of each vertex: the source point it shows.
+    triangles : (M, 3) ndarray of uint32
+    map : BijectiveMap
+        The map they come from.
+    max_area : (float, float)
+        The density it was built at (`preview_areas`).
+    rebuilt : tuple of str
+        Which sides were built for it (``"source"``, ``"target"``); the others were reused.
+    seconds : float
+        Time spent building and evaluating.
+    """
+
+    positions: NDArray[np.float32]
+    texcoords: NDArray[np.float32]
+    triangles: NDArray[np.uint32]
+    map: BijectiveMap
+    max_area: tuple[float, float]
+    rebuilt: tuple[str, ...]
+    seconds: float
+
+    def to_bytes(self, header: dict) -> bytes:
+        """``header`` (JSON, with the counts added) and the arrays, as the page reads them.
+
+        Layout: uint32 length of the JSON header, the header padded with
+        spaces to a multiple of 4 bytes, then float32 ``x, y, u, v`` per
+        vertex and uint32 indices, little-endian.
+        """
+        doc = dict(header, vertices=len(self.positions), triangles=len(self.triangles))
+        text = json.dumps(doc).encode()
+        text += b" " * (-len(text) % 4)
+        data = np.concatenate([self.positions, self.texcoords], axis=1).astype("<f4")
+        return struct.pack("<I", len(text)) + text + data.tobytes() + self.triangles.astype("<u4").tobytes()
+
+
+class PreviewMapper:
+    """Builds the preview's maps the way `warpcli.maps.compose.build_map` does, keeping the side that did not move.
+
+    `build_map` builds both harmonic maps every time. In a drag only one
+    polygon moves, and with Theta unchanged (Theta ``regular`` depends on
+    the vertex count alone) the other side's map is the same one: it is
+    kept, keyed by everything it depends on (polygon, Theta, method,
+    options, region). The map is then `BijectiveMap(phi0, phi1)`, certified
+    as `build_map` certifies it: the same map, built by the same calls.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._kept: dict[str, tuple[tuple, ThetaMap]] = {}
+
+    def build(self, src: Polygon, dst: Polygon, options: MapOptions, region: tuple[float, float, float, float]) -> PreviewMesh:
+        """The map between ``src`` and ``dst`` at ``options``' density, and its mesh of the target.
+
+        Raises
+        ------
+        InputError
+            If the polygons do not correspond or the options are bad.
+        FoldOverError
+            If the map would fold.
+        """
+        t0 = time.perf_counter()
+        with self._lock:
+            check_pair(src, dst)
+            theta = theta_for(src, dst, options)
+            method = METHODS[options.method].load()
+            rebuilt = []
+            maps = []
+            areas = options.areas()
+            # Only the source's lookup tables are made (it is inverted); the
+            # target is read at its own mesh's vertices, never on a pixel grid.
+            for i, (polygon, role, side) in enumerate(((src, "source", "inverse"), (dst, "target", None))):
+                # A side's map depends on the other side's max_area not at all.
+                own = dataclasses.replace(options, max_area=areas[i])
+                key = (polygon.points.tobytes(), polygon.name, theta.points.tobytes(), own, region)
+                kept = self._kept.get(role)
+                if kept is not None and kept[0] == key:
+                    maps.append(kept[1])
+                    continue
+                phi = method.build(polygon, theta, options, role, region)
+                if side is not None and hasattr(phi, "precompute"):
+                    phi.precompute(side)
+                self._kept[role] = (key, phi)
+                maps.append(phi)
+                rebuilt.append(role)
+            fmap = BijectiveMap(*maps)
+            if options.check:
+                fmap.check_bijective()
+            phi0, phi1 = maps
+            mesh = getattr(phi1, "mesh", None)
+            if mesh is not None and hasattr(phi1, "values"):
+                # FEM: phi1 takes its mesh's vertices to ``values`` by definition.
+                positions, triangles, in_theta = mesh.vertices, mesh.triangles, phi1.values
+            else:
+                from ..maps.fem.mesh import mesh_polygon
+
+                area = options.areas()[1] or max(1.0, abs(dst.signed_area) / PREVIEW_TRIANGLES)
+                mesh = mesh_polygon(dst, area, region=region)
+                positions, triangles = mesh.vertices, mesh.triangles
+                in_theta = phi1.evaluate(positions).points
+            # In Z order, each point starts its search where the last one was
+            # found (``coherent``): the same points, found ten times faster.
+            order = z_order(in_theta)
+            tex = np.empty_like(in_theta)
+            tex[order] = phi0.inverse(in_theta[order], coherent=True).points
+            # A vertex whose pre-image could not be found (none expected) shows nothing.
+            bad = ~np.isfinite(tex).all(axis=1)
+            if bad.any():
+                keep = ~bad[triangles].any(axis=1)
+                triangles = triangles[keep]
+                tex = np.where(bad[:, None], 0.0, tex)
+        return PreviewMesh(
+            positions.astype(np.float32), tex.astype(np.float32), np.asarray(triangles, np.uint32), fmap,
+            options.areas(), tuple(rebuilt), time.perf_counter() - t0,
+        )  # fmt: skip
+
+
+def z_order(points: NDArray[np.float64]) -> NDArray[np.intp]:
+    """The order of ``points`` along a Z (Morton) curve: neighbours in it are mostly neighbours in the plane.
+
+    >>> z_order(np.array([[1.0, 1.0], [0.0, 0.0], [1.0, 0.0]])).tolist()
+    [1, 2, 0]
+    """
+    lo = points.min(axis=0)
+    span = max(float(np.ptp(points, axis=0).max()), 1e-300)
+    q = ((points - lo) / span * 65535).astype(np.uint64)
+
+    def spread(v: NDArray[np.uint64]) -> NDArray[np.uint64]:
+        for shift, mask in ((8, 0x00FF00FF), (4, 0x0F0F0F0F), (2, 0x33333333), (1, 0x55555555)):
+            v = (v | (v << np.uint64(shift))) & np.uint64(mask)
+        return v
+
+    return np.argsort(spread(q[:, 0]) | (spread(q[:, 1]) << np.uint64(1)), kind="stable")
+
+
+def with_preview_density(options: MapOptions, src: Polygon, dst: Polygon) -> MapOptions:
+    """``options`` at the preview's density: its ``max_area`` (`preview_areas`), meshes not graded.
+
+    The FEM meshes' grading towards reflex vertices refines them down to a
+    tenth of a pixel, for accuracy far below a preview's pixel, and takes
+    most of their vertices (5 to 9 times as many): without it a drag's map is
+    rebuilt several times faster. It is the same map, by the same code, at a
+    coarser density: ``BijectiveMap.between(src, dst, with_preview_density(...))``.
+    """
+    return dataclasses.replace(options, max_area=preview_areas(src, dst), grade=False)

@@ -1,0 +1,393 @@
+"""The editor's session: one image, its two polygons, the options, and what the page may ask of them."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import shlex
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError, WarpError
+from ..maps.registry import METHODS, THETAS
+from ..options import BOUNDARIES, INTERPOLATIONS, OUTSIDE, MapOptions, WarpOptions
+from ..outputs import atomic_path, check_output_path, write_checked
+from ..polygon import Polygon, check_pair, read_polygon
+from ..raster.imageio import check_image_output, read_image
+from .preview import PreviewImage, PreviewMapper, encode_png, preview_image, with_preview_density
+
+__all__ = ["MAX_VERTICES", "EditPaths", "EditSession", "mirror_warning", "rotated_start", "rotated_start_warning"]
+
+#: Most vertices a polygon from the page may have.
+MAX_VERTICES = 2000
+#: The options the page chooses, and the lists it chooses them from.
+PAGE_CHOICES = {
+    "method": tuple(METHODS),
+    "theta": tuple(THETAS),
+    "boundary": BOUNDARIES,
+    "interp": INTERPOLATIONS,
+    "outside": OUTSIDE,
+}
+
+
+@dataclass(frozen=True)
+class EditPaths:
+    """Where the editor reads and writes.
+
+    The page names files to save by their name alone (no directory): they
+    go into the image's directory. The paths given on the command line are
+    the defaults and may lie anywhere.
+
+    Parameters
+    ----------
+    image : str
+        The image; read, never written.
+    src, dst : str
+        Where the polygons are read from if they exist, and saved.
+    output : str
+        Where an export writes the warped image.
+    """
+
+    image: str
+    src: str
+    dst: str
+    output: str
+
+    @classmethod
+    def defaults(cls, image: str, src: str | None = None, dst: str | None = None, output: str | None = None) -> EditPaths:
+        """The paths of a session, with ``IMAGE_STEM.src.json``, ``.dst.json`` and ``.warped.EXT`` beside the image by default."""
+        stem, ext = os.path.splitext(image)
+        return cls(image, src or f"{stem}.src.json", dst or f"{stem}.dst.json", output or f"{stem}.warped{ext}")
+
+    @property
+    def directory(self) -> str:
+        """The image's directory: where names chosen on the page are saved."""
+        return os.path.dirname(os.path.abspath(self.image))
+
+    def chosen(self, name: object, default: str, extensions: tuple[str, ...]) -> str:
+        """The path of a file name chosen on the page: ``default`` if it is its name, else NAME in the image's directory.
+
+        Raises
+        ------
+        InputError
+            If ``name`` is not a plain file name (a directory part, ``..``, a
+            hidden name, a control character) with one of ``extensions``.
+        """
+        if name is None or name == "" or name == os.path.basename(default):
+            return default
+        if not isinstance(name, str) or len(name) > 255:
+            raise InputError("a file name must be a text of at most 255 characters")
+        if (
+            name != os.path.basename(name) or "/" in name or "\\" in name or name.startswith(".")
+            or any(ord(c) < 32 for c in name)
+        ):  # fmt: skip
+            raise InputError(f"{name!r}: give a file name alone; files are saved in the image's directory {self.directory}")
+        if not name.lower().endswith(extensions):
+            raise InputError(f"{name}: the name must end in {' or '.join(extensions)}")
+        return os.path.join(self.directory, name)
+
+
+def rotated_start(src: Polygon, dst: Polygon) -> int:
+    """How far ``dst``'s vertices look rotated against ``src``'s: 0 when they correspond as numbered.
+
+    Each polygon is centred and scaled to unit mean square radius; the shift
+    k minimising the mean square distance between vertex i of ``src`` and
+    vertex i + k of ``dst`` is the answer when it is less than a quarter of
+    that of k = 0 (else 0: the shapes differ too much to tell).
+    """
+    if src.n != dst.n:
+        return 0
+
+    def normal(p: Polygon) -> np.ndarray:
+        q = p.points - p.points.mean(axis=0)
+        return q / math.sqrt(max((q**2).sum(axis=1).mean(), 1e-300))
+
+    a, b = normal(src), normal(dst)
+    errors = np.array([((a - np.roll(b, -k, axis=0)) ** 2).sum(axis=1).mean() for k in range(src.n)])
+    best = int(errors.argmin())
+    return best if best != 0 and errors[best] < 0.25 * errors[0] else 0
+
+
+def rotated_start_warning(src: Polygon, dst: Polygon) -> str | None:
+    """The warning for a rotated start vertex, or None."""
+    k = rotated_start(src, dst)
+    if k == 0:
+        return None
+    return (
+        f"{dst.name}: its vertex {k} sits where vertex 0 of {src.name} does: the start looks rotated by {k}, "
+        "which twists the warp (renumber one polygon if that is not what you want)"
+    )
+
+
+def mirror_warning(src: Polygon, dst: Polygon) -> str | None:
+    """The CLI's warning for polygons running in opposite directions, or None."""
+    if (src.signed_area > 0) == (dst.signed_area > 0):
+        return None
+    return (
+        f"{src.name} and {dst.name} run in opposite directions: the warp mirrors the image (reverse one file's vertex order "
+        "if that is not what you want)"
+    )
+
+
+class EditSession:
+    """The state the server keeps: the image, its preview, the paths, the options given on the command line.
+
+    Parameters
+    ----------
+    paths : EditPaths
+    options : WarpOptions
+        The command line's options; the page changes those of `PAGE_CHOICES`.
+
+    Raises
+    ------
+    WarpError
+        If the image cannot be read, or an existing polygon file is bad.
+    """
+
+    def __init__(self, paths: EditPaths, options: WarpOptions | None = None) -> None:
+        self.paths = paths
+        self.options = options or WarpOptions()
+        image = read_image(paths.image)
+        self.image_size = (image.width, image.height)
+        self.preview: PreviewImage = preview_image(image)
+        self.png = encode_png(self.preview.pixels)
+        self.mapper = PreviewMapper()
+        self.initial = {side: self._existing(path) for side, path in (("src", paths.src), ("dst", paths.dst))}
+        # The polygons last checked, by side: in a drag one side stays the same and is not checked again.
+        self._checked: dict[str, tuple[tuple, Polygon]] = {}
+
+    @staticmethod
+    def _existing(path: str) -> list | None:
+        """The polygon in ``path`` if the file exists (the CLI's errors if it is bad), else None."""
+        if not os.path.exists(path):
+            return None
+        return read_polygon(path).points.tolist()
+
+    # --- what the page asks ------------------------------------------------------
+
+    def state(self) -> dict:
+        """What the page starts from: sizes, the polygons on disk, the choices, the options, the paths."""
+        pw, ph = self.preview.preview_size
+        return {
+            "image": {"width": self.image_size[0], "height": self.image_size[1], "name": os.path.basename(self.paths.image)},
+            "preview": {"width": pw, "height": ph, "factor": self.preview.factor},
+            "src": self.initial["src"],
+            "dst": self.initial["dst"],
+            "choices": {k: list(v) for k, v in PAGE_CHOICES.items()},
+            "help": {"method": {k: v.help for k, v in METHODS.items()}, "theta": {k: v.help for k, v in THETAS.items()}},
+            "options": self.page_options(self.options),
+            "names": {"src": self.paths.src, "dst": self.paths.dst, "output": self.paths.output},
+            "directory": os.path.dirname(self.paths.image) or os.curdir,  # as the user named it
+        }
+
+    @staticmethod
+    def page_options(options: WarpOptions) -> dict:
+        """The page's options (`PAGE_CHOICES`) of a `WarpOptions`."""
+        return {
+            "method": options.map.method, "theta": options.map.theta, "boundary": options.map.dst_boundary,
+            "interp": options.interp, "outside": options.outside,
+        }  # fmt: skip
+
+    def options_from(self, doc: object) -> WarpOptions:
+        """The command line's options changed by the page's choices.
+
+        Raises
+        ------
+        InputError
+            If a choice is not one of `PAGE_CHOICES` (a Theta file given on
+            the command line is also allowed).
+        """
+        if doc is None:
+            return self.options
+        if not isinstance(doc, dict):
+            raise InputError("options must be an object")
+        unknown = sorted(set(doc) - set(PAGE_CHOICES))
+        if unknown:
+            raise InputError(f"unknown option {unknown[0]!r}")
+        for key, value in doc.items():
+            allowed = PAGE_CHOICES[key] + ((self.options.map.theta,) if key == "theta" else ())
+            if value not in allowed:
+                raise InputError(f"unknown {key} {value!r}; choose one of {', '.join(PAGE_CHOICES[key])}")
+        mapping = self.options.map
+        changes = {"method": doc.get("method", mapping.method), "theta": doc.get("theta", mapping.theta),
+                   "dst_boundary": doc.get("boundary", mapping.dst_boundary)}  # fmt: skip
+        return dataclasses.replace(
+            self.options, map=dataclasses.replace(mapping, **changes),
+            interp=doc.get("interp", self.options.interp), outside=doc.get("outside", self.options.outside),
+        )  # fmt: skip
+
+    def polygons(self, doc: dict, src_path: str | None = None, dst_path: str | None = None) -> tuple[Polygon, Polygon]:
+        """The page's two polygons, checked as the CLI checks polygon files, named after the files they are saved to.
+
+        Raises
+        ------
+        PolygonError, InputError
+            With the CLI's messages.
+        """
+        names = (src_path or self.paths.src, dst_path or self.paths.dst)
+        out = []
+        for side, name in zip(("src", "dst"), names):
+            points = doc.get(side)
+            if not isinstance(points, list) or len(points) > MAX_VERTICES:
+                raise InputError(f"{name}: expected a list of at most {MAX_VERTICES} [x, y] pairs")
+            out.append(self._polygon(side, points, name))
+        check_pair(out[0], out[1])
+        return out[0], out[1]
+
+    def _polygon(self, side: str, points: list, name: str) -> Polygon:
+        """``Polygon(points, name=name)``, reusing the one made last time for this side if nothing changed."""
+        try:
+            key = (side, name, json.dumps(points))
+        except (TypeError, ValueError):
+            return Polygon(points, name=name)  # not JSON numbers: Polygon says what is wrong
+        kept = self._checked.get(side)
+        if kept is not None and kept[0] == key:
+            return kept[1]
+        polygon = Polygon(points, name=name)
+        self._checked[side] = (key, polygon)
+        return polygon
+
+    @staticmethod
+    def warnings(src: Polygon, dst: Polygon) -> list[str]:
+        """The live warnings: mirrored, rotated start."""
+        return [w for w in (mirror_warning(src, dst), rotated_start_warning(src, dst)) if w]
+
+    def preview_map(self, doc: dict) -> bytes:
+        """The preview mesh of the page's polygons and options (`PreviewMesh.to_bytes`); errors in the header.
+
+        The polygons are scaled to the preview (image point p is preview
+        point p / factor) and the map built there at the preview's density
+        (`warpcli.edit.preview.preview_areas`), for a region the preview's size.
+        """
+        import struct
+
+        try:
+            src, dst = self.polygons(doc)
+            options = self.options_from(doc.get("options"))
+            k = self.preview.factor
+            psrc, pdst = (src, dst) if k == 1 else (Polygon(p.points / k, name=p.name) for p in (src, dst))
+            mapping = with_preview_density(options.map, psrc, pdst)
+            pw, ph = self.preview.preview_size
+            mesh = self.mapper.build(psrc, pdst, mapping, (0.0, 0.0, float(pw), float(ph)))
+        except WarpError as err:
+            text = json.dumps({"ok": False, "error": str(err), "command": None}).encode()
+            text += b" " * (-len(text) % 4)
+            return struct.pack("<I", len(text)) + text
+        header = {
+            "ok": True, "warnings": self.warnings(src, dst), "max_area": list(mesh.max_area),
+            "rebuilt": list(mesh.rebuilt), "seconds": round(mesh.seconds, 4),
+            "command": self.command(options, self.paths.src, self.paths.dst, self.paths.output),
+        }  # fmt: skip
+        return mesh.to_bytes(header)
+
+    @staticmethod
+    def load(doc: dict) -> dict:
+        """A polygon file's text from the page (a file the user chose), read as `read_polygon` reads a file.
+
+        ``doc``: ``name`` (the file's name, for messages), ``text`` and
+        ``label`` (which polygon of a labelme or GeoJSON file holding
+        several; optional). Nothing is read from the disk.
+
+        Returns
+        -------
+        dict
+            ``points``: the polygon's vertices.
+        """
+        from ..polygon.formats import parse_json, points_of
+
+        name, text, label = doc.get("name"), doc.get("text"), doc.get("label")
+        if not isinstance(name, str) or not isinstance(text, str) or not (label is None or isinstance(label, str)):
+            raise InputError("load: expected a file name, its text and an optional label")
+        name = os.path.basename(name) or "polygon"
+        points = points_of(parse_json(text.lstrip("\ufeff"), name), name, label)
+        return {"points": Polygon(points, name=name).points.tolist()}
+
+    # --- saving and exporting -------------------------------------------------------
+
+    def save(self, doc: dict) -> dict:
+        """Write the two polygon files (atomically), after checking them as the CLI would read them.
+
+        Returns
+        -------
+        dict
+            ``saved``: the two paths; ``warnings``; ``command``.
+        """
+        src_path = self.paths.chosen(doc.get("src_name"), self.paths.src, (".json",))
+        dst_path = self.paths.chosen(doc.get("dst_name"), self.paths.dst, (".json",))
+        if os.path.abspath(src_path) == os.path.abspath(dst_path):
+            raise InputError(f"{src_path}: the same file is given for both polygons")
+        src, dst = self.polygons(doc, src_path, dst_path)
+        for path in (src_path, dst_path):
+            check_output_path(path, inputs=(self.paths.image,))
+        for path, polygon in ((src_path, src), (dst_path, dst)):
+            text = json.dumps({"points": polygon.points.tolist()}, indent=1) + "\n"
+            with atomic_path(path) as tmp:
+                write_checked(tmp, text.encode(), path)
+        options = self.options_from(doc.get("options"))
+        output = self.paths.chosen(doc.get("output_name"), self.paths.output, _image_extensions(self.paths))
+        return {"saved": [src_path, dst_path], "warnings": self.warnings(src, dst),
+                "command": self.command(options, src_path, dst_path, output)}  # fmt: skip
+
+    def export(self, doc: dict) -> dict:
+        """Save the polygons, then warp the whole image through the ordinary pipeline (`warpcli.pipeline.warp_file`).
+
+        The output is what the returned command line writes, byte for byte:
+        the same call with the same options.
+        """
+        from ..pipeline import warp_file
+
+        output = self.paths.chosen(doc.get("output_name"), self.paths.output, _image_extensions(self.paths))
+        check_image_output(output, inputs=(self.paths.image,))
+        saved = self.save(doc)
+        src_path, dst_path = saved["saved"]
+        options = self.options_from(doc.get("options"))
+        warp_file(self.paths.image, output, src_path, dst_path, options)
+        return dict(saved, output=output, command=self.command(options, src_path, dst_path, output))
+
+    def command(self, options: WarpOptions, src_path: str, dst_path: str, output: str) -> str:
+        """The ``warp ...`` command line that makes what an export makes."""
+        return " ".join(shlex.quote(a) for a in command_args(options, self.paths.image, src_path, dst_path, output))
+
+
+def _image_extensions(paths: EditPaths) -> tuple[str, ...]:
+    ext = os.path.splitext(paths.output)[1].lower()
+    return tuple(dict.fromkeys((ext, ".png", ".tif", ".tiff", ".exr", ".jpg", ".jpeg")))
+
+
+def command_args(options: WarpOptions, image: str, src: str, dst: str, output: str) -> list[str]:
+    """``warp IMAGE --src SRC --dst DST OUTPUT`` and an option for every value that is not the default.
+
+    Raises
+    ------
+    InputError
+        If an option has no command-line form (a (source, target) pair of ``max_area``).
+    """
+    args = ["warp", image, "--src", src, "--dst", dst, output]
+    m, d = options.map, MapOptions()
+    if isinstance(m.max_area, tuple) or not m.grade:
+        raise InputError("max_area as a (source, target) pair, and grade=False, have no command-line form")
+    flags = [
+        ("--method", m.method, d.method), ("--theta", m.theta, d.theta),
+        ("--max-area", None if m.max_area is None else repr(m.max_area), None), ("--weights", m.weights, d.weights),
+        ("--src-boundary", m.src_boundary, d.src_boundary), ("--dst-boundary", m.dst_boundary, d.dst_boundary),
+        ("--energy", m.energy, d.energy), ("--theta-start", m.theta_start, d.theta_start),
+        ("--conditions", m.conditions, d.conditions), ("--nodes", None if m.nodes is None else str(m.nodes), None),
+    ]  # fmt: skip
+    w, dw = options, WarpOptions()
+    flags += [
+        ("--interp", w.interp, dw.interp), ("--outside", w.outside, dw.outside), ("--vacated", w.vacated, dw.vacated),
+        ("--dtype", w.dtype, dw.dtype),
+        ("--size", None if w.size is None else f"{w.size[0]}x{w.size[1]}", None),
+    ]  # fmt: skip
+    for flag, value, default in flags:
+        if value != default:
+            args += [flag, str(value)]
+    bg = w.background if isinstance(w.background, tuple) else (w.background,)
+    if tuple(float(v) for v in bg) != (0.0,):
+        args += ["--background", ",".join(repr(float(v)) for v in bg)]
+    if not w.antialias:
+        args.append("--no-antialias")
+    return args
