@@ -64,6 +64,8 @@ LAYERS = [
         "runs": ("tiled", "pipeline", "batch", "distributed", "points"),
         "volume": ("volume",),
     }),
+    # Applications over the runs: the browser editor (its server, session and preview).
+    ("apps", {"edit": ("edit",)}),
     # The public API: lazy exports of all of the above.
     ("api", {"api": ("__init__",)}),
     ("cli", {"cli": ("cli", "__main__")}),

@@ -15,9 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..maps.base import ThetaMap
-from ..maps.compose import BijectiveMap
+from ..maps.compose import BijectiveMap, theta_for
 from ..maps.registry import METHODS
-from ..maps.theta import theta_for
 from ..options import MapOptions
 from ..polygon import Polygon, check_pair
 from ..raster.imageio import RasterImage, convert_pixels

@@ -116,7 +116,7 @@ class EditServer:
 
 
 def _read_asset(name: str) -> bytes:
-    return resources.files("warpcli.edit").joinpath("static", name).read_bytes()
+    return resources.files(__package__).joinpath("static", name).read_bytes()  # the package's data, not a module
 
 
 def _handler(server: EditServer) -> type[BaseHTTPRequestHandler]:
