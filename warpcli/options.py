@@ -226,6 +226,10 @@ class WarpOptions:
         return dataclasses.replace(self, **mine)
 
 
+#: The longest side of an image, in pixels: OpenImageIO keeps sizes in C ints.
+MAX_SIDE = 2**31 - 1
+
+
 def check_size(size: object) -> tuple[int, int]:
     """An image size ``(width, height)`` of positive integers, or `InputError`.
 
@@ -241,6 +245,8 @@ def check_size(size: object) -> tuple[int, int]:
         raise InputError(f"size must be (width, height), two whole numbers, got {size!r}") from None
     if w <= 0 or h <= 0:
         raise InputError(f"size must be positive, got width {w} and height {h}")
+    if max(w, h) > MAX_SIDE:
+        raise InputError(f"size {w} x {h}: a side of more than {MAX_SIDE} pixels (OpenImageIO's limit)")
     return w, h
 
 
