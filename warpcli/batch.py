@@ -15,7 +15,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import InputError, WarpError
+from .errors import ImageInputError, InputError, WarpError
+from .files import check_regular_file
 from .maps.compose import BijectiveMap
 from .options import WarpOptions, resolve_options
 from .pipeline import read_header_or_none, write_like
@@ -24,7 +25,9 @@ from .polygon import check_pair, read_polygon
 from .raster.imageio import check_image_output, read_image
 from .tiled import in_parts, warp_file_tiled
 
-__all__ = ["BatchItem", "PlanCache", "output_name", "prepare_batch", "warp_batch", "warp_one", "warp_sequence"]
+__all__ = [
+    "BatchItem", "MissingFrameError", "PlanCache", "output_name", "prepare_batch", "warp_batch", "warp_one", "warp_sequence",
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -34,6 +37,10 @@ class BatchItem:
     input_path: str
     output_path: str
     error: WarpError | None = None
+
+
+class MissingFrameError(ImageInputError):
+    """A frame of a sequence whose image is missing (or not a regular file): it fails without a map."""
 
 
 def output_name(input_path: str | os.PathLike[str], pattern: str = "{name}") -> str:
@@ -237,7 +244,10 @@ def warp_one(inp: str, out: str, plans: PlanCache) -> BatchItem:
         write_like(out, image, px, opts.dtype)
         return BatchItem(inp, out)
     except WarpError as err:
-        return BatchItem(inp, out, err)
+        # Without its traceback: that holds this frame, and so the plans and
+        # their map, alive as long as the item (a long sequence of failures
+        # kept every map).
+        return BatchItem(inp, out, err.with_traceback(None))
 
 
 def _each(work: Callable, tasks: list, jobs: int, on_item: Callable[[BatchItem], None] | None) -> list[BatchItem]:
@@ -332,31 +342,53 @@ def warp_sequence(
         check_image_output(out, inputs=(inp, src_path, dst_path))
     src_keys = read_animated(src_path, src_label)
     dst_keys = read_animated(dst_path, dst_label)
-    # Every frame's polygons first (interpolation can self-intersect): errors before any work.
+    # Frames whose image is missing fail without a map, and without their polygons:
+    # a map is built for a run only if one of its frames has an image.
+    missing: dict[int, BatchItem] = {}
+    for (f, inp), (_, out) in zip(ins, outs):
+        try:
+            check_regular_file(inp, "image", MissingFrameError)
+        except MissingFrameError as err:
+            missing[f] = BatchItem(inp, out, err.with_traceback(None))
+    # Every other frame's polygons first (interpolation can self-intersect): errors before any work.
     pairs = {}
     for f, _ in ins:
-        if f not in pairs:
+        if f not in pairs and f not in missing:
             pairs[f] = (src_keys.at(f), dst_keys.at(f))
             check_pair(*pairs[f])
-    # Runs of frames with the same pair share one map; the frames of a run go to the threads.
-    runs: list[tuple[tuple[bytes, bytes], list[tuple[str, str]]]] = []
+    # Runs of frames with the same pair share one map (a missing frame breaks
+    # no run); the frames of a run go to the threads.
+    runs: list[tuple[tuple[bytes, bytes] | None, list[tuple[str, str, int]]]] = []
     for (f, inp), (_, out) in zip(ins, outs):
-        src, dst = pairs[f]
-        key = (src.points.tobytes(), dst.points.tobytes())
-        if not runs or runs[-1][0] != key:
+        key = None
+        if f not in missing:
+            src, dst = pairs[f]
+            key = (src.points.tobytes(), dst.points.tobytes())
+        if not runs or (key is not None and runs[-1][0] not in (None, key)):
             runs.append((key, []))
+        elif key is not None and runs[-1][0] is None:
+            runs[-1] = (key, runs[-1][1])
         runs[-1][1].append((inp, out, f))
     items: list[BatchItem] = []
-    for _, tasks in runs:
-        src, dst = pairs[tasks[0][2]]
+    for key, tasks in runs:
+        if key is None:  # every image of the run is missing
+            for _, _, f in tasks:
+                items.append(missing[f])
+                if on_item is not None:
+                    on_item(missing[f])
+            continue
+        src, dst = pairs[next(f for _, _, f in tasks if f not in missing)]
         try:
             plans = PlanCache(BijectiveMap.between(src, dst, opts.map), opts)
         except WarpError as err:  # a map that cannot be built fails its frames, not the others
-            done = [BatchItem(inp, out, err) for inp, out, _ in tasks]
+            done = [missing.get(f) or BatchItem(inp, out, err.with_traceback(None)) for inp, out, f in tasks]
             for item in done:
                 if on_item is not None:
                     on_item(item)
             items += done
             continue
-        items += _each(lambda task: warp_one(task[0], task[1], plans), tasks, jobs, on_item)
+        items += _each(
+            lambda task: missing[task[2]] if task[2] in missing else warp_one(task[0], task[1], plans), tasks, jobs, on_item
+        )
+        del plans  # this run's map goes before the next is built
     return items

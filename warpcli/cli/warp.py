@@ -203,11 +203,38 @@ def _sequence(paths, frames, polygons, options, jobs=1):
     for path in paths:
         if not is_pattern(path):
             raise InputError(f"{path}: with --frames, INPUT and OUTPUT are sequence patterns (shot.#.exr, shot.%04d.exr)")
+    report = _MissingFrames()
     items = warp_sequence(
         paths[0], paths[1], parse_frames(frames), polygons.src_path, polygons.dst_path, options,
-        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=_report_item, jobs=jobs,
+        src_label=polygons.src_label, dst_label=polygons.dst_label, on_item=report, jobs=jobs,
     )  # fmt: skip
+    report.summary()
     _exit_for(items, "frames")
+
+
+#: Missing frames of a sequence reported one line each before the rest are counted.
+MISSING_SHOWN = 5
+
+
+class _MissingFrames:
+    """`_report_item` for a sequence, with the lines of missing frames after the first `MISSING_SHOWN` counted."""
+
+    def __init__(self) -> None:
+        self.missing = 0
+
+    def __call__(self, item) -> None:
+        from ..batch import MissingFrameError
+
+        if isinstance(item.error, MissingFrameError):
+            self.missing += 1
+            if self.missing > MISSING_SHOWN:
+                return
+        _report_item(item)
+
+    def summary(self) -> None:
+        more = self.missing - MISSING_SHOWN
+        if more > 0:
+            click.echo(f"warp: error: ... and {more} more missing frame{'s' if more > 1 else ''}", err=True)
 
 
 def _batch(paths, out_dir, out_name, polygons, options, jobs=1, scheduler=None):
