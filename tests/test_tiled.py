@@ -268,3 +268,30 @@ def test_a_header_declaring_far_more_pixels_than_its_file_holds_is_refused(tmp_p
     code, err = run_cli([bomb, "--src", a, "--dst", a, tmp_path / "out.png"])
     assert code == 2 and "decompression bomb" in err and len(err.strip().splitlines()) == 1
     assert sorted(os.listdir(tmp_path)) == ["a.json", "bomb.png"]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_band_scans_only_its_own_triangles_and_finds_the_same_pixels(seed):
+    # evaluate_grid(rows=) restricted to the triangles that can reach the band
+    # (linear in the height, not quadratic) gives what scanning every
+    # triangle gives, band by band.
+    from helpers import star
+    from warpcli import MapOptions, Polygon
+    from warpcli.maps.compose import BijectiveMap
+    from warpcli.maps.fem import _compiled
+
+    rng = np.random.default_rng(seed)
+    h = int(rng.integers(60, 400))
+    src = Polygon(star(cx=32, cy=h / 2, r_in=10, r_out=h / 2 - 3, phase=rng.uniform(0, 1)))
+    dst = Polygon(star(cx=32, cy=h / 2, r_in=12, r_out=h / 2 - 5, phase=rng.uniform(0, 1)))
+    phi = BijectiveMap.between(src, dst, MapOptions()).phi0
+    for r0 in range(0, h, int(rng.integers(3, 40))):
+        r1 = min(h, r0 + int(rng.integers(1, 40)))
+        band = phi.evaluate_grid(64, h, (r0, r1))
+        size = (r1 - r0) * 64
+        pixels, values, where = np.empty(size, np.int64), np.empty((size, 2)), np.empty(size, np.int32)
+        count = _compiled.scan_grid(
+            phi.mesh.vertices, phi._triangles, phi._domain_coefficients, phi.values, phi._coherent_order,
+            64, h, r0, r1, np.zeros(size, np.uint8), pixels, values, where,
+        )  # fmt: skip
+        assert np.array_equal(band.pixels, pixels[:count]) and np.array_equal(band.values, values[:count])
