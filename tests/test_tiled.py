@@ -295,3 +295,37 @@ def test_a_band_scans_only_its_own_triangles_and_finds_the_same_pixels(seed):
             64, h, r0, r1, np.zeros(size, np.uint8), pixels, values, where,
         )  # fmt: skip
         assert np.array_equal(band.pixels, pixels[:count]) and np.array_equal(band.values, values[:count])
+
+
+@pytest.mark.parametrize("width,height", [(8, 3000), (5, 1200), (40, 2500)])
+def test_strips_of_a_thin_image_compute_each_band_once_and_agree_with_the_whole(width, height):
+    # A band (BAND_PIXELS / width rows) taller than a strip was computed again
+    # for every strip: quadratic in the height. Each band is now evaluated
+    # once, and the strips put together are the whole pull-back.
+    from warpcli import MapOptions, Polygon
+    from warpcli.maps.compose import BijectiveMap
+
+    src = Polygon(np.array([[1, 1], [width - 1, 1], [width - 1, height - 1], [1, height - 1]], float))
+    dst = Polygon(np.array([[1, 1], [width - 1, 2], [width - 1.5, height - 1], [1.5, height - 2]], float))
+    fmap = BijectiveMap.between(src, dst, MapOptions())
+    whole = fmap.pull_back(width, height)
+    phi = fmap.phi1
+    calls = []
+    real = type(phi).evaluate_grid
+
+    def counted(self, w, h, rows=None, **k):
+        calls.append(rows)
+        return real(self, w, h, rows, **k)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(type(phi), "evaluate_grid", counted)
+        strips = [fmap.pull_back(width, height, rows=(r, min(r + 256, height))) for r in range(0, height, 256)]
+    assert len(calls) == len(set(calls))  # no band twice
+    got = np.full((height, width, 2), np.nan)
+    for s in strips:
+        (r0, c0), pts = s.origin, s.points
+        got[r0 : r0 + pts.shape[0], c0 : c0 + pts.shape[1]] = pts
+    ref = np.full((height, width, 2), np.nan)
+    (r0, c0), pts = whole.origin, whole.points
+    ref[r0 : r0 + pts.shape[0], c0 : c0 + pts.shape[1]] = pts
+    np.testing.assert_array_equal(got, ref)
