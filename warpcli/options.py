@@ -81,8 +81,10 @@ class MapOptions:
     theta_start : {"regular", "cyclic"}
         Where the optimization starts.
     nodes : int or None
-        BEM and MFS: the number m of boundary nodes (BEM) or sites (MFS);
-        None: max(256, 8 n).
+        BEM and MFS: the number m of boundary nodes (BEM) or sites (MFS),
+        at least the vertex count and within memory
+        (`warpcli.maps.meshless.FIT_BYTES_PER_NODE2`); None: max(256, 8 n),
+        at most `warpcli.maps.meshless.MAX_AUTO_NODES`.
     conditions : {"dirichlet", "mixed"}
         Experimental (§5.2, quadrilaterals only): ``mixed`` maps onto the unit
         square with natural boundary conditions, each coordinate prescribed on
