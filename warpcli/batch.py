@@ -390,5 +390,5 @@ def warp_sequence(
         items += _each(
             lambda task: missing[task[2]] if task[2] in missing else warp_one(task[0], task[1], plans), tasks, jobs, on_item
         )
-        del plans  # this run's map goes before the next is built
+        plans = None  # this run's map goes before the next is built
     return items

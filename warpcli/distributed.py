@@ -105,8 +105,9 @@ def probe_scheduler(address: str, timeout: float) -> None:
         ) from None
     except Exception as err:  # noqa: BLE001 - any bytes may come back: their decoding fails in any way
         # (struct.error, ValueError of an absurd size, MemoryError, KeyError...).
+        first = (str(err).splitlines() or [""])[0][:120]
         raise InputError(
-            f"{address}: the server there does not answer as a Dask scheduler ({type(err).__name__}: {(str(err).splitlines() or [""])[0][:120]})"
+            f"{address}: the server there does not answer as a Dask scheduler ({type(err).__name__}: {first})"
         ) from None
 
 
@@ -129,7 +130,7 @@ def _resubmit(client, plans, tasks, futures, first: int, err: BaseException) -> 
             if futures[j].status != "finished":
                 futures[j].cancel()
                 futures[j] = client.submit(warp_one, *tasks[j], shipped, pure=False)
-    except Exception as again:  # the cluster is gone: the images fail with the first error
+    except Exception as again:  # noqa: BLE001 - the cluster is gone, whatever it raised: the images fail with the first error
         log.warning("cannot resubmit to the cluster: %s", str(again) or type(again).__name__)
         return False
     return True
