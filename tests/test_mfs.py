@@ -200,3 +200,99 @@ def test_the_map_interface_gives_the_hessian_inside_and_nan_elsewhere():
         np.testing.assert_allclose(H[:, :, :, b], fd, atol=1e-6 * np.abs(H).max() + 1e-9)
     np.testing.assert_allclose(np.trace(H, axis1=2, axis2=3), 0.0, atol=1e-9 * np.abs(H).max())  # harmonic
     assert np.isnan(phi.hessian([[70.0, 70.0], [50.0, 0.0], [np.nan, 1.0]])).all()
+
+
+# -- the number of nodes: bounded below by the vertices, above by memory and time (issue 27) --
+
+
+def _regular(n: int, r: float = 50.0) -> np.ndarray:
+    t = 2 * np.pi * np.arange(n) / n
+    return np.stack([60 + r * np.cos(t), 60 + r * np.sin(t)], axis=1)
+
+
+@pytest.mark.parametrize("method", ["bem", "mfs"])
+@pytest.mark.parametrize("n", [5, 17, 60, 301])
+def test_nodes_below_the_vertex_count_are_one_line_exit_2(tmp_path, method, n):
+    from helpers import run_cli, write_png, write_polygon
+
+    img = write_png(tmp_path / "in.png", np.zeros((120, 120, 3), dtype=np.uint8))
+    poly = write_polygon(tmp_path / "p.json", _regular(n))
+    for nodes in sorted({3, n // 2 + 1, n - 1} - {n}):
+        if nodes < 3:
+            continue
+        code, err = run_cli([img, tmp_path / "out.png", "--src", poly, "--dst", poly, "--method", method, "--nodes", str(nodes)])
+        assert code == 2 and err.count("\n") == 1 and f"--nodes {nodes} is fewer than its {n} vertices" in err, err
+        assert not (tmp_path / "out.png").exists()
+
+
+@pytest.mark.parametrize("method", ["bem", "mfs"])
+@pytest.mark.parametrize("budget", [10**6, 10**8, 10**10])
+def test_nodes_beyond_memory_are_refused_before_fitting(monkeypatch, method, budget):
+    from warpcli import MapOptions, Polygon
+    from warpcli.errors import InputError
+    from warpcli.maps import meshless
+
+    monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", str(budget))
+    entry = meshless.BEM if method == "bem" else meshless.MFS
+    most = entry.most_nodes()
+    # the bound is the memory model's: the largest m with bytes(m) <= budget
+    assert entry.fit_bytes(most) <= budget < entry.fit_bytes(most + 1)
+    poly = Polygon(_regular(8))
+    monkeypatch.setattr(entry, "_fit", lambda *a, **k: pytest.fail("fitted"))
+    for nodes in (most + 1, 2 * most + 7, 100_000):
+        with pytest.raises(InputError, match=rf"--nodes {nodes}: an? {method.upper()} fit .* more than"):
+            entry.build(poly, None, MapOptions(method=method, nodes=nodes))
+    if most >= 8:
+        assert entry.nodes_for(poly, most) == most
+
+
+@pytest.mark.parametrize("n", [3, 100, 256, 257, 600, 5000])
+def test_the_default_nodes_are_capped(monkeypatch, caplog, n):
+    from warpcli import Polygon
+    from warpcli.maps import meshless
+
+    monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", str(10**12))
+    poly = Polygon(_regular(n, 1000.0))
+    m = meshless.MFS.nodes_for(poly, None)
+    if 8 * n <= meshless.MAX_AUTO_NODES:
+        assert m is None  # the fit's own default, max(256, 8 n)
+    else:
+        assert m == max(meshless.MAX_AUTO_NODES, n) and "--nodes chooses m" in caplog.text
+
+
+def test_a_polygon_with_more_vertices_than_memory_allows_nodes_is_refused(monkeypatch):
+    from warpcli import Polygon
+    from warpcli.errors import InputError
+    from warpcli.maps import meshless
+
+    monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", str(300 * 99**2))
+    with pytest.raises(InputError, match="100 vertices need at least 100 MFS sites"):
+        meshless.MFS.nodes_for(Polygon(_regular(100)), None)
+
+
+@pytest.mark.parametrize("cap", [300, 512, 1000])
+def test_refits_of_a_folding_map_stay_within_the_cap(monkeypatch, caplog, cap):
+    # A certificate that always fails: the refits double m from the default
+    # and stop before passing the cap; the map is then refused by the
+    # certificate (in one line, elsewhere), never fitted beyond it.
+    from warpcli import MapOptions, Polygon
+    from warpcli.maps import meshless
+    from warpcli.maps.base import Certificate
+    from warpcli.maps.theta import regular
+
+    monkeypatch.setattr(meshless, "MAX_AUTO_NODES", cap)
+    fitted = []
+    real = meshless._Method._fit
+
+    def fit(self, polygon, theta, m, boundary, free):
+        fitted.append(m)
+        return real(self, polygon, theta, m, boundary, free)
+
+    monkeypatch.setattr(meshless._Method, "_fit", fit)
+    monkeypatch.setattr(meshless.SmoothMap, "certify", lambda self: Certificate(1, 10, "samples"))
+    poly = Polygon(_regular(7))
+    opts = MapOptions(method="mfs")
+    phi = meshless.MFS.build(poly, regular(poly, poly, opts), opts)
+    ms = [256 if m is None else m for m in fitted]
+    assert ms == [256 * 2**k for k in range(len(ms))] and ms[-1] <= cap < 2 * ms[-1]
+    assert phi.solution.m == ms[-1]

@@ -93,3 +93,44 @@ def test_bad_points_files_are_one_line(tmp_path, polys, capsys, name, content, e
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and match in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("digits", [310, 311, 401, 1000])
+@pytest.mark.parametrize("where", ["points", "theta"])
+@pytest.mark.parametrize("sign", ["", "-"])
+def test_integers_beyond_floating_point_are_one_line_exit_2(tmp_path, digits, where, sign):
+    # 10**309 and beyond overflow a float: numpy raised OverflowError (a traceback).
+    from helpers import run_cli, write_png
+
+    big = sign + "1" + "0" * (digits - 1)
+    src = write_polygon(tmp_path / "s.json", regular(5, cx=8, cy=8, r=6))
+    pts = tmp_path / "p.json"
+    pts.write_text(f"[[1, 2], [{big}, 3]]" if where == "points" else "[[1, 2]]")
+    theta = tmp_path / "t.json"
+    theta.write_text(f"[[0, 0], [1, 0], [1, 1], [0, 1], [{big}, 0.5]]")
+    if where == "points":
+        code, err = run_cli(["points", pts, tmp_path / "o.json", "--src", src, "--dst", src])
+        named = "p.json"
+    else:
+        img = write_png(tmp_path / "in.png", np.zeros((16, 16, 3), dtype=np.uint8))
+        code, err = run_cli([img, tmp_path / "o.png", "--src", src, "--dst", src, "--theta", theta])
+        named = "t.json"
+    assert code == 2 and err.count("\n") == 1 and named in err and "floating-point range" in err, err
+
+
+@pytest.mark.parametrize("size", ["3000000000x1", "1x3000000000", "2147483648x2", f"{10**400}x1", f"5x{2**63}"])
+def test_sizes_beyond_openimageio_are_one_line_exit_2(tmp_path, size):
+    from helpers import run_cli, write_png
+
+    from warpcli.errors import InputError
+    from warpcli.options import MAX_SIDE, check_size
+
+    img = write_png(tmp_path / "in.png", np.zeros((16, 16, 3), dtype=np.uint8))
+    src = write_polygon(tmp_path / "s.json", regular(5))
+    code, err = run_cli([img, tmp_path / "o.png", "--src", src, "--dst", src, "--size", size])
+    assert code == 2 and err.count("\n") == 1 and "--size" in err, err
+    assert not any(p.name.startswith(".") for p in tmp_path.iterdir())
+    w, h = (int(v) for v in size.split("x"))
+    with pytest.raises(InputError, match="OpenImageIO"):
+        check_size((w, h))
+    assert check_size((MAX_SIDE, 1)) == (MAX_SIDE, 1)

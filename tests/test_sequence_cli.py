@@ -110,3 +110,67 @@ def test_warp_sequence_library_api(tmp_path):
     items = warp_sequence(str(tmp_path / "in" / "shot.#.png"), str(tmp_path / "o_%03d.png"), parse_frames("5-6"), src, src)
     assert [i.error for i in items] == [None, None]
     assert sorted(p.name for p in tmp_path.glob("o_*")) == ["o_005.png", "o_006.png"]
+
+
+# -- missing frames: no map for them, no map kept for failures, a summary (issue 27) --
+
+
+def _present_pattern(seed, n):
+    rng = np.random.default_rng(seed)
+    return sorted(int(f) for f in np.flatnonzero(rng.random(n) < rng.uniform(0.0, 0.6)) + 1)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_maps_are_built_only_for_frames_with_images_and_missing_ones_are_summarised(tmp_path, monkeypatch, seed):
+    import importlib
+
+    cli_warp = importlib.import_module("warpcli.cli.warp")
+    from warpcli.maps.compose import BijectiveMap
+
+    n = 24
+    present = _present_pattern(seed, n)
+    _frames(tmp_path, present)
+    src = write_polygon(tmp_path / "s.json", SRC)
+    dst = _keyframes(tmp_path, {1: star(cx=64, cy=48, r_in=10, r_out=42), n: star(cx=64, cy=48, r_in=12, r_out=40, phase=0.2)})
+    built = []
+    original = BijectiveMap.between.__func__
+    monkeypatch.setattr(BijectiveMap, "between", classmethod(lambda cls, *a, **k: built.append(1) or original(cls, *a, **k)))
+    code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", f"1-{n}"])
+    missing = n - len(present)
+    assert len(built) == len(present)  # one map per frame that has an image (the target moves every frame)
+    assert code == (2 if missing else 0), err
+    lines = [ln for ln in err.splitlines() if ln.startswith("warp: error:")]
+    shown = min(missing, cli_warp.MISSING_SHOWN)
+    assert len(lines) == shown + (missing > shown)
+    if missing > shown:
+        assert lines[-1] == f"warp: error: ... and {missing - shown} more missing frame{'s' if missing - shown > 1 else ''}"
+    assert sorted(p.name for p in tmp_path.glob("out.*.png")) == [f"out.{f:04d}.png" for f in present]
+
+
+def test_the_maps_of_failed_frames_are_not_kept(tmp_path, monkeypatch):
+    # Frames whose image exists but cannot be read fail in warp_one: their
+    # items (errors) outlive the run, the maps must not.
+    import gc
+    import weakref
+
+    from warpcli.batch import warp_sequence
+    from warpcli.maps.compose import BijectiveMap
+
+    (tmp_path / "in").mkdir()
+    for f in range(1, 7):
+        (tmp_path / "in" / f"shot.{f:04d}.png").write_bytes(b"not a png")
+    src = write_polygon(tmp_path / "s.json", SRC)
+    dst = _keyframes(tmp_path, {1: star(cx=64, cy=48, r_in=10, r_out=42), 6: star(cx=64, cy=48, r_in=12, r_out=40, phase=0.2)})
+    maps = []
+    original = BijectiveMap.between.__func__
+
+    def between(cls, *a, **k):
+        m = original(cls, *a, **k)
+        maps.append(weakref.ref(m))
+        return m
+
+    monkeypatch.setattr(BijectiveMap, "between", classmethod(between))
+    items = warp_sequence(str(tmp_path / "in" / "shot.#.png"), str(tmp_path / "out.#.png"), range(1, 7), src, dst)
+    gc.collect()
+    assert len(maps) == 6 and all(i.error is not None for i in items)
+    assert [m() for m in maps] == [None] * 6

@@ -254,3 +254,42 @@ def test_unknown_kinds_are_refused(tmp_path):
     with pytest.raises(ValueError, match="unknown map kind"):
         load_stmap(tmp_path / "m.exr", (4, 3), kind="backward")
     assert list(tmp_path.iterdir()) == []
+
+
+# -- an STMap whose warp does not fit in memory is refused from its header (issue 27) --
+
+
+def _stmap_file(path, w, h, channels, fmt):
+    s, t = np.meshgrid((np.arange(w) + 0.5) / w, (np.arange(h) + 0.5) / h)
+    px = np.dstack([s, t] + [np.ones_like(s)] * (channels - 2)).astype(np.float32)
+    out = oiio.ImageOutput.create(str(path))
+    spec = oiio.ImageSpec(w, h, channels, fmt)
+    spec.attribute("compression", "zip")
+    assert out.open(str(path), spec) and out.write_image(px if fmt != "uint16" else (px * 65535).astype(np.uint16))
+    out.close()
+    return str(path)
+
+
+@pytest.mark.parametrize("fmt", ["half", "float", "uint16"])
+@pytest.mark.parametrize("channels", [2, 3, 4])
+@pytest.mark.parametrize("size", [(64, 48), (300, 7)])
+def test_an_stmap_beyond_the_memory_budget_is_refused_before_decoding(tmp_path, monkeypatch, fmt, channels, size):
+    from helpers import run_cli
+    from warpcli import pipeline
+
+    w, h = size
+    stmap = _stmap_file(tmp_path / "map.exr" if fmt != "uint16" else tmp_path / "map.tif", w, h, channels, fmt)
+    img = write_png(tmp_path / "in.png", np.zeros((20, 30, 3), dtype=np.uint8))
+    decoded = w * h * channels * {"half": 2, "float": 4, "uint16": 2}[fmt]
+    # Just under what the map alone decodes to: refused, and nothing decoded.
+    monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", str(decoded * 2))
+    real = pipeline.read_image
+    monkeypatch.setattr(pipeline, "read_image", lambda *a, **k: pytest.fail("decoded"))
+    code, err = run_cli(["apply-map", stmap, img, tmp_path / "out.png"])
+    assert code == 2 and err.count("\n") == 1 and "more than the" in err and "map." in err, err
+    assert not (tmp_path / "out.png").exists()
+    # With room for every copy it is applied.
+    monkeypatch.setattr(pipeline, "read_image", real)
+    monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", str(decoded * 64 + 10**6))
+    code, err = run_cli(["apply-map", stmap, img, tmp_path / "out.png"])
+    assert code == 0, err

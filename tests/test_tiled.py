@@ -268,3 +268,64 @@ def test_a_header_declaring_far_more_pixels_than_its_file_holds_is_refused(tmp_p
     code, err = run_cli([bomb, "--src", a, "--dst", a, tmp_path / "out.png"])
     assert code == 2 and "decompression bomb" in err and len(err.strip().splitlines()) == 1
     assert sorted(os.listdir(tmp_path)) == ["a.json", "bomb.png"]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_band_scans_only_its_own_triangles_and_finds_the_same_pixels(seed):
+    # evaluate_grid(rows=) restricted to the triangles that can reach the band
+    # (linear in the height, not quadratic) gives what scanning every
+    # triangle gives, band by band.
+    from helpers import star
+    from warpcli import MapOptions, Polygon
+    from warpcli.maps.compose import BijectiveMap
+    from warpcli.maps.fem import _compiled
+
+    rng = np.random.default_rng(seed)
+    h = int(rng.integers(60, 400))
+    src = Polygon(star(cx=32, cy=h / 2, r_in=10, r_out=h / 2 - 3, phase=rng.uniform(0, 1)))
+    dst = Polygon(star(cx=32, cy=h / 2, r_in=12, r_out=h / 2 - 5, phase=rng.uniform(0, 1)))
+    phi = BijectiveMap.between(src, dst, MapOptions()).phi0
+    for r0 in range(0, h, int(rng.integers(3, 40))):
+        r1 = min(h, r0 + int(rng.integers(1, 40)))
+        band = phi.evaluate_grid(64, h, (r0, r1))
+        size = (r1 - r0) * 64
+        pixels, values, where = np.empty(size, np.int64), np.empty((size, 2)), np.empty(size, np.int32)
+        count = _compiled.scan_grid(
+            phi.mesh.vertices, phi._triangles, phi._domain_coefficients, phi.values, phi._coherent_order,
+            64, h, r0, r1, np.zeros(size, np.uint8), pixels, values, where,
+        )  # fmt: skip
+        assert np.array_equal(band.pixels, pixels[:count]) and np.array_equal(band.values, values[:count])
+
+
+@pytest.mark.parametrize("width,height", [(8, 3000), (5, 1200), (40, 2500)])
+def test_strips_of_a_thin_image_compute_each_band_once_and_agree_with_the_whole(width, height):
+    # A band (BAND_PIXELS / width rows) taller than a strip was computed again
+    # for every strip: quadratic in the height. Each band is now evaluated
+    # once, and the strips put together are the whole pull-back.
+    from warpcli import MapOptions, Polygon
+    from warpcli.maps.compose import BijectiveMap
+
+    src = Polygon(np.array([[1, 1], [width - 1, 1], [width - 1, height - 1], [1, height - 1]], float))
+    dst = Polygon(np.array([[1, 1], [width - 1, 2], [width - 1.5, height - 1], [1.5, height - 2]], float))
+    fmap = BijectiveMap.between(src, dst, MapOptions())
+    whole = fmap.pull_back(width, height)
+    phi = fmap.phi1
+    calls = []
+    real = type(phi).evaluate_grid
+
+    def counted(self, w, h, rows=None, **k):
+        calls.append(rows)
+        return real(self, w, h, rows, **k)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(type(phi), "evaluate_grid", counted)
+        strips = [fmap.pull_back(width, height, rows=(r, min(r + 256, height))) for r in range(0, height, 256)]
+    assert len(calls) == len(set(calls))  # no band twice
+    got = np.full((height, width, 2), np.nan)
+    for s in strips:
+        (r0, c0), pts = s.origin, s.points
+        got[r0 : r0 + pts.shape[0], c0 : c0 + pts.shape[1]] = pts
+    ref = np.full((height, width, 2), np.nan)
+    (r0, c0), pts = whole.origin, whole.points
+    ref[r0 : r0 + pts.shape[0], c0 : c0 + pts.shape[1]] = pts
+    np.testing.assert_array_equal(got, ref)

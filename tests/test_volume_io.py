@@ -181,3 +181,128 @@ def test_distortion_of_a_similarity():
 
     m = distortion(np.array([1.5 * rotation([1, 1, 0], 0.3)]))
     assert m["conformal"][0] == pytest.approx(3.0) and m["isometric"][0] == pytest.approx(1.5)
+
+
+# Volumes the warp cannot take are refused from the header with one line
+# (exit 2 through the CLI), and byte orders or half floats it can take are
+# warped like their native twins.
+
+BYTE_ORDER_TYPES = [np.uint8, np.int16, np.uint16, np.int32, np.float32, np.float64]
+
+
+@pytest.mark.parametrize("dtype", BYTE_ORDER_TYPES)
+@pytest.mark.parametrize("fmt", ["nifti", "tiff"])
+def test_big_endian_volumes_warp_like_native_ones(tmp_path, dtype, fmt):
+    import tifffile
+
+    rng = np.random.default_rng(int(np.dtype(dtype).itemsize))
+    data = rng.integers(0, 100, (12, 10, 8)).astype(dtype)
+    v, f = box(1, (1.0, 1.0, 1.0), (7.0, 9.0, 11.0))
+    write_obj(tmp_path / "cube.obj", v, f)
+    outs = []
+    for order in "<>":
+        swapped = data.astype(np.dtype(dtype).newbyteorder(order))
+        if fmt == "nifti":
+            header = nib.Nifti1Header(endianness=order)
+            header.set_data_dtype(np.dtype(dtype))
+            nib.save(nib.Nifti1Image(swapped, np.eye(4), header=header), str(tmp_path / f"in{order == '>'}.nii"))
+            src = tmp_path / f"in{order == '>'}.nii"
+        else:
+            src = tmp_path / f"in{order == '>'}.tif"
+            tifffile.imwrite(src, np.transpose(swapped, (2, 1, 0)), byteorder=order, photometric="minisblack")
+        out = tmp_path / f"out{order == '>'}{src.suffix}"
+        warp_volume_file(src, out, tmp_path / "cube.obj", tmp_path / "cube.obj", interpolation="nearest")
+        outs.append(read_volume(out).data)
+    assert outs[0].dtype.newbyteorder("=") == outs[1].dtype.newbyteorder("=") == np.dtype(dtype)
+    assert np.array_equal(outs[0], outs[1])
+
+
+def test_nibabels_own_big_endian_anatomical_volume_is_warped(tmp_path):
+    import os
+
+    path = os.path.join(os.path.dirname(nib.__file__), "tests", "data", "anatomical.nii")
+    if not os.path.exists(path):
+        pytest.skip("nibabel without its test data")
+    img = nib.load(path)
+    assert not img.get_data_dtype().isnative  # the case: stored big-endian
+    volume = read_volume(path)
+    assert volume.data.dtype.isnative
+    assert np.array_equal(volume.data[..., 0], np.transpose(np.asanyarray(img.dataobj.get_unscaled()), (2, 1, 0)))
+
+
+def test_half_float_stack_is_warped_in_its_own_type(tmp_path):
+    import tifffile
+
+    data = (np.random.default_rng(4).random((8, 10, 12)) * 50).astype(np.float16)
+    tifffile.imwrite(tmp_path / "in.tif", data, photometric="minisblack")
+    v, f = box(1, (1.0, 1.0, 1.0), (11.0, 9.0, 7.0))
+    write_obj(tmp_path / "cube.obj", v, f)
+    warp_volume_file(tmp_path / "in.tif", tmp_path / "out.tif", tmp_path / "cube.obj", tmp_path / "cube.obj", interpolation="nearest")
+    out = tifffile.imread(tmp_path / "out.tif")
+    assert out.dtype == np.float16 and np.array_equal(out[2:6, 2:8, 2:10], data[2:6, 2:8, 2:10])
+
+
+def _cli_one_line(args):
+    from helpers import run_cli
+
+    code, err = run_cli(args)
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+    return err
+
+
+@pytest.mark.parametrize("dtype", [np.complex64, np.complex128])
+@pytest.mark.parametrize("ext", [".nii", ".nii.gz", ".tif"])
+def test_complex_volumes_are_refused_in_one_line(tmp_path, dtype, ext):
+    import tifffile
+
+    data = np.ones((6, 5, 4), dtype=dtype)
+    path = tmp_path / f"in{ext}"
+    if ext == ".tif":
+        tifffile.imwrite(path, data, photometric="minisblack")
+    else:
+        nifti(path, data)
+    v, f = box(1, (1, 1, 1), (3, 3, 3))
+    write_obj(tmp_path / "a.obj", v, f)
+    err = _cli_one_line(["volume", path, tmp_path / f"out{ext}", "--src", tmp_path / "a.obj", "--dst", tmp_path / "a.obj"])
+    assert f"in{ext}: complex data" in err
+    assert not (tmp_path / f"out{ext}").exists()
+
+
+@pytest.mark.parametrize("shape", [(0, 4, 4), (4, 0, 4), (4, 4, 0), (4, 4, 4, 0)])
+def test_volumes_without_voxels_are_refused_in_one_line(tmp_path, shape):
+    path = nifti(tmp_path / "in.nii", np.zeros(shape, dtype=np.float32))
+    v, f = box(1, (1, 1, 1), (3, 3, 3))
+    write_obj(tmp_path / "a.obj", v, f)
+    err = _cli_one_line(["volume", path, tmp_path / "out.nii", "--src", tmp_path / "a.obj", "--dst", tmp_path / "a.obj"])
+    assert "in.nii: the volume has no voxels" in err
+
+
+@pytest.mark.parametrize("page_shapes", [[(8, 8), (8, 8), (6, 8)], [(8, 8), (8, 7)], [(5, 5), (5, 5, 3)]])
+def test_tiff_stacks_with_mismatched_pages_are_refused_in_one_line(tmp_path, page_shapes):
+    import tifffile
+
+    with tifffile.TiffWriter(tmp_path / "in.tif") as tif:
+        for shape in page_shapes:
+            tif.write(np.zeros(shape, np.uint8), photometric="rgb" if len(shape) == 3 else "minisblack")
+    v, f = box(1, (1, 1, 1), (3, 3, 3))
+    write_obj(tmp_path / "a.obj", v, f)
+    err = _cli_one_line(["volume", tmp_path / "in.tif", tmp_path / "out.tif", "--src", tmp_path / "a.obj", "--dst", tmp_path / "a.obj"])
+    assert "in.tif: " in err
+
+
+@pytest.mark.parametrize("shape", [(1024, 1024, 1024), (64, 64, 64), (2000, 10, 10, 3)])
+@pytest.mark.parametrize("ext", [".nii", ".nii.gz"])
+def test_a_header_declaring_more_than_its_file_is_refused_before_reading(tmp_path, monkeypatch, shape, ext):
+    # A 33 KB file declaring gigabytes: refused from the header, nothing read
+    # (the reader is replaced by one that fails if called).
+    import gzip
+
+    header = nib.Nifti1Header()
+    header.set_data_shape(shape)
+    header.set_data_dtype(np.float32)
+    body = header.binaryblock + b"\0" * 4 + b"\1" * 1000
+    path = tmp_path / f"bomb{ext}"
+    path.write_bytes(gzip.compress(body) if ext.endswith(".gz") else body)
+    monkeypatch.setattr(nib.arrayproxy.ArrayProxy, "get_unscaled", lambda self: pytest.fail("data were read"))
+    with pytest.raises(ImageInputError, match=r"bomb\.nii(\.gz)?: declares .* in a file of .*refused before reading"):
+        read_volume(path)

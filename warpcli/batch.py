@@ -20,7 +20,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .errors import InputError, WarpError, naming
+from .errors import ImageInputError, InputError, WarpError, naming
+from .files import check_regular_file
 from .maps.compose import BijectiveMap
 from .options import WarpOptions, resolve_options
 from .outputs import RunInputs
@@ -31,8 +32,8 @@ from .raster.imageio import check_image_output, read_image
 from .tiled import in_parts, warp_file_tiled
 
 __all__ = [
-    "BatchItem", "FrameMaps", "PlanCache", "RunMaps", "apply_map_sequence", "link_or_copy", "output_name", "prepare_batch",
-    "warp_batch", "warp_one", "warp_run", "warp_sequence",
+    "BatchItem", "FrameMaps", "MissingFrameError", "PlanCache", "RunMaps", "apply_map_sequence", "link_or_copy",
+    "output_name", "prepare_batch", "warp_batch", "warp_one", "warp_run", "warp_sequence",
 ]  # fmt: skip
 
 
@@ -43,6 +44,10 @@ class BatchItem:
     input_path: str
     output_path: str
     error: WarpError | None = None
+
+
+class MissingFrameError(ImageInputError):
+    """A frame of a sequence whose image is missing (or not a regular file): it fails without a map."""
 
 
 def output_name(input_path: str | os.PathLike[str], pattern: str = "{name}") -> str:
@@ -354,7 +359,10 @@ def warp_one(
         write_like(out, image, px, opts.dtype)
         return BatchItem(inp, out)
     except WarpError as err:
-        return BatchItem(inp, out, err)
+        # Without its traceback: that holds this frame, and so the plans and
+        # their map, alive as long as the item (a long sequence of failures
+        # kept every map).
+        return BatchItem(inp, out, err.with_traceback(None))
 
 
 def _each(work: Callable, tasks: list, jobs: int, on_item: Callable[[BatchItem], None] | None) -> list[BatchItem]:
@@ -384,6 +392,7 @@ def _each(work: Callable, tasks: list, jobs: int, on_item: Callable[[BatchItem],
 def warp_run(
     src: Polygon, dst: Polygon, tasks: Sequence[tuple[str, str, int]], opts: WarpOptions, *,
     maps: FrameMaps | None = None, jobs: int = 1, on_item: Callable[[BatchItem], None] | None = None,
+    missing: dict[int, BatchItem] | None = None,
 ) -> list[BatchItem]:  # fmt: skip
     """A run of frames that share one polygon pair: its map, then each frame through it.
 
@@ -400,25 +409,48 @@ def warp_run(
         Threads warping the run's frames at once.
     on_item : callable or None
         Called with each `BatchItem`, in frame order.
+    missing : dict of int to BatchItem, or None
+        Frames whose image is missing, with their items: they need no map
+        (with every frame missing, ``src`` and ``dst`` may be None and no map
+        is built).
 
     Returns
     -------
     list of BatchItem
         In frame order; a map that cannot be built fails every frame of the run.
     """
+    missing = missing or {}
+    if all(f in missing for _, _, f in tasks):
+        done = [missing[f] for _, _, f in tasks]
+        for item in done:
+            if on_item is not None:
+                on_item(item)
+        return done
     try:
         plans = PlanCache(BijectiveMap.between(src, dst, opts.map), opts)
     except WarpError as err:  # a map that cannot be built fails its frames, not the others
-        done = [BatchItem(inp, out, err) for inp, out, _ in tasks]
+        done = [missing.get(f) or BatchItem(inp, out, err.with_traceback(None)) for inp, out, f in tasks]
         for item in done:
             if on_item is not None:
                 on_item(item)
         return done
     run_maps = None if maps is None else RunMaps(maps)
-    return _each(lambda task: warp_one(task[0], task[1], plans, frame=task[2], maps=run_maps), list(tasks), jobs, on_item)
+
+    def one(task):
+        if task[2] in missing:
+            return missing[task[2]]
+        return warp_one(task[0], task[1], plans, frame=task[2], maps=run_maps)
+
+    return _each(one, list(tasks), jobs, on_item)
 
 
-def _warp_run_in_worker(src, dst, tasks, opts, maps, level, filters):
+def _pair_of(tasks, pairs, missing):
+    """The polygon pair of a run's frames (None, None when every image of it is missing)."""
+    first = next((f for _, _, f in tasks if f not in missing), None)
+    return pairs[first] if first is not None else (None, None)
+
+
+def _warp_run_in_worker(src, dst, tasks, opts, maps, level, filters, missing=None):
     """`warp_run` in a worker process: its items, and its log records for the parent to log in order."""
     import warnings
 
@@ -431,7 +463,7 @@ def _warp_run_in_worker(src, dst, tasks, opts, maps, level, filters):
     log.propagate = False
     log.setLevel(level)
     try:
-        return warp_run(src, dst, tasks, opts, maps=maps), keep.records
+        return warp_run(src, dst, tasks, opts, maps=maps, missing=missing), keep.records
     finally:
         log.handlers[:] = []
 
@@ -548,25 +580,38 @@ def warp_sequence(
                 check_image_output(extra, inputs=inputs)
     src_keys = read_animated(src_path, src_label)
     dst_keys = read_animated(dst_path, dst_label)
-    # Every frame's polygons first (interpolation can self-intersect): errors before any work.
+    # Frames whose image is missing fail without a map, and without their polygons:
+    # a map is built for a run only if one of its frames has an image.
+    missing: dict[int, BatchItem] = {}
+    for (f, inp), (_, out) in zip(ins, outs):
+        try:
+            check_regular_file(inp, "image", MissingFrameError)
+        except MissingFrameError as err:
+            missing[f] = BatchItem(inp, out, err.with_traceback(None))
+    # Every other frame's polygons first (interpolation can self-intersect): errors before any work.
     pairs = {}
     for f, _ in ins:
-        if f not in pairs:
+        if f not in pairs and f not in missing:
             pairs[f] = (src_keys.at(f), dst_keys.at(f))
             check_pair(*pairs[f])
-    # Runs of frames with the same pair share one map.
-    runs: list[tuple[tuple[bytes, bytes], list[tuple[str, str, int]]]] = []
+    # Runs of frames with the same pair share one map (a missing frame breaks
+    # no run); the frames of a run go to the threads.
+    runs: list[tuple[tuple[bytes, bytes] | None, list[tuple[str, str, int]]]] = []
     for (f, inp), (_, out) in zip(ins, outs):
-        src, dst = pairs[f]
-        key = (src.points.tobytes(), dst.points.tobytes())
-        if not runs or runs[-1][0] != key:
+        key = None
+        if f not in missing:
+            src, dst = pairs[f]
+            key = (src.points.tobytes(), dst.points.tobytes())
+        if not runs or (key is not None and runs[-1][0] not in (None, key)):
             runs.append((key, []))
+        elif key is not None and runs[-1][0] is None:
+            runs[-1] = (key, runs[-1][1])
         runs[-1][1].append((inp, out, f))
     width = _processes(jobs, len(runs), ins, opts)
     if width <= 1:  # the frames of a run go to the threads
         items: list[BatchItem] = []
         for _, tasks in runs:
-            items += warp_run(*pairs[tasks[0][2]], tasks, opts, maps=maps, jobs=jobs, on_item=on_item)
+            items += warp_run(*_pair_of(tasks, pairs, missing), tasks, opts, maps=maps, jobs=jobs, on_item=on_item, missing=missing)
         return items
     units = []
     for _, tasks in runs:
@@ -574,7 +619,7 @@ def warp_sequence(
         # all workers have work; not when its frames share map files.
         size = len(tasks) if maps is not None else max(1, math.ceil(len(ins) / width))
         units += [tasks[k : k + size] for k in range(0, len(tasks), size)]
-    return _in_processes(units, pairs, opts, maps, width, on_item)
+    return _in_processes(units, pairs, opts, maps, width, on_item, missing)
 
 
 def _warn_about_outputs(patterns, frames) -> None:
@@ -603,7 +648,7 @@ def _processes(jobs: int, runs: int, ins: list[tuple[int, str]], opts: WarpOptio
     return max(1, min(jobs, runs, max_image_bytes() // max(1, need)))
 
 
-def _in_processes(units, pairs, opts, maps, width, on_item) -> list[BatchItem]:
+def _in_processes(units, pairs, opts, maps, width, on_item, missing) -> list[BatchItem]:
     """Runs of frames on ``width`` worker processes; items, log records and ``on_item`` calls in frame order."""
     import multiprocessing
     import warnings
@@ -618,7 +663,8 @@ def _in_processes(units, pairs, opts, maps, width, on_item) -> list[BatchItem]:
     pool = ProcessPoolExecutor(max_workers=width, mp_context=multiprocessing.get_context("spawn"))
     items: list[BatchItem] = []
     try:
-        futures = [pool.submit(_warp_run_in_worker, *pairs[u[0][2]], u, opts, maps, level, filters) for u in units]
+        futures = [pool.submit(_warp_run_in_worker, *_pair_of(u, pairs, missing), u, opts, maps, level, filters,
+                               {f: missing[f] for _, _, f in u if f in missing}) for u in units]  # fmt: skip
         for unit, future in zip(units, futures):
             try:
                 done, records = future.result()

@@ -9,7 +9,9 @@ import sys
 from .errors import ImageInputError
 from .files import format_bytes
 
-__all__ = ["MAX_IMAGE_BYTES_ENV", "MEMORY_FRACTION", "check_fits", "max_image_bytes"]
+__all__ = [
+    "MAX_COMPRESSION", "MAX_IMAGE_BYTES_ENV", "MEMORY_FRACTION", "check_declared_size", "check_fits", "max_image_bytes",
+]  # fmt: skip
 
 #: Environment variable: the most bytes of pixels warpcli will hold for one
 #: image (read, or made with ``--size``), overriding the default limit.
@@ -18,6 +20,9 @@ MAX_IMAGE_BYTES_ENV = "WARPCLI_MAX_IMAGE_BYTES"
 #: within a cgroup's limit; elsewhere the free physical memory), leaving the
 #: rest for the warp's working arrays.
 MEMORY_FRACTION = 0.5
+#: The most decoded bytes per byte of file a compressed image may declare:
+#: zlib (PNG, TIFF, OpenEXR, .nii.gz) compresses at most about 1032 to 1.
+MAX_COMPRESSION = 1100
 
 
 def max_image_bytes() -> int:
@@ -91,6 +96,36 @@ def check_fits(
         raise ImageInputError(
             f"{what}: a {width} x {height} image of {channels} channel(s) x {nbytes} {unit} needs "
             f"{shown_need} of memory{several}, more than the {shown_limit} warpcli may use ({source})"
+        )
+
+
+def check_declared_size(path: str | os.PathLike[str], decoded: int, what: str, *, ratio: float = MAX_COMPRESSION) -> None:
+    """Refuse, from its header and before decoding it, a file that declares far
+    more data than it could hold (a decompression bomb or a corrupt header).
+
+    Parameters
+    ----------
+    path : path-like
+        The file; its size on disk is what the header is checked against.
+    decoded : int
+        The bytes of data its header declares.
+    what : str
+        What is declared, for the message ("16 x 16 x 4096 voxels of float32").
+    ratio : float
+        The most decoded bytes per byte of file: `MAX_COMPRESSION` for a
+        compressed file, 1 for one stored raw.
+
+    Raises
+    ------
+    ImageInputError
+        If ``decoded`` is more than ``ratio`` times the file's size.
+    """
+    size = max(os.stat(path).st_size, 1)
+    if decoded > ratio * size:
+        how = "more than any compression gives" if ratio > 1 else "more than the file holds"
+        raise ImageInputError(
+            f"{os.fspath(path)}: declares {what} ({format_bytes(decoded)}) in a file of {format_bytes(size)}, "
+            f"{how}: refused before reading (truncated, corrupt or a decompression bomb)"
         )
 
 

@@ -15,7 +15,10 @@ on a laptop, ``--scheduler local`` starts a `LocalCluster`. Needs
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
+import re
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -23,6 +26,114 @@ from .batch import BatchItem, PlanCache, prepare_batch, warp_one
 from .errors import ImageIOError, InputError, WarpError
 from .options import WarpOptions, resolve_options
 from .pipeline import read_header_or_none
+
+log = logging.getLogger("warpcli")
+
+
+#: Seconds to wait for a scheduler to answer (connect and handshake) before
+#: giving up with one line; ``WARPCLI_DASK_TIMEOUT`` sets another.
+CONNECT_TIMEOUT = 10.0
+#: Environment variable: seconds to wait for the scheduler.
+CONNECT_TIMEOUT_ENV = "WARPCLI_DASK_TIMEOUT"
+#: How many times the tasks of images lost with a worker are sent again.
+RESUBMITS = 3
+
+_ADDRESS = re.compile(r"(?:(?:tcp|tls|ws|wss)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9][A-Za-z0-9.\-_]*):([0-9]{1,5})")
+
+
+def check_scheduler(address: object) -> None:
+    """Refuse, before any work, what cannot be a scheduler's address.
+
+    ``"local"``, None or a Client pass; a string must be ``[tcp|tls|ws|wss://]HOST:PORT``.
+
+    Raises
+    ------
+    InputError
+    """
+    if address is None or address == "local" or not isinstance(address, str):
+        return
+    m = _ADDRESS.fullmatch(address.strip())
+    if m is None or not 0 < int(m.group(2)) < 65536:
+        shown = address if len(address) <= 60 else address[:57] + "..."
+        raise InputError(f"--scheduler {shown!r}: not a scheduler address; give tcp://HOST:PORT, or 'local'")
+
+
+def connect_timeout() -> float:
+    """Seconds to wait for a scheduler: ``WARPCLI_DASK_TIMEOUT``, else `CONNECT_TIMEOUT`.
+
+    Raises
+    ------
+    InputError
+        If ``WARPCLI_DASK_TIMEOUT`` is not a positive number of seconds.
+    """
+    value = os.environ.get(CONNECT_TIMEOUT_ENV, "").strip()
+    if not value:
+        return CONNECT_TIMEOUT
+    try:
+        seconds = float(value)
+    except ValueError:
+        seconds = 0.0
+    if not 0 < seconds < float("inf"):
+        raise InputError(f"{CONNECT_TIMEOUT_ENV}={value!r}: not a positive number of seconds")
+    return seconds
+
+
+def probe_scheduler(address: str, timeout: float) -> None:
+    """Connect to ``address`` and shake hands as a Dask client would, within ``timeout`` seconds.
+
+    `dask.distributed.Client`'s timeout covers the connection, not the
+    handshake: a server that accepts and never answers would hang it.
+
+    Raises
+    ------
+    InputError
+        If nothing answers in time, or what answers is not a Dask scheduler.
+    """
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def shake() -> None:
+        comm = await asyncio.wait_for(connect(address, timeout=timeout), timeout)
+        await comm.close()
+
+    try:
+        asyncio.run(shake())
+    except (OSError, TimeoutError) as err:
+        raise InputError(
+            f"cannot reach the Dask scheduler {address}: {str(err) or f'no answer within {timeout:g} s ({CONNECT_TIMEOUT_ENV})'}"
+        ) from None
+    except Exception as err:  # noqa: BLE001 - any bytes may come back: their decoding fails in any way
+        # (struct.error, ValueError of an absurd size, MemoryError, KeyError...).
+        first = (str(err).splitlines() or [""])[0][:120]
+        raise InputError(
+            f"{address}: the server there does not answer as a Dask scheduler ({type(err).__name__}: {first})"
+        ) from None
+
+
+def _resubmit(client, plans, tasks, futures, first: int, err: BaseException) -> bool:
+    """Ship the plans again and resubmit every task from ``first`` on that has not succeeded.
+
+    A worker lost mid-batch takes its copy of the plans with it; a worker that
+    joined after they were shipped never had one. When no copy is left, every
+    task still to run fails ("already forgotten"): shipping them again lets
+    the rest of the batch go on. Returns False if the cluster takes nothing more.
+    """
+    remaining = len(tasks) - first
+    log.warning(
+        "%s: the task failed on the cluster (%s); shipping the plans again and resubmitting %d image(s)",
+        tasks[first][0], str(err) or type(err).__name__, remaining,
+    )  # fmt: skip
+    try:
+        shipped = client.scatter(plans, broadcast=True)
+        for j in range(first, len(tasks)):
+            if futures[j].status != "finished":
+                futures[j].cancel()
+                futures[j] = client.submit(warp_one, *tasks[j], shipped, pure=False)
+    except Exception as again:  # noqa: BLE001 - the cluster is gone, whatever it raised: the images fail with the first error
+        log.warning("cannot resubmit to the cluster: %s", str(again) or type(again).__name__)
+        return False
+    return True
 
 
 def warp_batch_dask(
@@ -72,6 +183,8 @@ def warp_batch_dask(
         raise InputError("--scheduler needs dask.distributed: pip install 'warpcli[dask]'") from None
     from .maps.compose import BijectiveMap
 
+    check_scheduler(scheduler)
+    timeout = connect_timeout()
     opts = resolve_options(options, changes)
     tasks, src, dst = prepare_batch(
         input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=opts.map.theta_file
@@ -85,6 +198,52 @@ def warp_batch_dask(
             cache.get(tuple(opts.size) if opts.size is not None else header.displayed_size)
     plans = PlanCache(None, opts, cache.plans)
 
+    with quiet_dask():
+        return _run(Client, LocalCluster, scheduler, workers, timeout, tasks, plans, on_item)
+
+
+@contextlib.contextmanager
+def quiet_dask():
+    """Keep Dask's own log lines off stderr while a batch runs: warp says what went wrong, in its words.
+
+    The handlers distributed gives its loggers in this process are muted; the
+    worker processes a `LocalCluster` starts inherit
+    ``DASK_LOGGING__DISTRIBUTED`` (read when they import dask). Both are
+    restored at the end.
+    """
+    # distributed gives its loggers ("distributed", "distributed.client",
+    # "tornado", ...) stderr handlers of their own: those are muted.
+    # (A filter, not a level: a LocalCluster sets their levels when it starts.)
+    handlers = {
+        handler
+        for name, logger in list(logging.root.manager.loggerDict.items())
+        if name.split(".")[0] in _DASK_LOGGERS and isinstance(logger, logging.Logger)
+        for handler in logger.handlers
+    }
+    env = os.environ.get(_DASK_LOG_ENV)
+    for handler in handlers:
+        handler.addFilter(_mute)
+    os.environ[_DASK_LOG_ENV] = "critical"
+    try:
+        yield
+    finally:
+        for handler in handlers:
+            handler.removeFilter(_mute)
+        if env is None:
+            os.environ.pop(_DASK_LOG_ENV, None)
+        else:
+            os.environ[_DASK_LOG_ENV] = env
+
+
+_DASK_LOG_ENV = "DASK_LOGGING__DISTRIBUTED"
+_DASK_LOGGERS = ("distributed", "tornado", "bokeh")
+
+
+def _mute(record: logging.LogRecord) -> bool:
+    return False
+
+
+def _run(Client, LocalCluster, scheduler, workers, timeout, tasks, plans, on_item) -> list[BatchItem]:
     cluster = None
     if isinstance(scheduler, Client):
         client, own = scheduler, False
@@ -94,7 +253,8 @@ def warp_batch_dask(
                 cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
                 client = Client(cluster)
             else:
-                client = Client(scheduler)  # waits distributed.comm.timeouts.connect (30 s by default)
+                probe_scheduler(scheduler, timeout)
+                client = Client(scheduler, timeout=timeout)
         except (OSError, TimeoutError) as err:
             raise InputError(f"cannot reach the Dask scheduler {scheduler}: {err}") from None
         own = True
@@ -102,13 +262,19 @@ def warp_batch_dask(
         shipped = client.scatter(plans, broadcast=True)
         futures = [client.submit(warp_one, inp, out, shipped, pure=False) for inp, out in tasks]
         items = []
-        for (inp, out), future in zip(tasks, futures):
-            try:
-                item = future.result()
-            except WarpError as err:
-                item = BatchItem(inp, out, err)
-            except Exception as err:  # a lost worker, a killed task: that image's failure
-                item = BatchItem(inp, out, ImageIOError(f"{inp}: the task failed on the cluster: {err}"))
+        resent = 0
+        for k, (inp, out) in enumerate(tasks):
+            while True:
+                try:
+                    item = futures[k].result()
+                except WarpError as err:
+                    item = BatchItem(inp, out, err)
+                except Exception as err:  # a lost worker, a killed task: that image's failure
+                    if resent < RESUBMITS and _resubmit(client, plans, tasks, futures, k, err):
+                        resent += 1
+                        continue
+                    item = BatchItem(inp, out, ImageIOError(f"{inp}: the task failed on the cluster: {err}"))
+                break
             items.append(item)
             if on_item is not None:
                 on_item(item)

@@ -86,8 +86,10 @@ class MapOptions:
     theta_start : {"regular", "cyclic"}
         Where the optimization starts.
     nodes : int or None
-        BEM and MFS: the number m of boundary nodes (BEM) or sites (MFS);
-        None: max(256, 8 n).
+        BEM and MFS: the number m of boundary nodes (BEM) or sites (MFS),
+        at least the vertex count and within memory
+        (`warpcli.maps.meshless.FIT_BYTES_PER_NODE2`); None: max(256, 8 n),
+        at most `warpcli.maps.meshless.MAX_AUTO_NODES`.
     conditions : {"dirichlet", "mixed"}
         Experimental (§5.2, quadrilaterals only): ``mixed`` maps onto the unit
         square with natural boundary conditions, each coordinate prescribed on
@@ -244,6 +246,10 @@ class WarpOptions:
         return dataclasses.replace(self, **mine)
 
 
+#: The longest side of an image, in pixels: OpenImageIO keeps sizes in C ints.
+MAX_SIDE = 2**31 - 1
+
+
 def check_size(size: object) -> tuple[int, int]:
     """An image size ``(width, height)`` of positive integers, or `InputError`.
 
@@ -259,6 +265,8 @@ def check_size(size: object) -> tuple[int, int]:
         raise InputError(f"size must be (width, height), two whole numbers, got {size!r}") from None
     if w <= 0 or h <= 0:
         raise InputError(f"size must be positive, got width {w} and height {h}")
+    if max(w, h) > MAX_SIDE:
+        raise InputError(f"size {w} x {h}: a side of more than {MAX_SIDE} pixels (OpenImageIO's limit)")
     return w, h
 
 

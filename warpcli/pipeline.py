@@ -584,6 +584,36 @@ def _write_json(path: str, doc: dict) -> None:
     write_checked(path, (json.dumps(doc, indent=2) + "\n").encode())
 
 
+#: Bytes per output pixel that applying an STMap holds besides the decoded
+#: map and the output: the map as float64 values, its points (2 float64),
+#: and the sampling plan's weights and indices (measured: a 3000 x 3000
+#: float STMap peaks at ~60 bytes per pixel in all).
+STMAP_BYTES_PER_PIXEL = 40
+
+
+def check_stmap_fits(map_path: str | os.PathLike[str], input_path: str | os.PathLike[str]) -> None:
+    """Refuse, from the headers and before decoding anything, an STMap whose warp does not fit in memory.
+
+    Raises
+    ------
+    ImageInputError
+        If either header cannot be read, or the map's pixels, their float64
+        copy, the points, the plan and the output together need more than
+        `warpcli.budget.max_image_bytes`.
+    """
+    import math
+
+    header = read_header(map_path)
+    image = read_header(input_path)
+    w, h = header.displayed_size
+    decoded = header.channels * header.dtype.itemsize
+    per_pixel = decoded + 8 * header.channels + STMAP_BYTES_PER_PIXEL + image.channels * max(image.dtype.itemsize, 4)
+    check_fits(
+        w, h, header.channels, header.dtype.itemsize, os.fspath(map_path), copies=max(1, math.ceil(per_pixel / decoded)),
+        why="the map decoded, as points, as a sampling plan and as the output image",
+    )  # fmt: skip
+
+
 def apply_map_file(
     map_path: str | os.PathLike[str],
     input_path: str | os.PathLike[str],
@@ -618,6 +648,7 @@ def apply_map_file(
 
     opts = resolve_options(options, changes)
     check_image_output(output_path, inputs=(input_path, map_path))
+    check_stmap_fits(map_path, input_path)
     image = read_image(input_path)
     points = load_stmap(map_path, (image.width, image.height), t_up=t_up)
     plan = SamplingPlan.from_points(points, interp=opts.interp, background=opts.background)

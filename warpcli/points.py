@@ -180,6 +180,8 @@ def _as_xy(values, name: str) -> NDArray[np.float64]:
         pts = np.array(values, dtype=np.float64)
     except (TypeError, ValueError):
         raise InputError(f"{name}: points must be [x, y] pairs of numbers") from None
+    except OverflowError:  # an integer of hundreds of digits
+        raise InputError(f"{name}: a coordinate is beyond the floating-point range (1.8e308)") from None
     if pts.ndim != 2 or pts.shape[1] != 2 or not np.isfinite(pts).all():
         raise InputError(f"{name}: points must be finite [x, y] pairs")
     return pts

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .budget import MAX_COMPRESSION
 from .errors import InputError
 from .maps.compose import BijectiveMap
 from .options import WarpOptions
@@ -224,9 +225,6 @@ def _reach(points: NDArray, jac: NDArray | None, extra: NDArray | None, header: 
     return x0, y0, x1, y1
 
 
-#: The most decoded bytes per byte of file an image taken into strips by itself
-#: may declare: zlib (PNG, TIFF, OpenEXR) compresses at most about 1032 to 1.
-MAX_COMPRESSION = 1100
 
 
 def check_plausible(path: str | os.PathLike[str], header: ImageHeader) -> None:

@@ -21,7 +21,7 @@ from typing import Any, Callable, NamedTuple
 import click
 
 from ..maps.registry import METHODS, THETAS
-from ..options import BOUNDARIES, CONDITIONS, DTYPES, ENERGIES, INTERPOLATIONS, WEIGHTS, MapOptions, WarpOptions
+from ..options import BOUNDARIES, CONDITIONS, DTYPES, ENERGIES, INTERPOLATIONS, MAX_SIDE, WEIGHTS, MapOptions, WarpOptions
 
 #: Context settings of every command: -h as well as --help, and help up to 100 columns wide.
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -89,6 +89,9 @@ def parse_size(ctx, param, value):
         raise click.BadParameter(f"expected WIDTHxHEIGHT such as 640x480, got {value!r}") from None
     if w <= 0 or h <= 0:
         raise click.BadParameter(f"width and height must be positive, got {value!r}")
+    if max(w, h) > MAX_SIDE:
+        shown = value if len(value) <= 40 else value[:37] + "..."
+        raise click.BadParameter(f"a side of at most {MAX_SIDE} pixels (OpenImageIO's limit), got {shown!r}")
     return w, h
 
 
@@ -203,7 +206,7 @@ map_options = collected(
     click.option("--dst-boundary", type=click.Choice(BOUNDARIES), default="linear", show_default=True, help="Boundary behaviour of DST (--boundary sets it)."),
     click.option("--energy", type=click.Choice(ENERGIES), default="conformal", show_default=True, help="What --theta optimized lowers: the area-weighted mean distortion."),
     click.option("--theta-start", type=click.Choice(("regular", "cyclic")), default="regular", show_default=True, help="Where --theta optimized starts."),
-    click.option("--nodes", type=click.IntRange(3, 100_000), help="BEM/MFS: boundary nodes (BEM) or sites (MFS), m.  [default: max(256, 8 n)]"),
+    click.option("--nodes", type=click.IntRange(3, 100_000), help="BEM/MFS: boundary nodes (BEM) or sites (MFS), m, from n (the vertices) to what memory allows.  [default: max(256, 8 n), at most 2048]"),
     click.option(
         "--conditions",
         type=click.Choice(CONDITIONS),

@@ -115,7 +115,7 @@ single_outputs = collected(
 @click.option("--frame", "frame", type=int, metavar="N", help="Keyframed polygon files in a single warp: the polygons at frame N.")
 @click.option("--inverse", is_flag=True, help="Undo the warp from SRC to DST: map DST onto SRC (the same polygon files, swapped).")
 @click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
-@click.option("--scheduler", metavar="ADDRESS|local", help="Batch: run on a Dask cluster (tcp://host:8786), or 'local' for a LocalCluster of --jobs processes; the map is built here once and shipped. Needs warpcli[dask].")
+@click.option("--scheduler", metavar="ADDRESS|local", help="Batch: run on a Dask cluster (tcp://host:8786), or 'local' for a LocalCluster of --jobs processes; the map is built here once and shipped; a scheduler silent for 10 s (WARPCLI_DASK_TIMEOUT) is an error. Needs warpcli[dask].")
 @click.option("--jobs", type=click.IntRange(1, 256), default=1, show_default=True, help="Batch and sequences: images warped at once, by threads sharing the map, or for animated polygons by processes, a run of frames each (output bytes as with 1).")
 @click.option("--out-name", default="{name}", show_default=True, help="Batch output file name: {name}, {stem}, {ext} of the input (the extension picks the format).")
 @resample_options
@@ -252,11 +252,39 @@ def _sequence(paths, frames, polygons, options, jobs=1, outputs=None):
         maps = FrameMaps(outputs.save_map, outputs.save_forward_map, outputs.stmap_t == "up")
     spec = frames_or_disk(frames, paths[0])
     with progress_for(spec) as progress:
+        report = _MissingFrames(reporter(progress))
         items = warp_sequence(
             paths[0], paths[1], spec, polygons.src_path, polygons.dst_path, options, src_label=polygons.src_label,
-            dst_label=polygons.dst_label, on_item=reporter(progress), jobs=jobs, maps=maps,
+            dst_label=polygons.dst_label, on_item=report, jobs=jobs, maps=maps,
         )  # fmt: skip
+    report.summary()
     exit_for(items, "frames")
+
+
+#: Missing frames of a sequence reported one line each before the rest are counted.
+MISSING_SHOWN = 5
+
+
+class _MissingFrames:
+    """A sequence's item reporter, with the lines of missing frames after the first `MISSING_SHOWN` counted."""
+
+    def __init__(self, report) -> None:
+        self.report = report
+        self.missing = 0
+
+    def __call__(self, item) -> None:
+        from ..batch import MissingFrameError
+
+        if isinstance(item.error, MissingFrameError):
+            self.missing += 1
+            if self.missing > MISSING_SHOWN:
+                return
+        self.report(item)
+
+    def summary(self) -> None:
+        more = self.missing - MISSING_SHOWN
+        if more > 0:
+            click.echo(f"warp: error: ... and {more} more missing frame{'s' if more > 1 else ''}", err=True)
 
 
 def _batch(paths, out_dir, out_name, polygons, options, jobs=1, scheduler=None):

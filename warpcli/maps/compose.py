@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextvars
 import threading
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -239,6 +240,11 @@ class BijectiveMap(ComposedMap):
         return out
 
 
+#: The bands the last strip of a pull-back computed, by the map whose grid they scan
+#: (see `_through_theta`); weak, so that they go with their map.
+_STRIP_BANDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 def _through_theta(
     phi_grid: ThetaMap, phi_other: ThetaMap, width: int, height: int, jacobian: bool,
     rows: tuple[int, int] | None = None,
@@ -255,6 +261,30 @@ def _through_theta(
     points = np.empty(((r1 - r0) * ww, 2))
     jac = np.empty(((r1 - r0) * ww, 2, 2)) if jacobian else None
 
+    def band_values(first: int, last: int) -> tuple:
+        g = phi_grid.evaluate_grid(width, height, (first, last), jacobian=jacobian)
+        row, col = np.divmod(g.pixels, width)
+        # The window holds every centre in the polygon (its bounding box and
+        # a margin); a method that reported one beyond it would be dropped.
+        keep = (col >= c0) & (col < c1)
+        values, jac_grid = g.values, g.jacobian
+        if not keep.all():
+            row, col, values = row[keep], col[keep], values[keep]
+            jac_grid = None if jac_grid is None else jac_grid[keep]
+        m = phi_other.inverse(values, jacobian=jacobian, coherent=True)
+        return row, col, m.points, jac_grid, m.jacobian
+
+    # Strips (``rows``) of a narrow image are thinner than a band (BAND_PIXELS
+    # over the width): each strip would compute its whole band again, so a
+    # tall thin image cost time quadratic in its height. The bands of the
+    # last strip are kept for the next (at most a strip and a band of points).
+    kept = made = lock = None
+    if rows is not None:
+        lock = threading.Lock()
+        last_bands = _STRIP_BANDS.get(phi_grid)
+        kept = last_bands[1] if last_bands is not None and last_bands[0] is phi_other else {}
+        made = {}
+
     def one_band(first: int) -> None:
         # Bands are independent (each walk starts afresh) and write their own
         # rows of the window, so they run on all cores with the same result.
@@ -267,17 +297,14 @@ def _through_theta(
         points[lo:hi] = np.nan
         if jac is not None:
             jac[lo:hi] = np.nan
-        g = phi_grid.evaluate_grid(width, height, (first, last), jacobian=jacobian)
-        row, col = np.divmod(g.pixels, width)
-        # The window holds every centre in the polygon (its bounding box and
-        # a margin); a method that reported one beyond it would be dropped.
-        keep = (col >= c0) & (col < c1)
-        values, jac_grid = g.values, g.jacobian
-        if not keep.all():
-            row, col, values = row[keep], col[keep], values[keep]
-            jac_grid = None if jac_grid is None else jac_grid[keep]
-        m = phi_other.inverse(values, jacobian=jacobian, coherent=True)
-        found, jac_found = m.points, m.jacobian
+        key = (width, height, first, jacobian)
+        hit = kept.get(key) if kept is not None else None
+        if hit is None:
+            hit = band_values(first, last)
+        if kept is not None:
+            with lock:
+                made[key] = hit
+        row, col, found, jac_grid, jac_found = hit
         if start != first or stop != last:
             cut = (row >= start) & (row < stop)
             row, col, found = row[cut], col[cut], found[cut]
@@ -290,6 +317,8 @@ def _through_theta(
 
     if r1 > r0:
         parallel(one_band, range(w0 + (r0 - w0) // band * band, r1, band))
+    if made is not None:
+        _STRIP_BANDS[phi_grid] = (phi_other, made)
     shape = (r1 - r0, ww)
     return PullBack(
         points.reshape(*shape, 2), None if jac is None else jac.reshape(*shape, 2, 2), (r0, c0), (width, height)

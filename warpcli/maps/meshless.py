@@ -31,6 +31,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..boundary import nearest_edge, on_boundary
+from ..budget import MAX_IMAGE_BYTES_ENV, max_image_bytes
+from ..errors import InputError, MeshingError
+from ..files import format_bytes
 from ..grid import inside_polygon
 from ..polygon import Polygon
 from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, slide, sliding_tables
@@ -43,8 +46,17 @@ ON_BOUNDARY = 1e-9
 GUESS_TRIANGLES = 4000
 #: Residual (relative to Theta) within which Newton accepts a point it cannot improve further.
 NEWTON_FLOOR = 1e-9
-#: With the default m, a map that folds is fitted again with twice the nodes, up to this many.
-MAX_AUTO_NODES = 4096
+#: The most nodes warpcli chooses by itself: the default m, max(256, 8 n), is
+#: capped here, and a map that folds with it is fitted again with twice the
+#: nodes only while that stays within it. A fit costs ~m^3 time and ~m^2
+#: memory: MFS, m = 2400: 20 s and 0.9 GB for the fit alone; a 53-vertex comb
+#: refitted 424 -> 3392 took 338 s and 3.9 GB (to be refused: still folded);
+#: m = 4800, a 600-vertex polygon's default: 70 s and 6.5 GB, then a failure.
+MAX_AUTO_NODES = 2048
+#: Peak bytes of a whole warp per m^2 (measured: MFS 6.5 GB, BEM 4.9 GB at
+#: m = 4800, 512 x 512): a fit with m nodes is refused, or not attempted as a
+#: refit, when this times m^2 is more than `warpcli.budget.max_image_bytes`.
+FIT_BYTES_PER_NODE2 = {"bem": 220, "mfs": 300}
 
 log = logging.getLogger("warpcli")
 
@@ -231,14 +243,17 @@ class _Method:
         # edges where y is prescribed (0 and 2), y along the others, as for FEM.
         free = ((0, 2), (1, 3)) if options.conditions == "mixed" else ((), ())
         t0 = time.perf_counter()
-        m = options.nodes
+        m = self.nodes_for(polygon, options.nodes)
+        most = min(MAX_AUTO_NODES, self.most_nodes())
         while True:
             fit = self._fit(polygon, theta, m, boundary, free)
             phi = SmoothMap(polygon, theta, fit, self.name, options.conditions, boundary=boundary)
             # Repair what can be repaired: with the default m, a map whose
             # certificate fails (MFS oscillates near reflex corners, the
-            # paper's Fig. 5) is fitted again with twice the nodes.
-            if options.nodes is not None or not options.check or phi.solution.m >= MAX_AUTO_NODES:
+            # paper's Fig. 5) is fitted again with twice the nodes, within
+            # MAX_AUTO_NODES and memory (FIT_BYTES_PER_NODE2): past that the
+            # certificate refuses the map in one line.
+            if options.nodes is not None or not options.check or 2 * phi.solution.m > most:
                 break
             if phi.certify().ok:
                 break
@@ -247,14 +262,71 @@ class _Method:
         phi.timings["solve"] = time.perf_counter() - t0
         return phi
 
+    def fit_bytes(self, m: int) -> int:
+        """About how many bytes a warp with ``m`` nodes holds at its peak (`FIT_BYTES_PER_NODE2`)."""
+        return FIT_BYTES_PER_NODE2[self.name] * int(m) ** 2
+
+    def most_nodes(self) -> int:
+        """The most nodes whose fit fits in the memory budget (`warpcli.budget.max_image_bytes`)."""
+        from ..budget import max_image_bytes
+
+        return math.isqrt(max_image_bytes() // FIT_BYTES_PER_NODE2[self.name])
+
+    def nodes_for(self, polygon: Polygon, nodes: int | None) -> int | None:
+        """The m to fit first: ``nodes`` if it is possible, else the default (None) or its cap.
+
+        Raises
+        ------
+        InputError
+            If ``nodes`` is fewer than the polygon's vertices, or its fit would
+            need more memory than warpcli may use; or if the polygon has more
+            vertices than the memory allows nodes.
+        """
+        n = len(polygon.points)
+        most = self.most_nodes()
+        what = "boundary nodes" if self.name == "bem" else "sites"
+        if nodes is not None:
+            if nodes < n:
+                raise InputError(
+                    f"{polygon.name}: --nodes {nodes} is fewer than its {n} vertices; {self.name.upper()} needs at least "
+                    f"one of its {what} per vertex (the default is max(256, 8 n))"
+                )
+            if nodes > most:
+                raise InputError(
+                    f"--nodes {nodes}: {'an' if self.name == 'mfs' else 'a'} {self.name.upper()} fit with m = {nodes} needs about "
+                    f"{format_bytes(self.fit_bytes(nodes))} of memory, more than the {format_bytes(max_image_bytes())} "
+                    f"warpcli may use (m <= {most} here; {MAX_IMAGE_BYTES_ENV}); use fewer --nodes or --method fem"
+                )
+            return nodes
+        default = max(256, 8 * n)  # default_bem_nodes and default_mfs_sites
+        cap = min(MAX_AUTO_NODES, most)
+        if default <= cap:
+            return None
+        if n > most:
+            raise InputError(
+                f"{polygon.name}: {n} vertices need at least {n} {self.name.upper()} {what}, about "
+                f"{format_bytes(self.fit_bytes(n))} of memory, more than the {format_bytes(max_image_bytes())} "
+                f"warpcli may use ({MAX_IMAGE_BYTES_ENV}); use --method fem"
+            )
+        m = max(cap, n)
+        log.warning(
+            "%s: %d vertices: %s fits with m = %d %s, not the default 8 n = %d (about %s of memory and %.0fx the time); "
+            "--nodes chooses m",
+            polygon.name, n, self.name.upper(), m, what, default, format_bytes(self.fit_bytes(default)), (default / m) ** 3,
+        )  # fmt: skip
+        return m
+
     def _fit(self, polygon: Polygon, theta: Theta, m: int | None, boundary: str, free):
         if self.name == "bem":
             from .bem import fit_bem
 
             return fit_bem(polygon.points, theta.points, m, boundary=boundary, free=free)
-        from .mfs import fit_mfs
+        from .mfs import SitePlacementError, fit_mfs
 
-        return fit_mfs(polygon.points, theta.points, m, boundary=boundary, free=free)
+        try:
+            return fit_mfs(polygon.points, theta.points, m, boundary=boundary, free=free)
+        except SitePlacementError as err:
+            raise MeshingError(f"{polygon.name}: MFS with m = {err.m} sites: {err}; use --method fem or bem") from None
 
     def prepare(self) -> None:
         """Nothing to warm up beyond what the first fit compiles."""

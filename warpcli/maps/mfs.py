@@ -266,6 +266,15 @@ def _outward_normals(V: NDArray[np.float64], edge: NDArray[np.int64], t: NDArray
     return nrm
 
 
+class SitePlacementError(ValueError):
+    """MFS sites could not be placed outside the polygon and clear of its boundary (too many for its
+    narrowest gaps: a site between two close edges is near both)."""
+
+    def __init__(self, m: int) -> None:
+        super().__init__("could not place MFS sites outside the polygon, clear of its boundary")
+        self.m = m
+
+
 def _pull_back(
     V: NDArray[np.float64],
     base: NDArray[np.float64],
@@ -286,7 +295,7 @@ def _pull_back(
         if not bad.any():
             return s
         dist[bad] *= 0.5
-    raise ValueError("could not place MFS sites outside the polygon")
+    raise SitePlacementError(len(base))
 
 
 def fit_mfs(

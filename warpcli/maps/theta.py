@@ -282,6 +282,8 @@ def from_file(path: str, n: int) -> Theta:
         arr = np.array(pts, dtype=np.float64)
     except (TypeError, ValueError):
         raise InputError(f"{path}: Theta must be an array of [x, y] pairs") from None
+    except OverflowError:  # an integer of hundreds of digits
+        raise InputError(f"{path}: Theta has a coordinate beyond the floating-point range (1.8e308)") from None
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise InputError(f"{path}: Theta must be an array of [x, y] pairs")
     if len(arr) != n:

@@ -180,6 +180,8 @@ def warp_volume(
     bg = _cast(np.full((1, nc), float(background)), dtype)
     out[...] = bg.reshape(1, 1, 1, nc)
     flat_out = out.reshape(-1, nc)
+    # The kernels read no half floats: sample a float32 copy (exact), cast back at the end.
+    samples = data.astype(np.float32) if dtype == np.float16 else data
     grid = volume.grid
     inside = 0
     for voxels, points in vmap.pull_back_slabs(grid):
@@ -187,7 +189,7 @@ def warp_volume(
         idx = np.ascontiguousarray(grid.to_index(points[ok_pre]))
         vals = np.empty((len(idx), nc))
         ok = np.empty(len(idx), dtype=np.bool_)
-        _kernels.sample(data, idx, interpolation == "linear", vals, ok)
+        _kernels.sample(samples, idx, interpolation == "linear", vals, ok)
         target = voxels[ok_pre][ok]
         flat_out[target] = _cast(vals[ok], dtype)
         inside += int(len(voxels))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import gzip
 import io
+import math
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -12,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..budget import max_image_bytes
+from ..budget import MAX_COMPRESSION, check_declared_size, max_image_bytes
 from ..errors import ImageInputError, ImageIOError
 from ..files import check_regular_file
 from ..outputs import atomic_path, check_output_path, write_checked
@@ -136,6 +137,36 @@ def _check_memory(name: str, nbytes: int) -> None:
         )
 
 
+def _check_declared(name: str, shape: tuple, dtype: np.dtype, *, header_bytes: int = 0, compressed: bool = True) -> None:
+    """Refuse from the header, before reading any voxel: an empty shape, a data type
+    the warp cannot carry, data more than memory or more than the file holds."""
+    if any(int(s) <= 0 for s in shape):
+        raise ImageInputError(f"{name}: the volume has no voxels (shape {tuple(int(s) for s in shape)})")
+    if dtype.kind == "c":
+        raise ImageInputError(
+            f"{name}: complex data ({dtype.name}) cannot be warped; warp the real and imaginary parts as two volumes"
+        )
+    if dtype.kind not in "biuf" or dtype.fields is not None:
+        raise ImageInputError(f"{name}: data of type {dtype} cannot be warped; use integers or floating point")
+    nbytes = math.prod(int(s) for s in shape) * dtype.itemsize
+    _check_memory(name, nbytes)
+    what = f"{' x '.join(str(int(s)) for s in shape)} voxels of {dtype.newbyteorder('=').name}"
+    check_declared_size(name, header_bytes + nbytes, what, ratio=MAX_COMPRESSION if compressed else 1)
+
+
+def _refused(name: str, shape: tuple, dtype: np.dtype) -> ImageInputError | None:
+    try:
+        _check_declared(name, shape, dtype)
+    except ImageInputError as err:
+        return err
+    return None
+
+
+def _native(data: NDArray) -> NDArray:
+    """``data`` in this machine's byte order (the warp's kernels read no other): the same values and type."""
+    return data if data.dtype.isnative else data.astype(data.dtype.newbyteorder("="))
+
+
 def _read_nifti(name: str) -> Volume:
     try:
         import nibabel as nib
@@ -149,13 +180,15 @@ def _read_nifti(name: str) -> Volume:
         raise ImageInputError(f"{name}: cannot read NIfTI: {err}") from None
     if len(shape) not in (3, 4):
         raise ImageInputError(f"{name}: a volume needs 3 dimensions (or 4, the last one channels), got shape {shape}")
-    _check_memory(name, int(np.prod(shape)) * dtype.itemsize)
+    gz = name.lower().endswith(".gz")
+    offset = 0 if gz else int(getattr(img.header, "get_data_offset", lambda: 0)())
+    _check_declared(name, shape, dtype, header_bytes=offset, compressed=gz)
     try:
         proxy = img.dataobj
         raw = proxy.get_unscaled() if hasattr(proxy, "get_unscaled") else np.asanyarray(proxy)
     except Exception as err:
         raise ImageInputError(f"{name}: cannot read NIfTI data: {err}") from None
-    raw = np.asarray(raw)
+    raw = _native(np.asarray(raw))
     if raw.ndim == 3:
         raw = raw[..., None]
     data = np.ascontiguousarray(np.transpose(raw, (2, 1, 0, 3)))  # (i, j, k, c) -> (k, j, i, c)
@@ -172,10 +205,14 @@ def _read_tiff(name: str) -> Volume:
             series = tif.series[0]
             axes = series.axes
             shape = series.shape
-            _check_memory(name, int(np.prod(shape)) * np.dtype(series.dtype).itemsize)
-            data = series.asarray()
+            dtype = np.dtype(series.dtype)
+            # Checked from the header, before any page is decoded.
+            refused = _refused(name, shape, dtype)
+            data = None if refused else _native(series.asarray())
     except (tifffile.TiffFileError, OSError, ValueError) as err:
         raise ImageInputError(f"{name}: cannot read TIFF: {err}") from None
+    if refused is not None:
+        raise refused
     if data.ndim == 3 and axes[-1] != "S":
         data = data[..., None]
     elif not (data.ndim == 4 and axes[-1] == "S"):

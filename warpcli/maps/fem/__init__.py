@@ -247,13 +247,37 @@ class FEMMap(ThetaMap):
         pixels = np.empty(size, dtype=np.int64)
         values = np.empty((size, 2))
         where = np.empty(size, dtype=np.int32)
+        order = self._coherent_order if rows is None else self._order_within(r0, r1)
         count = _compiled.scan_grid(
-            self.mesh.vertices, self._triangles, self._domain_coefficients, self.values, self._coherent_order,
+            self.mesh.vertices, self._triangles, self._domain_coefficients, self.values, order,
             width, height, r0, r1, np.zeros(size, dtype=np.uint8), pixels, values, where,
         )  # fmt: skip
         where = where[:count]
         jac = self._jacobians[where] if jacobian else None
         return GridSample(pixels[:count], values[:count], jac)
+
+    def _order_within(self, r0: int, r1: int) -> NDArray[np.int64]:
+        """`_coherent_order` restricted to the triangles that can reach rows r0 <= r < r1 (in the
+        same order, so each pixel goes to the same triangle): a band scans its own triangles, not
+        the whole mesh (which made strips of a tall image quadratic in its height)."""
+        ymin_sorted, ymax, by_ymin, rank, tallest = self._row_index
+        lo = np.searchsorted(ymin_sorted, r0 - 1.0 - tallest, side="left")
+        hi = np.searchsorted(ymin_sorted, r1 + 1.0, side="right")
+        near = by_ymin[lo:hi]
+        near = near[ymax[near] >= r0 - 1.0]
+        return self._coherent_order[np.sort(rank[near])]
+
+    @cached_property
+    def _row_index(self):
+        """The triangles' ymin in increasing order, each one's ymax, the triangles by ymin, their
+        ranks in `_coherent_order`, and the tallest's height."""
+        y = self.mesh.vertices[self._triangles][:, :, 1]
+        ymin, ymax = y.min(axis=1), y.max(axis=1)
+        rank = np.empty(len(ymin), dtype=np.int64)
+        rank[self._coherent_order] = np.arange(len(ymin))
+        tallest = float((ymax - ymin).max()) if len(ymin) else 0.0
+        by_ymin = np.argsort(ymin, kind="stable")
+        return ymin[by_ymin], ymax, by_ymin, rank, tallest
 
     @cached_property
     def _domain_coefficients(self) -> NDArray[np.float64]:
