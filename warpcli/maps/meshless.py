@@ -22,6 +22,7 @@ analytic derivatives; this module makes them `ThetaMap`s:
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
