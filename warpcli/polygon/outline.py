@@ -18,9 +18,13 @@ How (design (a) of issue 21):
    predicates; edge flips repair the few that fold. A triangulation whose
    triangles all keep their orientation on both sides maps the ring
    bijectively (the degree of a map whose boundary goes once round the
-   target ring is 1 inside it, and every triangle counts +1);
-3. triangles are merged greedily into few, fat faces (the most convex merge
-   first), a merge kept only if the union stays a disk (one boundary cycle,
+   target ring is 1 inside it, and every triangle counts +1). Where no
+   triangulation of the boundary's points alone does (a pocket of a cage
+   changing shape), a quality mesh of the source ring with interior points
+   is used, the points carried to the target by the harmonic extension of
+   the cages' moves (mean-value weights), finer meshes until none folds;
+3. triangles are merged greedily into few, fat faces (the merge with the
+   roundest result first: the isoperimetric quotient), a merge kept only if the union stays a disk (one boundary cycle,
    no vertex twice) that passes `validate_points` on both sides: a disk made
    of such triangles is a simple polygon on both sides.
 
@@ -153,16 +157,16 @@ def cut_ring(
     min_convexity : float
         Keep a merge of faces only if the merged face's area is at least this
         share of its convex hull's, on both sides (0: merge while the faces
-        stay simple; then the ring around k cages has few more than k + 1
-        faces).
+        stay simple; then the ring around k cages has 2 faces, or a few more).
 
     Returns
     -------
     src_vertices, dst_vertices : (N, 2) ndarray of float
         The cage loops in order (cage 0's vertices, then cage 1's, ...), then
         the outline's points (its vertices, and the points inserted on its
-        edges, in order along it), identical in both. No interior points are
-        inserted.
+        edges, in order along it), identical in both, then the interior
+        points of the cut, if it needed any (each strictly inside the
+        outline, at its own place on each side).
     faces : tuple of tuple of int
         The ring's faces (not the cages' interiors), each a simple polygon in
         both ``src_vertices`` and ``dst_vertices`` that passes
@@ -217,14 +221,23 @@ def cut_ring(
     cage_pts = (np.concatenate(src), np.concatenate(dst))
     segments = [np.stack([starts[i] + np.arange(n), starts[i] + (np.arange(n) + 1) % n], axis=1) for i, n in enumerate(sizes)]
     failure = None
-    for density in (1.0, 3.0):
+    # Without interior points first (the faces' vertices are then the cages' and the outline's), then
+    # with them: a quality mesh of the source ring, its interior points carried to the target by the
+    # harmonic extension of the cages' moves (finer meshes follow a move more closely).
+    for density, refine in ((1.0, 0), (3.0, 0), (1.0, 1), (1.0, 2), (1.0, 3)):
         ring_pts = _outline_points(out, density * max(MIN_OUTLINE_POINTS, OUTLINE_POINTS_PER_CAGE_VERTEX * sum(sizes)))
         m = len(ring_pts)
         base = int(starts[-1])
         seg = np.concatenate(segments + [np.stack([base + np.arange(m), base + (np.arange(m) + 1) % m], axis=1)])
         sv = np.concatenate([cage_pts[0], ring_pts])
         dv = np.concatenate([cage_pts[1], ring_pts])
-        tris = _compatible_triangles(sv, dv, seg, starts)
+        if refine:
+            meshed = _steiner_triangles(sv, dv, seg, starts, refine)
+            if meshed is None:
+                continue
+            sv, dv, tris = meshed
+        else:
+            tris = _compatible_triangles(sv, dv, seg, starts)
         bad = _folded(sv, dv, tris)
         if not bad.any():
             faces = _merge(sv, dv, tris, seg, min_convexity, name)
@@ -233,10 +246,91 @@ def cut_ring(
                 validate_points(dv[f], f"{name}: a face of the ring")
             if sign < 0:
                 faces = [f[::-1] for f in faces]
-            return sv, dv, tuple(tuple(int(v) for v in _canonical(f)) for f in faces)
-        failure = (sv, dv, tris, bad)
+            return _drop_unused(sv, dv, faces, base + m)
+        if failure is None:
+            failure = (sv, dv, tris, bad)
     sv, dv, tris, bad = failure  # type: ignore[misc]
     raise PolygonError(_fold_message(sv, dv, tris[bad], starts, dnames, name))
+
+
+def _drop_unused(
+    sv: NDArray, dv: NDArray, faces: list[list[int]], keep: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], tuple[tuple[int, ...], ...]]:
+    """Interior points no face's boundary uses (inside merged faces) left out; the first ``keep`` points stay."""
+    used = np.zeros(len(sv), dtype=bool)
+    used[:keep] = True
+    for f in faces:
+        used[f] = True
+    index = np.cumsum(used) - 1
+    out = tuple(tuple(int(index[v]) for v in _canonical(f)) for f in faces)
+    return sv[used], dv[used], out
+
+
+def _steiner_triangles(
+    sv: NDArray, dv: NDArray, seg: NDArray, starts: NDArray, level: int
+) -> tuple[NDArray, NDArray, NDArray[np.intp]] | None:
+    """A quality mesh of the source ring with interior points, carried to the target harmonically, flips repaired.
+
+    The boundary keeps its points (no point is added on a cage's or the
+    outline's edge: the cages are faces of their own). An interior point goes
+    to its source position plus the harmonic extension of the boundary's
+    moves (mean-value weights, positive, so an unmoved cage gives the
+    identity), which follows the moves smoothly; ``level`` 1 is a quality
+    mesh graded by the boundary alone, 2 and 3 bound the triangles' area by
+    the median cage edge's square and a quarter of it.
+    """
+    import triangle as tr
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.linalg import spsolve
+
+    holes = np.array([_inner_point(sv[a:b]) for a, b in zip(starts[:-1], starts[1:])])
+    n_cage = int(starts[-1])
+    cage_edges = np.hypot(*(sv[seg[:, 1]] - sv[seg[:, 0]]).T)[: n_cage]
+    # Level 1: a quality mesh alone (graded by the boundary: fine near the cages, coarse far off); then
+    # triangles of at most the median cage edge's square, and a quarter of it.
+    area = "" if level == 1 else f"a{float(np.median(cage_edges)) ** 2 / 4.0 ** (level - 2):.17g}"
+    try:
+        t = tr.triangulate({"vertices": sv, "segments": seg, "holes": holes}, f"pq25{area}YYQ")
+    except Exception:  # triangle raises bare RuntimeErrors on geometry it cannot take
+        return None
+    v = np.asarray(t["vertices"], dtype=np.float64)
+    tris = np.asarray(t["triangles"], dtype=np.intp)
+    n_b = len(sv)
+    if len(v) < n_b or not np.array_equal(v[:n_b], sv) or len(tris) == 0:
+        return None
+    n = len(v)
+    # Mean-value weights: edge i->j of a triangle with angle theta at i adds tan(theta / 2) / |x_j - x_i|.
+    rows, cols, vals = [], [], []
+    for k in range(3):
+        i, j, l = tris[:, k], tris[:, (k + 1) % 3], tris[:, (k + 2) % 3]
+        e1, e2 = v[j] - v[i], v[l] - v[i]
+        n1, n2 = np.hypot(*e1.T), np.hypot(*e2.T)
+        cos = np.clip((e1 * e2).sum(axis=1) / (n1 * n2), -1.0, 1.0)
+        half = np.tan(np.arccos(cos) / 2)
+        rows += [i, i]
+        cols += [j, l]
+        vals += [half / n1, half / n2]
+    r, c, w = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+    inner = r >= n_b
+    r, c, w = r[inner], c[inner], w[inner]
+    move = np.zeros((n, 2))
+    move[:n_b] = dv - sv
+    free = np.arange(n_b, n)
+    if free.size:
+        diag = np.bincount(r - n_b, weights=w, minlength=free.size)
+        fixed = c < n_b
+        lap = coo_matrix(
+            (np.concatenate([diag, -w[~fixed]]), (np.concatenate([free - n_b, r[~fixed] - n_b]),
+                                                   np.concatenate([free - n_b, c[~fixed] - n_b]))),
+            shape=(free.size, free.size),
+        ).tocsc()
+        rhs = np.zeros((free.size, 2))
+        np.add.at(rhs, r[fixed] - n_b, w[fixed, None] * move[c[fixed]])
+        move[n_b:] = np.asarray(spsolve(lap, rhs)).reshape(free.size, 2)
+    vd = v + move
+    vd[:n_b] = dv  # exactly
+    tris = _repair(v, vd, tris, seg)
+    return v, vd, tris
 
 
 def _check_inside(outline: NDArray, cages: list[NDArray], names: list[str], name: str) -> None:
@@ -510,9 +604,20 @@ def _join(a: list[int], b: list[int], u: int, v: int) -> list[int] | None:
 
 
 def _merge(sv: NDArray, dv: NDArray, tris: NDArray, seg: NDArray, min_convexity: float, name: str) -> list[list[int]]:
-    """Triangles merged greedily into few faces, most convex merge first, each simple on both sides."""
+    """Triangles merged greedily into few faces, fattest merge first, each simple on both sides.
+
+    A merge's score is the isoperimetric quotient ``4 pi area / perimeter^2``
+    of the merged face (1 for a disc, small for a sliver or a long snake),
+    the lesser of source and target, kept per face so that a score costs
+    O(1); a merge is done only if the union is a disk with clearance on both
+    sides (and, with ``min_convexity``, convex enough).
+    """
     fixed = {frozenset((int(a), int(b))) for a, b in seg}
     faces: dict[int, list[int]] = {i: [int(x) for x in t] for i, t in enumerate(tris)}
+    area = {i: (abs(float(a)), abs(float(b))) for i, (a, b) in enumerate(zip(_areas(sv, tris), _areas(dv, tris)))}
+    perimeter = {}
+    for i, t in enumerate(tris):
+        perimeter[i] = tuple(float(sum(np.hypot(*(side[t[(j + 1) % 3]] - side[t[j]])) for j in range(3))) for side in (sv, dv))
     version: dict[int, int] = dict.fromkeys(faces, 0)
     owner: dict[tuple[int, int], int] = {}
     for f, cyc in faces.items():
@@ -523,33 +628,41 @@ def _merge(sv: NDArray, dv: NDArray, tris: NDArray, seg: NDArray, min_convexity:
 
     def candidates(f: int) -> None:
         cyc = faces[f]
-        seen = set()
+        common: dict[int, list[float]] = {}
+        first: dict[int, tuple[int, int]] = {}
         for j in range(len(cyc)):
             u, v = cyc[j], cyc[(j + 1) % len(cyc)]
             g = owner.get((v, u))
-            if g is None or g not in faces or g == f or g in seen or frozenset((u, v)) in fixed:
+            if g is None or g not in faces or g == f or frozenset((u, v)) in fixed:
                 continue
-            seen.add(g)
-            joined = _join(cyc, faces[g], u, v)
-            if joined is None:
-                continue
-            score = min(_convexity(sv[joined]), _convexity(dv[joined]))
-            if score < min_convexity:
-                continue
-            heapq.heappush(heap, (-score, f, version[f], g, version[g], u, v))
+            length = common.setdefault(g, [0.0, 0.0])
+            length[0] += float(np.hypot(*(sv[v] - sv[u])))
+            length[1] += float(np.hypot(*(dv[v] - dv[u])))
+            first.setdefault(g, (u, v))
+        for g, (ls, ld) in common.items():
+            score = min(
+                4 * math.pi * (area[f][k] + area[g][k]) / max(perimeter[f][k] + perimeter[g][k] - 2 * c, 1e-300) ** 2
+                for k, c in ((0, ls), (1, ld))
+            )
+            u, v = first[g]
+            heapq.heappush(heap, (-score, f, version[f], g, version[g], u, v, (ls, ld)))
 
     for f in list(faces):
         candidates(f)
     while heap:
-        _, f, vf, g, vg, u, v = heapq.heappop(heap)
+        _, f, vf, g, vg, u, v, common = heapq.heappop(heap)
         if f not in faces or g not in faces or version[f] != vf or version[g] != vg:
             continue
         joined = _join(faces[f], faces[g], u, v)
-        if joined is None or not _valid_face(sv, dv, joined, name):
+        if joined is None or not _valid_join(sv, dv, faces[f], faces[g], joined):
             continue
-        del faces[f], faces[g]
+        if min_convexity > 0 and min(_convexity(sv[joined]), _convexity(dv[joined])) < min_convexity:
+            continue
         h = next_id
         next_id += 1
+        area[h] = (area[f][0] + area[g][0], area[f][1] + area[g][1])
+        perimeter[h] = (perimeter[f][0] + perimeter[g][0] - 2 * common[0], perimeter[f][1] + perimeter[g][1] - 2 * common[1])
+        del faces[f], faces[g]
         faces[h] = joined
         version[h] = 0
         for j in range(len(joined)):
@@ -558,25 +671,28 @@ def _merge(sv: NDArray, dv: NDArray, tris: NDArray, seg: NDArray, min_convexity:
     return list(faces.values())
 
 
-def _valid_face(sv: NDArray, dv: NDArray, face: list[int], name: str) -> bool:
-    """Whether a face has `validate_points`' clearance on both sides.
+def _valid_join(sv: NDArray, dv: NDArray, a: list[int], b: list[int], joined: list[int]) -> bool:
+    """Whether the union ``joined`` of faces ``a`` and ``b`` has `validate_points`' clearance on both sides.
 
     A disk made of triangles that keep their orientation on both sides is
-    simple on both; what may fail is the clearance (a vertex of a merged face
-    close to an edge that does not end at it), tested here in numpy (the
-    faces are small), the same floor as `validate_points`.
+    simple on both; what may fail is the clearance (a vertex of one face
+    close to an edge of the other that does not end at it): only those pairs
+    are tested (each face has its clearance already), in numpy, with the
+    floor of `validate_points` for the joined face.
     """
-    return all(_has_clearance(side[face]) for side in (sv, dv))
-
-
-def _has_clearance(points: NDArray) -> bool:
-    n = len(points)
-    floor = clearance_floor(points)
-    a, b = points, np.roll(points, -1, axis=0)
-    p = np.repeat(points, n, axis=0)
-    d = point_segment_distance(p, np.tile(a, (n, 1)), np.tile(b, (n, 1))).reshape(n, n)
-    ends = np.zeros((n, n), dtype=bool)  # vertex i is an end of edge j (j = i or j = i - 1)
-    idx = np.arange(n)
-    ends[idx, idx] = True
-    ends[idx, (idx - 1) % n] = True
-    return bool((d[~ends] >= floor).all())
+    if len(a) < len(b):
+        a, b = b, a
+    idx = np.array(joined)
+    n = len(idx)
+    verts_b = np.isin(idx, b)
+    from_b = verts_b & np.roll(verts_b, -1)  # edges between two of b's vertices (b's, and maybe a chord: tested too)
+    vi = np.concatenate([np.repeat(np.arange(n), from_b.sum()), np.repeat(np.flatnonzero(verts_b), n)])
+    ei = np.concatenate([np.tile(np.flatnonzero(from_b), n), np.tile(np.arange(n), verts_b.sum())])
+    keep = (vi != ei) & (vi != (ei + 1) % n)
+    vi, ei = vi[keep], ei[keep]
+    for side in (sv, dv):
+        pts = side[idx]
+        d = point_segment_distance(pts[vi], pts[ei], pts[(ei + 1) % n])
+        if (d < clearance_floor(pts)).any():
+            return False
+    return True
