@@ -42,7 +42,9 @@ from .grid import window
 from .options import VACATED
 
 
-def polygon_coverage(vertices: ArrayLike, width: int, height: int) -> NDArray[np.float32]:
+def polygon_coverage(
+    vertices: ArrayLike, width: int, height: int, *, rows: tuple[int, int] | None = None
+) -> NDArray[np.float32]:
     """The share of each pixel of a ``width`` x ``height`` grid inside a polygon, antialiased.
 
     Pixel centres inside (even-odd rule, by a scanline fill over the polygon's
@@ -56,25 +58,29 @@ def polygon_coverage(vertices: ArrayLike, width: int, height: int) -> NDArray[np
     vertices : (n, 2) array_like of float
         The polygon, in the grid's continuous coordinates.
     width, height : int
+    rows : (int, int) or None
+        Only rows ``start <= r < stop`` (a strip).
 
     Returns
     -------
     (height, width) ndarray of float32
-        Coverage in [0, 1].
+        Coverage in [0, 1] (with ``rows``: the strip's rows only).
     """
     from .raster.resample import edge_coverage
 
     v = np.asarray(vertices, dtype=np.float64)
-    out = np.zeros((height, width), dtype=np.float32)
+    r_lo, r_hi = (0, height) if rows is None else rows
+    out = np.zeros((r_hi - r_lo, width), dtype=np.float32)
     lo, hi = v.min(axis=0), v.max(axis=0)
     r0, r1, c0, c1 = window((lo[0], lo[1], hi[0], hi[1]), width, height)
+    r0, r1 = max(r0, r_lo), min(r1, r_hi)
     if r0 >= r1 or c0 >= c1:
         return out
     inside = _scanline_inside(v, r0, r1, c0, c1)
     cov = inside.astype(np.float32)
     edge = edge_coverage(v, inside, (r0, c0))
     cov.ravel()[edge.pixels] = edge.fraction
-    out[r0:r1, c0:c1] = cov
+    out[r0 - r_lo : r1 - r_lo, c0:c1] = cov
     return out
 
 
@@ -252,6 +258,7 @@ def paste_over(
     vacated: str = "keep",
     feather: float = 0.0,
     dst: ArrayLike | None = None,
+    rows: tuple[int, int] | None = None,
 ) -> NDArray:
     """The warped region composited over the input (``--outside input``).
 
@@ -281,6 +288,9 @@ def paste_over(
         the warp is blended into the base (0: none; see the module docstring).
     dst : (n, 2) array_like of float or None
         The target polygon (for ``feather``).
+    rows : (int, int) or None
+        ``image`` is rows ``start <= r < stop`` of the image (a strip of a
+        warp in parts), and ``warp`` gives those rows of the warp.
 
     Returns
     -------
@@ -297,14 +307,12 @@ def paste_over(
     if vacated not in VACATED:
         raise InputError(f"unknown --vacated {vacated!r}; choose one of {', '.join(VACATED)}")
     h, w, nc = image.shape
+    y0, y1 = (0, h) if rows is None else rows
     scale = float(unit(image.dtype))
     work = np.float64 if image.dtype == np.float64 else np.float32
     straight = alpha_channel is not None and not associated_alpha
-    base = image.astype(work)
-    if straight:
-        _multiply_colour(base, base[:, :, alpha_channel] / scale, alpha_channel)
-    # One more channel, constant 1, that only the target's coverage changes.
-    carrier = np.concatenate([base, np.full((h, w, 1), scale, dtype=work)], axis=2)
+    carrier = carrier_pixels(image, alpha_channel, associated_alpha)
+    base = carrier[:, :, :nc].copy()
     warped = warp(carrier, nc)
     del carrier
     cov = warped[:, :, nc:] / scale
@@ -313,7 +321,7 @@ def paste_over(
         bg = np.broadcast_to(np.asarray(background, dtype=np.float64), (nc,)).astype(work)[None, None, :].copy()
         if straight:
             _multiply_colour(bg, bg[:, :, alpha_channel] / scale, alpha_channel)
-        s = polygon_coverage(src, w, h)
+        s = polygon_coverage(src, w, y1, rows=(y0, y1))
         untouched &= s == 0
         s = s[:, :, None]
         base *= 1 - s
@@ -322,7 +330,7 @@ def paste_over(
     if feather > 0:
         if dst is None:
             raise InputError("feather needs the target polygon")
-        weight = feather_weights(dst, w, h, feather)[:, :, None].astype(work)
+        weight = feather_weights(dst, w, y1, feather, rows=(y0, y1))[:, :, None].astype(work)
         out *= weight
         out += base * (1 - weight * cov)
     else:
@@ -334,6 +342,38 @@ def paste_over(
     out = _to_dtype(np.ascontiguousarray(out), image.dtype)
     # Pixels neither warped onto nor vacated are the input's, bit for bit.
     out[untouched] = image[untouched]
+    return out
+
+
+def carrier_pixels(pixels: NDArray, alpha_channel: int | None, associated_alpha: bool) -> NDArray:
+    """What a paste resamples: the pixels in premultiplied float, then one channel of 1 (the carrier).
+
+    Resampled against a background of 0 with the target's edge coverage
+    applied to every channel, the carrier comes out as the target's coverage
+    (see `paste_over`).
+
+    Parameters
+    ----------
+    pixels : (h, w, C) ndarray
+        The input, or a part of it.
+    alpha_channel : int or None
+    associated_alpha : bool
+
+    Returns
+    -------
+    (h, w, C + 1) ndarray of float32 (float64 for a float64 input)
+        In the input's units (an integer type's range).
+    """
+    from .raster.pixels import unit
+
+    scale = float(unit(pixels.dtype))
+    work = np.float64 if pixels.dtype == np.float64 else np.float32
+    h, w, nc = pixels.shape
+    out = np.empty((h, w, nc + 1), dtype=work)
+    out[:, :, :nc] = pixels
+    if alpha_channel is not None and not associated_alpha:
+        _multiply_colour(out[:, :, :nc], out[:, :, alpha_channel] / scale, alpha_channel)
+    out[:, :, nc] = scale
     return out
 
 
