@@ -131,7 +131,7 @@ def rings(draw):
     return outline, src, dst
 
 
-@settings(max_examples=15, deadline=None)
+@settings(max_examples=12, deadline=None)
 @given(rings())
 def test_random_rings_are_cut_into_faces_simple_on_both_sides(case):
     outline, src, dst = case
