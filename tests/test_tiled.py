@@ -183,7 +183,6 @@ def test_what_needs_the_whole_image_is_refused_in_strips(tmp_path, extra):
 @pytest.mark.parametrize(
     ("kind", "options"),
     [
-        ("rgb8", {"vacated": "keep"}),
         ("rgba16", {"vacated": "background", "background": (0.2, 0.4, 0.6, 1.0)}),
         ("rgb8", {"feather": 6.0}),
         ("float", {"vacated": "background", "feather": 3.5, "interp": "nearest"}),
