@@ -22,7 +22,8 @@ How (design (a) of issue 21):
    triangulation of the boundary's points alone does (a pocket of a cage
    changing shape), a quality mesh of the source ring with interior points
    is used, the points carried to the target by the harmonic extension of
-   the cages' moves (mean-value weights), finer meshes until none folds;
+   the cages' moves (mean-value weights), finer meshes until none folds
+   (then the same from the target ring back to the source);
 3. triangles are merged greedily into few, fat faces (the merge with the
    roundest result first: the isoperimetric quotient), a merge kept only if the union stays a disk (one boundary cycle,
    no vertex twice) that passes `validate_points` on both sides: a disk made
@@ -224,18 +225,23 @@ def cut_ring(
     # Without interior points first (the faces' vertices are then the cages' and the outline's), then
     # with them: a quality mesh of the source ring, its interior points carried to the target by the
     # harmonic extension of the cages' moves (finer meshes follow a move more closely).
-    for density, refine in ((1.0, 0), (3.0, 0), (1.0, 1), (1.0, 2), (1.0, 3)):
+    for density, refine in ((1.0, 0), (3.0, 0), (1.0, 1), (1.0, 2), (1.0, 3), (1.0, -1), (1.0, -2), (1.0, -3)):
         ring_pts = _outline_points(out, density * max(MIN_OUTLINE_POINTS, OUTLINE_POINTS_PER_CAGE_VERTEX * sum(sizes)))
         m = len(ring_pts)
         base = int(starts[-1])
         seg = np.concatenate(segments + [np.stack([base + np.arange(m), base + (np.arange(m) + 1) % m], axis=1)])
         sv = np.concatenate([cage_pts[0], ring_pts])
         dv = np.concatenate([cage_pts[1], ring_pts])
-        if refine:
+        if refine > 0:  # a mesh of the source ring, carried to the target
             meshed = _steiner_triangles(sv, dv, seg, starts, refine)
             if meshed is None:
                 continue
             sv, dv, tris = meshed
+        elif refine < 0:  # a mesh of the target ring, carried back to the source
+            meshed = _steiner_triangles(dv, sv, seg, starts, -refine)
+            if meshed is None:
+                continue
+            dv, sv, tris = meshed
         else:
             tris = _compatible_triangles(sv, dv, seg, starts)
         bad = _folded(sv, dv, tris)
