@@ -150,3 +150,110 @@ def test_outside_input_needs_the_input_size_and_leaves_nothing_behind(tmp_path):
     code, err = run_cli([img, tmp_path / "out.png", "--src", poly, "--dst", poly, "--outside", "input", "--size", "32x32"])
     assert code == 2 and "must have its size 64x64" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.png", "p.json"]
+
+
+# --- feathering (--feather) ---------------------------------------------------------------
+
+
+def _distance_to_boundary(vertices, width, height):
+    """Brute force: every pixel centre's distance to every edge, the least (an independent reference)."""
+    v = np.asarray(vertices, dtype=float)
+    p = pixel_centres(width, height)
+    a, b = v, np.roll(v, -1, axis=0)
+    d = b - a
+    t = np.clip(((p[:, None, :] - a) * d).sum(axis=2) / (d * d).sum(axis=1), 0, 1)
+    nearest = a + t[..., None] * d
+    return np.hypot(*(p[:, None, :] - nearest).transpose(2, 0, 1)).min(axis=1).reshape(height, width)
+
+
+def _smoothstep(s):
+    s = np.clip(s, 0, 1)
+    return s * s * (3 - 2 * s)
+
+
+@pytest.mark.parametrize("band", [0.7, 3.0, 9.5])
+@pytest.mark.parametrize("shape", [star(cx=40, cy=30, r_in=8, r_out=26), l_shape(2.5, -3.0, 60.0)])
+def test_feather_weights_are_the_smoothstep_of_the_exact_distance(shape, band):
+    from warpcli.composite import feather_weights
+
+    w, h = 70, 56
+    got = feather_weights(shape, w, h, band)
+    inside = inside_polygon(pixel_centres(w, h), shape).reshape(h, w)
+    want = np.where(inside, _smoothstep(_distance_to_boundary(shape, w, h) / band), 0.0)
+    np.testing.assert_allclose(got, want, atol=2e-7)
+    # A strip's rows are the whole grid's.
+    np.testing.assert_array_equal(feather_weights(shape, w, h, band, rows=(9, 31)), got[9:31])
+
+
+def _ramp_scene():
+    """A float ramp image (smooth: a seam shows as a jump of many steps) and a cage moved and turned."""
+    y, x = np.mgrid[0:64, 0:80].astype(np.float32)
+    img = np.stack([x / 80, y / 64, (x + y) / 144], axis=2).astype(np.float32)
+    src = np.array([[20.0, 18.0], [52.0, 16.0], [56.0, 44.0], [24.0, 48.0]])
+    dst = np.array([[26.0, 14.0], [58.0, 20.0], [52.0, 50.0], [18.0, 42.0]])
+    return img, src, dst
+
+
+def test_feather_blends_warp_and_input_by_the_documented_weights_and_nothing_else():
+    from warpcli import warp_image
+
+    img, src, dst = _ramp_scene()
+    band = 6.0
+    plain = warp_image(img, src, dst, outside="input").pixels
+    assert np.array_equal(warp_image(img, src, dst, outside="input", feather=0).pixels, plain)
+    got = warp_image(img, src, dst, outside="input", feather=band).pixels
+    h, w = img.shape[:2]
+    cov = polygon_coverage(dst, w, h)
+    weight = _smoothstep(_distance_to_boundary(dst, w, h) / band)
+    inner = cov == 1  # fully inside the target: plain holds the warp itself
+    want = weight[..., None] * plain + (1 - weight[..., None]) * img
+    np.testing.assert_allclose(got[inner], want[inner], atol=1e-5)
+    far = inner & (_distance_to_boundary(dst, w, h) >= band + 1e-9)
+    np.testing.assert_array_equal(got[far], plain[far])  # beyond the band: unchanged, bit for bit
+    outside = cov == 0
+    np.testing.assert_array_equal(got[outside], plain[outside])  # the input, as without feather
+
+
+def test_feather_lowers_the_seam_on_a_smooth_ramp():
+    from warpcli import warp_image
+    from warpcli.report.seam import seam_jump
+
+    img, src, dst = _ramp_scene()
+    step = 1 / 80
+    hard = seam_jump(warp_image(img, src, dst, outside="input").pixels, dst)
+    soft = seam_jump(warp_image(img, src, dst, outside="input", feather=8.0).pixels, dst)
+    assert hard.across_max > 4 * step  # the seam: several ramp steps at once
+    assert soft.across_max < 0.25 * hard.across_max
+
+
+def test_feather_needs_outside_input_and_a_sane_width():
+    from warpcli.errors import InputError
+    from warpcli.options import WarpOptions
+
+    with pytest.raises(InputError, match="needs --outside input"):
+        WarpOptions(feather=3)
+    for bad in (-1, float("nan"), float("inf"), "x"):
+        with pytest.raises(InputError, match="feather"):
+            WarpOptions(outside="input", feather=bad)
+    assert WarpOptions(outside="input", feather=2).feather == 2.0
+
+
+def test_feather_through_the_cli_and_batches(tmp_path):
+    from helpers import read_pixels, write_png, write_polygon
+
+    img, src, dst = _ramp_scene()
+    px = np.round(img * 255).astype(np.uint8)
+    a = write_png(tmp_path / "a.png", px)
+    b = write_png(tmp_path / "b.png", px[::-1].copy())
+    s, d = write_polygon(tmp_path / "s.json", src), write_polygon(tmp_path / "d.json", dst)
+    common = ["--src", s, "--dst", d, "--outside", "input"]
+    assert run_cli([a, tmp_path / "zero.png", *common, "--feather", "0"])[0] == 0
+    assert run_cli([a, tmp_path / "none.png", *common])[0] == 0
+    assert read_pixels(tmp_path / "zero.png").tobytes() == read_pixels(tmp_path / "none.png").tobytes()
+    assert run_cli([a, tmp_path / "one.png", *common, "--feather", "5"])[0] == 0
+    (tmp_path / "out").mkdir()
+    code, err = run_cli([a, b, "--out-dir", tmp_path / "out", *common, "--feather", "5", "--jobs", "2"])
+    assert code == 0, err
+    np.testing.assert_array_equal(read_pixels(tmp_path / "out" / "a.png"), read_pixels(tmp_path / "one.png"))
+    code, err = run_cli([a, tmp_path / "bad.png", "--src", s, "--dst", d, "--feather", "5"])
+    assert code == 2 and "needs --outside input" in err and not (tmp_path / "bad.png").exists()

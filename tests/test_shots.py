@@ -334,3 +334,22 @@ def test_worker_processes_stay_within_the_memory_budget(tmp_path, monkeypatch, b
     code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", "1-3", "--jobs", 2])
     assert code == 0, err
     assert started == ([2] if processes else [])
+
+
+def test_a_feathered_retouch_of_an_animated_cage_is_each_frame_s_single_retouch(tmp_path):
+    # Keyframed polygons, --outside input, --feather and --save-map through a sequence: each frame's
+    # output and map are those of the single warp of its polygons (frame 2: between the keyframes).
+    _frames(tmp_path / "in", range(1, 4))
+    src, dst = _animated(tmp_path, 7, 1, 3)
+    common = ["--outside", "input", "--feather", "4", "--vacated", "background"]
+    code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst,
+                         "--frames", "1-3", "--save-map", tmp_path / "map.#.exr", *common])  # fmt: skip
+    assert code == 0, err
+    keys_s, keys_d = (json.loads(open(p).read())["frames"] for p in (src, dst))
+    mid = [write_polygon(tmp_path / f"{n}2.json", (np.array(k["1"]) + np.array(k["3"])) / 2) for n, k in (("s", keys_s), ("d", keys_d))]
+    code, err = run_cli([tmp_path / "in" / "shot.0002.png", tmp_path / "one.png", "--src", mid[0], "--dst", mid[1],
+                         "--save-map", tmp_path / "one.exr", *common])  # fmt: skip
+    assert code == 0, err
+    assert (tmp_path / "one.png").read_bytes() == (tmp_path / "out.0002.png").read_bytes()
+    assert read_pixels(tmp_path / "one.exr").tobytes() == read_pixels(tmp_path / "map.0002.exr").tobytes()
+    assert (read_pixels(tmp_path / "map.0002.exr")[..., 3] == 1).mean() > 0.5  # the whole image, identity outside

@@ -288,8 +288,80 @@ def test_an_stmap_beyond_the_memory_budget_is_refused_before_decoding(tmp_path, 
     code, err = run_cli(["apply-map", stmap, img, tmp_path / "out.png"])
     assert code == 2 and err.count("\n") == 1 and "more than the" in err and "map." in err, err
     assert not (tmp_path / "out.png").exists()
-    # With room for every copy it is applied.
+    # With room for every copy it is applied (stretched: the map is not of the image's size).
     monkeypatch.setattr(pipeline, "read_image", real)
     monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", str(decoded * 64 + 10**6))
-    code, err = run_cli(["apply-map", stmap, img, tmp_path / "out.png"])
+    code, err = run_cli(["apply-map", stmap, img, tmp_path / "out.png", "--map-scale", "stretch"])
     assert code == 0, err
+
+
+# --- maps of a retouch (--outside input) and maps of another size ----------------------------
+
+
+@pytest.mark.parametrize("antialias", [False, True])
+def test_the_map_of_a_retouch_covers_the_whole_image_and_apply_map_reproduces_it(scene, antialias):
+    from warpcli.composite import polygon_coverage
+
+    d = scene["dir"]
+    src = np.asarray(star(6, 56, 48, 14, 30))
+    dst = src + [6.0, -3.0]
+    s, t = write_polygon(d / "s.json", src), write_polygon(d / "t.json", dst)
+    flags = [] if antialias else ["--no-antialias"]
+    assert main([scene["image"], str(d / "out.png"), "--src", s, "--dst", t, "--outside", "input",
+                 "--save-map", str(d / "map.exr"), *flags]) == 0  # fmt: skip
+    points = load_stmap(d / "map.exr", (112, 96))
+    assert np.isfinite(points).all()  # the whole image, no black frame
+    cov = polygon_coverage(dst, 112, 96)
+    centres = pixel_centres(112, 96).reshape(96, 112, 2)
+    np.testing.assert_allclose(points[cov == 0], centres[cov == 0], atol=1e-4)  # identity outside the target
+    assert main(["apply-map", str(d / "map.exr"), scene["image"], str(d / "again.png")]) == 0
+    a = read_pixels(d / "out.png").astype(int)
+    b = read_pixels(d / "again.png").astype(int)
+    assert (a[cov == 0] == scene["pixels"][cov == 0]).all() and (b[cov == 0] == a[cov == 0]).all()  # exact
+    inner = cov == 1 if antialias else np.ones(cov.shape, bool)
+    # Within interpolation tolerance: float32 s, t (and, antialiased, the footprints apply-map has not).
+    assert np.abs(a - b)[inner].max() <= (3 if antialias else 1)
+
+
+def test_the_map_of_a_retouch_leaves_the_vacated_source_to_the_background(scene):
+    from warpcli.composite import polygon_coverage
+
+    d = scene["dir"]
+    src = np.array([[20.0, 20.0], [50.0, 20.0], [50.0, 70.0], [20.0, 70.0]])
+    dst = src + [30.0, 0.0]
+    s, t = write_polygon(d / "s.json", src), write_polygon(d / "t.json", dst)
+    assert main([scene["image"], str(d / "out.png"), "--src", s, "--dst", t, "--outside", "input", "--vacated",
+                 "background", "--background", "1", "--save-map", str(d / "map.exr"), "--no-antialias"]) == 0  # fmt: skip
+    assert main(["apply-map", str(d / "map.exr"), scene["image"], str(d / "again.png"), "--background", "1"]) == 0
+    vacated = (polygon_coverage(src, 112, 96) == 1) & (polygon_coverage(dst, 112, 96) == 0)
+    assert (read_pixels(d / "again.png")[vacated] == 255).all()
+    assert (read_pixels(d / "out.png")[vacated] == 255).all()
+
+
+def test_apply_map_refuses_an_image_of_another_size_unless_stretched(scene, capsys):
+    d = scene["dir"]
+    assert main([scene["image"], str(d / "out.png"), "--src", scene["src"], "--dst", scene["dst"],
+                 "--save-map", str(d / "map.exr")]) == 0  # fmt: skip
+    small = write_png(d / "small.png", scene["pixels"][::2, ::2].copy())  # 56 x 48
+    capsys.readouterr()
+    assert main(["apply-map", str(d / "map.exr"), small, str(d / "x.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "112x96" in err[0] and "56x48" in err[0] and "--map-scale stretch" in err[0]
+    assert not (d / "x.png").exists()
+    assert main(["apply-map", str(d / "map.exr"), small, str(d / "x.png"), "--map-scale", "stretch"]) == 0
+    assert read_pixels(d / "x.png").shape[:2] == (96, 112)  # the map's size, sampling the small image
+
+
+def test_a_map_of_a_resized_warp_records_its_source_size(scene):
+    d = scene["dir"]
+    assert main([scene["image"], str(d / "out.png"), "--src", scene["src"], "--dst", scene["dst"], "--size", "80x60",
+                 "--save-map", str(d / "map.tif")]) == 0  # fmt: skip
+    # The map is 80x60 but made for the 112x96 input: accepted for it (the header says so, TIFF too).
+    assert main(["apply-map", str(d / "map.tif"), scene["image"], str(d / "again.png")]) == 0
+    assert read_pixels(d / "again.png").shape[:2] == (60, 80)
+    assert main(["apply-map", str(d / "map.tif"), write_png(d / "o.png", np.zeros((60, 80), np.uint8)),
+                 str(d / "x.png")]) == 2  # fmt: skip
+    # A map of the input's own size says nothing more: its bytes are those of before.
+    save_stmap(d / "own.exr", pixel_centres(4, 3).reshape(3, 4, 2), (4, 3))
+    names = {a.name for a in oiio.ImageInput.open(str(d / "own.exr")).spec().extra_attribs}
+    assert "warpcli:source" not in names and "warpcli:map" in names

@@ -167,7 +167,7 @@ def test_a_warp_too_large_for_memory_goes_to_strips_by_itself(monkeypatch, tmp_p
 
 @pytest.mark.parametrize(
     "extra",
-    [["--grid", "g.png"], ["--report", "r.json"], ["--save-map", "m.exr"], ["--outside", "input"]],
+    [["--grid", "g.png"], ["--report", "r.json"], ["--save-map", "m.exr"], ["--outside", "input", "--size", "40x30"]],
 )
 def test_what_needs_the_whole_image_is_refused_in_strips(tmp_path, extra):
     px, _ = _image("rgb8", np.random.default_rng(9))
@@ -178,6 +178,25 @@ def test_what_needs_the_whole_image_is_refused_in_strips(tmp_path, extra):
     assert code == 2
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
     assert sorted(os.listdir(tmp_path)) == ["a.json", "b.json", "in.png"]
+
+
+@pytest.mark.parametrize(
+    ("kind", "options"),
+    [
+        ("rgba16", {"vacated": "background", "background": (0.2, 0.4, 0.6, 1.0)}),
+        ("rgb8", {"feather": 6.0}),
+        ("float", {"vacated": "background", "feather": 3.5, "interp": "nearest"}),
+    ],
+)
+def test_a_retouch_in_strips_is_the_in_memory_retouch_bit_for_bit(small_strips, tmp_path, kind, options):
+    # --outside input in parts: each strip's input with the warp pasted over it (the vacated source, the
+    # feather's band and the untouched pixels cross strip and chunk boundaries).
+    px, _ = _image(kind, np.random.default_rng(12))
+    src = star(6, 70, 62, 20, 50)
+    dst = star(6, 78, 60, 22, 52, phase=0.2)
+    whole, strips = _both(str(tmp_path), src, dst, px, "tif", outside="input", **options)
+    assert whole.tobytes() == strips.tobytes()
+    assert not np.array_equal(whole, px)
 
 
 def test_jpeg_is_refused_before_any_work(tmp_path):

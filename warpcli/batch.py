@@ -288,7 +288,7 @@ class RunMaps:
             first = self.written.get(key)
             if first is None:
                 if paths[0] is not None:
-                    save_stmap(paths[0], plan.pull.full_points(), in_size, kind="inverse", t_up=self.maps.t_up)
+                    save_stmap(paths[0], plan.whole_points(), in_size, kind="inverse", t_up=self.maps.t_up)
                 if paths[1] is not None:
                     fwd = fmap.forward_grid(*in_size)
                     save_stmap(paths[1], fwd, plan.size, kind="forward", t_up=self.maps.t_up)
@@ -690,6 +690,7 @@ def apply_map_sequence(
     t_up: bool | None = None,
     on_item: Callable[[BatchItem], None] | None = None,
     jobs: int = 1,
+    map_scale: str = "refuse",
     **changes: Any,
 ) -> list[BatchItem]:
     """Warp the frames of a sequence with saved STMaps: one per frame (a pattern), or one for all.
@@ -716,6 +717,9 @@ def apply_map_sequence(
         Called with each `BatchItem`, in frame order.
     jobs : int
         Threads warping frames at once (bytes as with 1).
+    map_scale : {"refuse", "stretch"}
+        A frame of another size than its map was made for: refused (in its
+        item), or the map stretched to it.
 
     Returns
     -------
@@ -770,7 +774,9 @@ def apply_map_sequence(
             with lock:  # one load per distinct map file
                 plan = plans.get(key)
                 if plan is None:
-                    points = load_stmap(mp, (image.width, image.height), t_up=t_up)
+                    points = load_stmap(
+                        mp, (image.width, image.height), t_up=t_up, scale=map_scale, image_name=inp
+                    )
                     plan = SamplingPlan.from_points(points, interp=opts.interp, background=opts.background)
                     if len(plans) > jobs:  # a map per frame: keep those of the frames in flight, not all
                         del plans[next(iter(plans))]

@@ -31,6 +31,8 @@ STMAP_T = ("down", "up")
 OUTSIDE = ("background", "input")
 #: With OUTSIDE "input": what the part of the source the target leaves uncovered shows.
 VACATED = ("keep", "background")
+#: How `warp apply-map` takes a map made for an image of another size: refuse it, or stretch its coordinates.
+MAP_SCALES = ("refuse", "stretch")
 #: Boundary conditions: Dirichlet everywhere, or the experimental mixed conditions of §5.2.
 CONDITIONS = ("dirichlet", "mixed")
 #: Energies the Theta optimization can lower.
@@ -185,6 +187,12 @@ class WarpOptions:
         With ``outside="input"``: the part of the source polygon the target
         no longer covers keeps the input's pixels, or is filled with the
         background.
+    feather : float
+        With ``outside="input"``: blend the warp into the input over a band
+        this many pixels wide inside the target's edge (weight
+        ``smoothstep(d / feather)`` at distance ``d`` from the edge, see
+        `warpcli.composite.feather_weights`), as GIMP and Photoshop feather a
+        selection; 0: no blend (a hard edge, antialiased).
 
     Raises
     ------
@@ -205,6 +213,7 @@ class WarpOptions:
     dtype: str | None = None
     outside: str = "background"
     vacated: str = "keep"
+    feather: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.map, MapOptions):
@@ -212,6 +221,15 @@ class WarpOptions:
         _choice("interpolation", self.interp, INTERPOLATIONS)
         _choice("outside", self.outside, OUTSIDE)
         _choice("vacated", self.vacated, VACATED)
+        try:
+            feather = float(self.feather)
+        except (TypeError, ValueError):
+            raise InputError(f"feather must be a number of pixels, got {self.feather!r}") from None
+        if not (feather >= 0 and math.isfinite(feather)):
+            raise InputError(f"feather must be a finite number of pixels, 0 or more, got {self.feather!r}")
+        if feather > 0 and self.outside != "input":
+            raise InputError("--feather blends the warp into the input: it needs --outside input")
+        object.__setattr__(self, "feather", feather)
         if self.dtype is not None:
             _choice("dtype", self.dtype, DTYPES)
         bg = self.background

@@ -525,9 +525,12 @@ def warp_file(
             stage("saving maps")
             out_h, out_w = result.pull.size[1], result.pull.size[0]
             if save_map is not None:
+                # With --outside input: the map of the whole retouch (identity outside the target).
+                points = result.inverse_map if opts.outside != "input" else result.plan.whole_points()
+                if opts.feather > 0:
+                    log.warning("%s: a map cannot blend; it holds the warp without the feather", os.fspath(save_map))
                 save_stmap(
-                    pending.path(save_map), result.inverse_map, (image.width, image.height), kind="inverse",
-                    t_up=stmap_t_up,
+                    pending.path(save_map), points, (image.width, image.height), kind="inverse", t_up=stmap_t_up,
                 )  # fmt: skip
             if save_forward_map is not None:
                 fwd = result.map.forward_grid(image.width, image.height)
@@ -621,6 +624,7 @@ def apply_map_file(
     options: WarpOptions | None = None,
     *,
     t_up: bool | None = None,
+    map_scale: str = "refuse",
     **changes: Any,
 ) -> NDArray:
     """Warp an image with a saved STMap (see `warpcli.raster.stmap`); the output has the map's size.
@@ -633,6 +637,9 @@ def apply_map_file(
         change them.
     t_up : bool or None
         Which way the map's t runs; None: as its header says.
+    map_scale : {"refuse", "stretch"}
+        An image of another size than the map was made for: refused (one
+        line naming both sizes), or the map's coordinates stretched to it.
 
     Returns
     -------
@@ -642,7 +649,8 @@ def apply_map_file(
     Raises
     ------
     InputError
-        For a bad map, image or output path.
+        For a bad map, image or output path, or an image of another size
+        than the map's with ``map_scale="refuse"``.
     """
     from .raster.stmap import load_stmap
 
@@ -650,7 +658,9 @@ def apply_map_file(
     check_image_output(output_path, inputs=(input_path, map_path))
     check_stmap_fits(map_path, input_path)
     image = read_image(input_path)
-    points = load_stmap(map_path, (image.width, image.height), t_up=t_up)
+    points = load_stmap(
+        map_path, (image.width, image.height), t_up=t_up, scale=map_scale, image_name=os.fspath(input_path)
+    )
     plan = SamplingPlan.from_points(points, interp=opts.interp, background=opts.background)
     out = plan.render(image.pixels, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha)
     write_like(output_path, image, out, opts.dtype)

@@ -86,6 +86,12 @@ class SamplingPlan:
         target no longer covers holds.
     src : (n, 2) ndarray of float or None
         The source polygon, for ``vacated="background"``.
+    feather : float
+        With ``outside="input"``: the width in pixels of the band inside the
+        target's edge where the warp is blended into the input
+        (`warpcli.composite.feather_weights`); 0: none.
+    dst : (n, 2) ndarray of float or None
+        The target polygon, for ``feather``.
     """
 
     pull: PullBack
@@ -96,6 +102,8 @@ class SamplingPlan:
     outside: str = "background"
     vacated: str = "keep"
     src: NDArray[np.float64] | None = None
+    feather: float = 0.0
+    dst: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         if self.outside not in OUTSIDE:
@@ -104,6 +112,8 @@ class SamplingPlan:
             raise InputError(f"vacated must be one of {', '.join(VACATED)}, got {self.vacated!r}")
         if self.outside == "input" and self.vacated == "background" and self.src is None:
             raise InputError("vacated='background' needs the source polygon")
+        if self.feather > 0 and (self.outside != "input" or self.dst is None):
+            raise InputError("feather blends the warp into the input: it needs outside='input' and the target polygon")
 
     @classmethod
     def from_map(
@@ -119,6 +129,7 @@ class SamplingPlan:
         vacated: str = "keep",
         jacobian: bool = False,
         rows: tuple[int, int] | None = None,
+        feather: float = 0.0,
     ) -> SamplingPlan:
         """The plan of a map for a ``width`` x ``height`` output.
 
@@ -143,6 +154,8 @@ class SamplingPlan:
         rows : (int, int) or None
             Only output rows ``start <= r < stop`` (a strip): the values are
             those of the whole plan's rows, bit for bit.
+        feather : float
+            See `SamplingPlan.feather`.
 
         Returns
         -------
@@ -156,7 +169,7 @@ class SamplingPlan:
         src = getattr(fmap, "src", None)
         return cls(
             pull, coverage, interp, footprints, _as_background(background), outside, vacated,
-            None if src is None else src.points,
+            None if src is None else src.points, float(feather), fmap.dst.points if feather > 0 else None,
         )  # fmt: skip
 
     @classmethod
@@ -266,6 +279,21 @@ class SamplingPlan:
             associated_alpha=associated_alpha, jacobian=jac, coverage=self.coverage, part=part,
         )  # fmt: skip
 
+    def whole_points(self) -> NDArray[np.float64]:
+        """The source point of every pixel of the whole output (H, W, 2): the map to save as an STMap.
+
+        NaN where a pixel has no pre-image; with ``outside="input"`` the map
+        of the retouch over the whole image (`warpcli.composite.whole_image_map`:
+        identity outside the target, NaN where ``vacated="background"``
+        shows the background).
+        """
+        points = self.pull.full_points()
+        if self.outside != "input":
+            return points
+        from .composite import whole_image_map
+
+        return whole_image_map(points, src=self.src, vacated=self.vacated)
+
     def render(self, pixels: NDArray, *, alpha_channel: int | None = None, associated_alpha: bool = False) -> NDArray:
         """The whole output from the input image ``pixels``: (H, W, C) of their type.
 
@@ -303,7 +331,7 @@ class SamplingPlan:
 
             return paste_over(
                 pixels, warp, src=self.src, background=bg, alpha_channel=alpha_channel,
-                associated_alpha=associated_alpha, vacated=self.vacated,
+                associated_alpha=associated_alpha, vacated=self.vacated, feather=self.feather, dst=self.dst,
             )  # fmt: skip
         return self._whole(pixels, bg, alpha_channel, associated_alpha)
 
@@ -414,5 +442,5 @@ def plan_for(
     """`SamplingPlan.from_map` with a `WarpOptions`' resampling and output choices."""
     return SamplingPlan.from_map(
         fmap, width, height, interp=opts.interp, antialias=opts.antialias, background=opts.background,
-        outside=opts.outside, vacated=opts.vacated, jacobian=jacobian, rows=rows,
+        outside=opts.outside, vacated=opts.vacated, jacobian=jacobian, rows=rows, feather=opts.feather,
     )  # fmt: skip

@@ -17,7 +17,10 @@ the image:
   the end.
 
 Map work is done only in the window around the target polygon; strips
-outside it are background. With ``nearest`` and ``linear`` the output is
+outside it are background. A retouch (``outside="input"``) pastes the warp
+over each strip of the input as `warpcli.composite.paste_over` pastes it over
+the whole image (the parts of the input resampled as its carrier), with the
+same bytes. With ``nearest`` and ``linear`` the output is
 that of the in-memory warp bit for bit (the pull-back is computed in the same
 bands, and a sampler given part of an image reads the same pixels); ``cubic``
 prefilters each part with a margin of `CUBIC_MARGIN` pixels, which agrees
@@ -27,6 +30,7 @@ with the whole image's prefilter to about 0.27^12 of the data's range.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 import os
@@ -41,7 +45,7 @@ from .budget import MAX_COMPRESSION
 from .errors import InputError
 from .maps.compose import BijectiveMap
 from .options import WarpOptions
-from .plan import SamplingPlan, plan_for, warn_if_outside
+from .plan import SamplingPlan, check_paste, plan_for, warn_if_outside
 from .polygon import Polygon
 from .raster.imageio import ImageHeader, read_header, size_limit_lifted
 from .raster.parts import TILE, PartReader, StripWriter, check_writable_in_parts, output_format
@@ -100,9 +104,8 @@ def warp_file_tiled(
     if header.oriented:
         raise InputError(f"{name}: an image with an EXIF orientation cannot be warped in parts; upright it first")
     check_writable_in_parts(output_format(output_path), output_path)
-    if opts.outside == "input":
-        raise InputError(f"{name}: --outside input cannot be used on an image warped in parts")
     width, height = opts.size if opts.size is not None else (header.width, header.height)
+    check_paste(opts.outside, (width, height), (header.width, header.height), name)
     warn_if_outside(src, (header.width, header.height), name, "all background")
     warn_if_outside(dst, (width, height), os.fspath(output_path), "all background")
     timings: dict[str, float] = {}
@@ -148,6 +151,8 @@ class _Sampler:
         t0 = time.perf_counter()
         plan = plan_for(self.fmap, width, height, self.opts, rows=(y0, y1))
         timings["compose"] += time.perf_counter() - t0
+        if plan.outside == "input":
+            return self._pasted(reader, plan, width, y0, y1, timings)
         out = np.empty((y1 - y0, width, self.header.channels), dtype=self.header.dtype)
         out[:] = plan.empty_pixel(self.header.dtype, self.header.channels, **self.alpha)
         if plan.pull.points.size == 0:
@@ -159,8 +164,38 @@ class _Sampler:
         timings["resample"] += time.perf_counter() - t0
         return out
 
-    def _chunk(self, reader: PartReader, plan: SamplingPlan, box, out: NDArray, y0: int) -> None:
-        """Resample the window's rows ``box[0]:box[1]`` and columns ``box[2]:box[3]`` into ``out`` (from row y0)."""
+    def _pasted(self, reader: PartReader, plan: SamplingPlan, width: int, y0: int, y1: int, timings: dict) -> NDArray:
+        """Rows ``y0 <= y < y1`` of a retouch (``--outside input``): the strip's input with the warp pasted over it,
+        as `warpcli.composite.paste_over` pastes a whole image (each part of the input resampled as its carrier)."""
+        from .composite import carrier_pixels, paste_over
+
+        t0 = time.perf_counter()
+        alpha, associated = self.header.alpha_channel, self.header.associated_alpha
+        nc = self.header.channels
+
+        def warp(carrier: NDArray, channels: int) -> NDArray:
+            out = np.zeros(carrier.shape, dtype=carrier.dtype)
+            if plan.pull.points.size == 0:
+                return out
+            convert = functools.partial(carrier_pixels, alpha_channel=alpha, associated_alpha=associated)
+            kw = {"alpha_channel": nc, "associated_alpha": True, "background": np.zeros(nc + 1)}
+            rows, cols = plan.pull.points.shape[:2]
+            for cx in range(0, cols, CHUNK):
+                self._chunk(reader, plan, (0, rows, cx, min(cols, cx + CHUNK)), out, y0, convert, kw)
+            return out
+
+        base = reader.read(0, y0, width, y1)
+        src = plan.src
+        done = paste_over(
+            base, warp, src=src, background=plan.background_values(base), alpha_channel=alpha,
+            associated_alpha=associated, vacated=plan.vacated, feather=plan.feather, dst=plan.dst, rows=(y0, y1),
+        )  # fmt: skip
+        timings["resample"] += time.perf_counter() - t0
+        return done
+
+    def _chunk(self, reader: PartReader, plan: SamplingPlan, box, out: NDArray, y0: int, convert=None, kw=None) -> None:
+        """Resample the window's rows ``box[0]:box[1]`` and columns ``box[2]:box[3]`` into ``out`` (from row y0);
+        ``convert`` turns the input's pixels into what is resampled, ``kw`` the sampling's arguments."""
         a, b, c, d = box
         part_plan = plan.crop((a, b), (c, d))
         if part_plan.is_empty():
@@ -179,10 +214,14 @@ class _Sampler:
                 m = (c + d) // 2
                 halves = ((a, b, c, m), (a, b, m, d))
             for half in halves:
-                self._chunk(reader, plan, half, out, y0)
+                self._chunk(reader, plan, half, out, y0, convert, kw)
             return
         pixels = reader.read(x0, py0, x1, py1)
-        done = part_plan.sample_window(pixels, part=(x0, py0, self.header.width, self.header.height), **self.alpha)
+        if convert is not None:
+            pixels = convert(pixels)
+        done = part_plan.sample_window(
+            pixels, part=(x0, py0, self.header.width, self.header.height), **(self.alpha if kw is None else kw)
+        )
         r, q = pull.origin
         out[r - y0 : r - y0 + (b - a), q : q + (d - c)] = done
 

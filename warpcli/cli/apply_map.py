@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ..options import STMAP_T, WarpOptions
+from ..options import MAP_SCALES, STMAP_T, WarpOptions
 from .exits import EXIT_CODES
 from .options import CONTEXT, background_option, collected, dtype_option, interp_option, quiet_option
 
@@ -28,12 +28,20 @@ from .options import CONTEXT, background_option, collected, dtype_option, interp
     "map for all; SPEC the frames (1001-1100); without it, the frames of INPUT on disk.",
 )
 @click.option("--jobs", type=click.IntRange(1, 256), default=1, show_default=True, help="Sequences: frames warped at once, on threads.")
+@click.option(
+    "--map-scale",
+    type=click.Choice(MAP_SCALES),
+    default="refuse",
+    show_default=True,
+    help="INPUT of another size than MAP was made for: refuse it, or stretch MAP's coordinates to it.",
+)
 @quiet_option
-def apply_map(map_path, input_path, output_path, resampling, stmap_t, frames, jobs):
+def apply_map(map_path, input_path, output_path, resampling, stmap_t, frames, jobs, map_scale):
     """Warp INPUT with a map saved by warp --save-map (or any STMap); write OUTPUT.
 
     MAP holds, for each OUTPUT pixel, the normalized point (s, t) of INPUT it
     comes from (OpenImageIO st_warp's convention); OUTPUT has MAP's size.
+    INPUT must have the size MAP was made for (unless --map-scale stretch).
 
     \b
     Examples:
@@ -45,14 +53,14 @@ def apply_map(map_path, input_path, output_path, resampling, stmap_t, frames, jo
 
     t_up = None if stmap_t == "auto" else stmap_t == "up"
     if frames is not None or is_pattern(input_path) or is_pattern(output_path):
-        _sequence(map_path, input_path, output_path, resampling, t_up, frames, jobs)
+        _sequence(map_path, input_path, output_path, resampling, t_up, frames, jobs, map_scale)
         return
     from ..pipeline import apply_map_file
 
-    apply_map_file(map_path, input_path, output_path, resampling, t_up=t_up)
+    apply_map_file(map_path, input_path, output_path, resampling, t_up=t_up, map_scale=map_scale)
 
 
-def _sequence(map_path, input_path, output_path, resampling, t_up, frames, jobs) -> None:
+def _sequence(map_path, input_path, output_path, resampling, t_up, frames, jobs, map_scale="refuse") -> None:
     """Every frame through its map; failed frames one line each, the others go on."""
     from ..batch import apply_map_sequence
     from .warp import exit_for, frames_or_disk, progress_for, reporter
@@ -60,6 +68,7 @@ def _sequence(map_path, input_path, output_path, resampling, t_up, frames, jobs)
     spec = frames_or_disk(frames, input_path)
     with progress_for(spec) as progress:
         items = apply_map_sequence(
-            map_path, input_path, output_path, spec, resampling, t_up=t_up, on_item=reporter(progress), jobs=jobs
+            map_path, input_path, output_path, spec, resampling, t_up=t_up, on_item=reporter(progress), jobs=jobs,
+            map_scale=map_scale,
         )
     exit_for(items, "frames")

@@ -288,6 +288,15 @@ resample_options = collected(
         show_default=True,
         help="With --outside input: the part of SRC that DST leaves uncovered keeps the input, or shows the background.",
     ),
+    click.option(
+        "--feather",
+        type=click.FloatRange(min=0.0),
+        default=0.0,
+        show_default=True,
+        metavar="PX",
+        help="With --outside input: blend the warp into the input over a band PX pixels wide inside DST's edge "
+        "(smoothstep of the distance), a cosmetic blend; --within is the seamless choice.",
+    ),
 )  # fmt: skip
 
 

@@ -8,9 +8,12 @@ One module per job, each importing only the ones above it in this list
 - `validate`: the checks every polygon passes (crossings, clearance), with an
   n log n scan over pairs of edges;
 - `shape`: the `Polygon` value, validated on construction, and `check_pair`;
-- `formats`: polygon files (plain JSON, labelme, GeoJSON) and `read_polygon`.
+- `formats`: polygon files (plain JSON, labelme, GeoJSON) and `read_polygon`;
+- `outline`: the ring between a fixed outline and the cages inside it, cut
+  into faces simple on both sides (`outline.cut_ring`), and ``--within``'s
+  outline (`outline.outline_polygon`).
 
-So ``messages, predicates <- validate <- shape <- formats``.
+So ``messages, predicates <- validate <- shape <- formats <- outline``.
 """
 
 from __future__ import annotations

@@ -9,7 +9,14 @@ image it samples: ``s = x / W`` and ``t = y / H`` for the continuous point
 as ``st_warp`` reads it; with ``t_up`` it runs up, ``t = 1 - y / H``, as Nuke's
 STMap node reads it. Channel A is 1 where the map is defined and 0 elsewhere,
 where R and G hold -1 (outside any image, so tools that ignore A sample
-black); B is 0. The header says which way t runs and what the map is.
+black); B is 0. The header says which way t runs and what the map is, and,
+when the image the points refer to has another size than the map's own
+(a warp with ``--size``), that size (``warpcli:source``, ``WxH``).
+
+Normalized points would let a map fit any image; `load_stmap` still refuses,
+by default, an image of another size than the map was made for (a 480x320
+map silently applied to a 512x512 image stretches it): ``scale="stretch"``
+scales the map's coordinates to the image.
 """
 
 from __future__ import annotations
@@ -28,6 +35,10 @@ from .pixels import to_unit
 #: input -> output) and which way t runs ("down" or "up").
 KIND_ATTRIBUTE = "warpcli:map"
 T_ATTRIBUTE = "warpcli:t"
+#: Header attribute: the size ``WxH`` of the image the points refer to, written when it is not the map's own.
+SOURCE_ATTRIBUTE = "warpcli:source"
+#: How `load_stmap` takes an image of another size than the map's: refuse it, or stretch the map to it.
+SCALES = ("refuse", "stretch")
 #: The kinds of map.
 KINDS = ("inverse", "forward")
 #: File extensions an STMap may have: formats that store float32.
@@ -36,7 +47,7 @@ STMAP_EXTENSIONS = (".exr", ".tif", ".tiff")
 # TIFF keeps no attribute of its own choosing: the header is repeated in the
 # ImageDescription, where every format keeps it.
 _DESCRIPTION = "warpcli STMap: " + KIND_ATTRIBUTE + "={kind}, " + T_ATTRIBUTE + "={t}"
-_DESCRIBED = re.compile(r"(warpcli:map|warpcli:t)=(\w+)")
+_DESCRIBED = re.compile(r"(warpcli:map|warpcli:t|warpcli:source)=(\w+)")
 
 
 def check_stmap_path(path: str | os.PathLike[str]) -> None:
@@ -108,17 +119,30 @@ def save_stmap(
     rgba[..., 1] = np.where(ok, t, -1.0)
     rgba[..., 3] = ok
     t_dir = "up" if t_up else "down"
+    description = _DESCRIPTION.format(kind=kind, t=t_dir)
+    source: tuple = ()
+    if (int(w), int(h)) != (points.shape[1], points.shape[0]):
+        # Only then: maps of the input's own size keep the bytes they always had.
+        source = ((SOURCE_ATTRIBUTE, "string", f"{int(w)}x{int(h)}"),)
+        description += f", {SOURCE_ATTRIBUTE}={int(w)}x{int(h)}"
     attrs = (
         (KIND_ATTRIBUTE, "string", kind),
         (T_ATTRIBUTE, "string", t_dir),
-        ("ImageDescription", "string", _DESCRIPTION.format(kind=kind, t=t_dir)),
+        *source,
+        ("ImageDescription", "string", description),
         ("compression", "string", "zip"),
     )
     write_image(path, RasterImage(rgba, ("R", "G", "B", "A"), 3, attrs))
 
 
 def load_stmap(
-    path: str | os.PathLike[str], size: tuple[int, int], *, t_up: bool | None = None, kind: str = "inverse"
+    path: str | os.PathLike[str],
+    size: tuple[int, int],
+    *,
+    t_up: bool | None = None,
+    kind: str = "inverse",
+    scale: str = "stretch",
+    image_name: str = "the image",
 ) -> NDArray[np.float64]:
     """Read an STMap as continuous points in an image of ``size``.
 
@@ -136,6 +160,12 @@ def load_stmap(
         The kind of map wanted: "inverse" (output -> input, what apply-map
         applies; written by ``--save-map``) or "forward" (input -> output,
         ``--save-forward-map``).
+    scale : {"stretch", "refuse"}
+        ``refuse``: the image must have the size the map was made for (its
+        ``warpcli:source`` header, else the map's own size); ``stretch``:
+        the map's normalized coordinates are scaled to any image.
+    image_name : str
+        How the message of a refused size names the image.
 
     Returns
     -------
@@ -166,9 +196,18 @@ def load_stmap(
         if found == "inverse":
             raise ImageInputError(f"{name}: this is an inverse map (output -> input), not a forward map")
         raise ImageInputError(f"{name}: an STMap of unknown kind {KIND_ATTRIBUTE}={found!r}, not {kind!r}")
+    if scale not in SCALES:
+        raise ValueError(f"unknown map scale {scale!r}; choose one of {', '.join(SCALES)}")
+    w, h = size
+    if scale == "refuse":
+        made_for = _size(header.get(SOURCE_ATTRIBUTE)) or (px.shape[1], px.shape[0])
+        if tuple(made_for) != (int(w), int(h)):
+            raise ImageInputError(
+                f"{name}: the map is for a {made_for[0]}x{made_for[1]} image but {image_name} is {w}x{h} "
+                "(--map-scale stretch scales the map to it)"
+            )
     if t_up is None:
         t_up = header.get(T_ATTRIBUTE) == "up"
-    w, h = size
     s = px[..., 0]
     t = px[..., 1]
     if t_up:
@@ -181,10 +220,16 @@ def load_stmap(
     return points
 
 
+def _size(text: object) -> tuple[int, int] | None:
+    """``"WxH"`` as ``(W, H)``, else None."""
+    m = re.fullmatch(r"(\d+)x(\d+)", text) if isinstance(text, str) else None
+    return (int(m.group(1)), int(m.group(2))) if m else None
+
+
 def _header(attributes) -> dict:
     """warpcli's header: its own attributes, else what the ImageDescription says."""
     attrs = {name: value for name, _, value in attributes}
-    header = {key: value for key, value in attrs.items() if key in (KIND_ATTRIBUTE, T_ATTRIBUTE)}
+    header = {key: value for key, value in attrs.items() if key in (KIND_ATTRIBUTE, T_ATTRIBUTE, SOURCE_ATTRIBUTE)}
     description = attrs.get("ImageDescription")
     if isinstance(description, str) and description.startswith("warpcli STMap:"):
         for key, value in _DESCRIBED.findall(description):

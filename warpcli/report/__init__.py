@@ -1,7 +1,8 @@
 """Report: measuring a map (certificates, Jacobians, distortion) and drawing it (grid, heatmap).
 
 - `metrics`: distortion measures from Jacobians;
-- `figures`: a grid carried through the map, distortion heatmaps.
+- `figures`: a grid carried through the map, distortion heatmaps;
+- `seam`: the jump of neighbouring values across a polyline (a retouch's edge, a cut) against elsewhere.
 """
 
 from __future__ import annotations
