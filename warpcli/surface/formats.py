@@ -1,0 +1,39 @@
+"""Surface mesh files by extension: OBJ or PLY, read into a `UVMesh`."""
+
+from __future__ import annotations
+
+import os
+
+from .mesh import MeshError, UVMesh
+from .obj import read_obj
+from .ply import read_ply
+
+__all__ = ["read_mesh"]
+
+
+def read_mesh(path: str | os.PathLike[str]) -> UVMesh:
+    """Read an OBJ or PLY surface patch with texture coordinates.
+
+    Parameters
+    ----------
+    path : path-like
+        ``.obj`` (``v``, ``vt``, ``f`` in the forms ``v/vt`` and ``v/vt/vn``,
+        ``mtllib``/``usemtl``; vertex colours as ``v x y z r g b``) or ``.ply``
+        (ASCII or binary; per-vertex ``u, v`` or ``s, t``).
+
+    Returns
+    -------
+    UVMesh
+
+    Raises
+    ------
+    MeshError
+        Naming the file, and the line where one is at fault.
+    """
+    name = os.fspath(path)
+    kind = os.path.splitext(name)[1].lower()
+    if kind == ".obj":
+        return read_obj(name).mesh
+    if kind == ".ply":
+        return read_ply(name).mesh
+    raise MeshError(f"{name}: a surface mesh must be an .obj or .ply file")
