@@ -10,14 +10,17 @@ from numpy.typing import NDArray
 
 from .mesh import MeshError
 
-__all__ = ["MERGE_PIXELS", "LoopPair", "corresponding_loops"]
+__all__ = ["MERGE_PIXELS", "STRAIGHT", "LoopPair", "corresponding_loops"]
 
 #: Boundary points of the two sides closer than this (pixels, along either side) are
 #: one vertex of the polygons: a hundredth of a pixel is far below what a texture
 #: shows, and inserting both would leave edges shorter than the polygons' clearance.
 MERGE_PIXELS = 0.01
-# A vertex is straight when sin(turn) is below this, and two ratios agree within it.
-_STRAIGHT = 1e-9
+#: A vertex is left out of the polygons when it lies within this fraction of the chord's
+#: length from the chord between its kept neighbours, on both sides, at fractions along
+#: them that agree within it: texture coordinates are usually written with 6 decimals,
+#: which puts the vertices of a straight side up to ~1e-5 of an edge off their line.
+STRAIGHT = 1e-4
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,7 +197,7 @@ def _straight(prev: NDArray[np.float64], here: NDArray[np.float64], nxt: NDArray
         return False, 0.0
     cross = abs(float(d[0] * e[1] - d[1] * e[0]))
     t = float(d @ e) / dd
-    return cross <= _STRAIGHT * dd and 0.0 < t < 1.0, t
+    return cross <= STRAIGHT * dd and 0.0 < t < 1.0, t
 
 
 def _simplified(a: NDArray[np.float64], b: NDArray[np.float64], corners: NDArray[np.bool_]) -> LoopPair:
@@ -206,7 +209,7 @@ def _simplified(a: NDArray[np.float64], b: NDArray[np.float64], corners: NDArray
         p = keep[-1]
         sa, ta = _straight(a[p], a[i], a[j])
         sb, tb = _straight(b[p], b[i], b[j])
-        if sa and sb and abs(ta - tb) <= _STRAIGHT and n - (i - len(keep) + 1) >= 3:
+        if sa and sb and abs(ta - tb) <= STRAIGHT and n - (i - len(keep) + 1) >= 3:
             continue
         keep.append(i)
     k = np.array(keep)
