@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from warpcli.surface import MeshError, read_mesh
 from warpcli.surface.obj import read_obj
@@ -205,3 +207,33 @@ def test_unknown_extension_and_unreadable_files(tmp_path):
     with pytest.raises(MeshError, match="directory"):
         read_mesh(tmp_path / "d.obj")
     assert isinstance(PlyFile, type)
+
+
+def _valid_files(tmp_path) -> dict:
+    _, uv, faces = ply_text()
+    out = {}
+    for fmt in ("ascii", "binary_little_endian"):
+        p = tmp_path / f"{fmt}.ply"
+        write_ply(p, fmt, uv, faces)
+        out[fmt] = p.read_bytes()
+    out["obj"] = quad_obj().encode()
+    return out
+
+
+@settings(max_examples=25)
+@given(kind=st.sampled_from(["ascii", "binary_little_endian", "obj"]), data=st.data())
+def test_damaged_files_are_read_or_refused_with_a_mesh_error(tmp_path_factory, kind, data):
+    """Bytes overwritten, or the file cut short: a `MeshError` (or a mesh), never another exception."""
+    tmp = tmp_path_factory.mktemp("damaged")
+    raw = bytearray(_valid_files(tmp)[kind])
+    for _ in range(data.draw(st.integers(1, 4))):
+        raw[data.draw(st.integers(0, len(raw) - 1))] = data.draw(st.integers(0, 255))
+    raw = raw[: data.draw(st.integers(len(raw) // 2, len(raw)))]
+    path = tmp / ("m.obj" if kind == "obj" else "m.ply")
+    path.write_bytes(bytes(raw))
+    try:
+        mesh = read_mesh(path)
+    except MeshError as err:
+        assert str(err).startswith(str(path)) and "\n" not in str(err)
+    else:
+        assert np.isfinite(mesh.uv).all() and mesh.triangles_uv.min() >= 0

@@ -11,8 +11,10 @@ from ..errors import InputError
 
 __all__ = ["MAX_ELEMENTS", "MAX_MESH_BYTES", "MESH_KINDS", "MeshError", "UVMesh"]
 
-#: Largest mesh file read, in bytes.
-MAX_MESH_BYTES = 1 << 30
+#: Largest mesh file read, in bytes: text formats are parsed into Python objects
+#: (some 10 times the file's size at the peak), so this keeps a run within a few GiB;
+#: a 256 MiB OBJ holds about 5 million vertices.
+MAX_MESH_BYTES = 256 << 20
 #: Most vertices, texture coordinates or faces a mesh may have (each): far beyond any
 #: UV chart, and small enough that the arrays of a mesh stay within a few GiB.
 MAX_ELEMENTS = 20_000_000

@@ -401,10 +401,12 @@ def _serialize(fmt: str, comments, elements) -> bytes:
 
 
 def _text(values: NDArray) -> list:
+    """ASCII values: integers as they are, floats in the shortest form that reads back as the
+    same value of their type (a float property written as 0.939693 stays 0.939693)."""
     if values.dtype.kind in "iu":
         return [str(int(v)) for v in values]
-    digits = 9 if values.dtype.itemsize == 4 else 17
-    return [f"{float(v):.{digits}g}" for v in values]
+    return [np.format_float_positional(v, unique=True, trim="-") if 1e-4 <= abs(v) < 1e16 or v == 0
+            else np.format_float_scientific(v, unique=True, trim="-") for v in values]  # fmt: skip
 
 
 def _ascii_rows(el: PlyElement) -> bytes:

@@ -230,11 +230,17 @@ def transfer_texture(
         raise InputError(f"texture must be a non-empty (H, W) or (H, W, C) array of numbers, got shape {img.shape}")
     src_size = (img.shape[1], img.shape[0])
     size = opts.size if opts.size is not None else src_size
+    from ..pipeline import check_output
+
+    check_output(opts, size, src_size, img[:1, :1])  # memory and background, before any map
     if chart is None:
         chart = chart_map(
             src, dst, src_size, size, opts.map, flip_v=flip_v, src_start=src_start, dst_start=dst_start,
             src_corners=src_corners, dst_corners=dst_corners,
         )  # fmt: skip
+    xmin, ymin, xmax, ymax = chart.map.src.bounds
+    if xmin < 0 or ymin < 0 or xmax > src_size[0] or ymax > src_size[1]:
+        log.warning("%s: the chart reaches beyond its texture (UVs outside 0..1): its edge texels repeat there", src.name)
     width, height = size
     plan = SamplingPlan.from_map(
         chart.map, width, height, interp=opts.interp, antialias=opts.antialias, background=opts.background
