@@ -221,6 +221,8 @@ def transfer_texture(
     Schneider & Hormann, CAGD 2015, §4.2: g = S1^-1 o f o S0.
     """
     opts = resolve_options(options, changes)
+    if opts.outside != "background":
+        raise InputError("a texture is moved onto the background (outside='background'), not pasted over its input")
     if isinstance(padding, bool) or not isinstance(padding, (int, np.integer)) or not 0 <= padding <= 4096:
         raise InputError(f"padding must be a whole number of texels from 0 to 4096, got {padding!r}")
     img = np.asarray(texture)
