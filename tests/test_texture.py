@@ -146,17 +146,18 @@ def test_charts_that_are_not_disks_are_refused(uv, tris, message):
 
 
 def test_a_chart_whose_boundary_crosses_itself_is_refused():
-    # Faces of one orientation whose boundary still overlaps (a spiral strip over itself).
+    """A strip wound 1.75 times round: every face counter-clockwise, but the chart overlaps
+    itself, so its boundary crosses itself: the polygon check refuses it, naming the file."""
     angles = np.linspace(0, 3.5 * np.pi, 30)
     inner = np.stack([np.cos(angles), np.sin(angles)], axis=1) * (1 + 0.05 * angles)[:, None]
-    outer = inner * 1.25
-    uv = np.vstack([inner, outer]) * 0.1 + 0.5
+    uv = np.vstack([inner, inner * 1.25]) * 0.1 + 0.5
     n = len(angles)
-    tris = [t for k in range(n - 1) for t in ((k, n + k, n + k + 1), (k, n + k + 1, k + 1))]
-    mesh = _mesh(uv, np.array(tris)[:, ::-1] if False else np.array(tris), "spiral.obj")
-    good = grid(3, 3, name="g.obj")
-    with pytest.raises((PolygonError, MeshError)):
-        chart_map(good, mesh, SIZE, SIZE, src_corners=[0], dst_corners=[int(chart_of(mesh).loop_vertices[0])])
+    tris = np.array([t for k in range(n - 1) for t in ((k, k + 1, n + k + 1), (k, n + k + 1, n + k))])
+    spiral = _mesh(uv, tris, "spiral.obj")
+    chart = chart_of(spiral)  # a disk, unfolded face by face
+    corner = int(chart.loop_vertices[0])
+    with pytest.raises(PolygonError, match="^spiral.obj: .*(cross|touch)"):
+        chart_map(grid(3, 3, name="g.obj"), spiral, SIZE, SIZE, src_corners=[0], dst_corners=[corner])
 
 
 # --- the correspondence --------------------------------------------------------------

@@ -88,13 +88,16 @@ class UVMesh:
 
     def uv_to_position(self) -> NDArray[np.int64]:
         """For each texture coordinate, the position of the first corner using it (-1: unused)."""
-        out = np.full(len(self.uv), -1, dtype=np.int64)
-        # Reversed, so that the first corner's position is the one written last.
-        out[self.triangles_uv.ravel()[::-1]] = self.triangles_pos.ravel()[::-1]
-        return out
+        return _first_partner(self.triangles_uv.ravel(), self.triangles_pos.ravel(), len(self.uv))
 
     def position_to_uv(self) -> NDArray[np.int64]:
         """For each position, the texture coordinate of the first corner using it (-1: unused)."""
-        out = np.full(len(self.positions), -1, dtype=np.int64)
-        out[self.triangles_pos.ravel()[::-1]] = self.triangles_uv.ravel()[::-1]
-        return out
+        return _first_partner(self.triangles_pos.ravel(), self.triangles_uv.ravel(), len(self.positions))
+
+
+def _first_partner(keys: NDArray[np.int64], partners: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+    """For each of ``n`` keys, the partner at its first occurrence in ``keys`` (-1: none)."""
+    out = np.full(n, -1, dtype=np.int64)
+    uniq, first = np.unique(keys, return_index=True)
+    out[uniq] = partners[first]
+    return out
