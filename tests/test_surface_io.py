@@ -199,7 +199,7 @@ def test_ply_ascii_errors(tmp_path, rows, message):
 
 
 def test_unknown_extension_and_unreadable_files(tmp_path):
-    with pytest.raises(MeshError, match="must be an .obj or .ply"):
+    with pytest.raises(MeshError, match="must be an .obj, .ply, .gltf or .glb"):
         read_mesh(tmp_path / "m.stl")
     with pytest.raises(MeshError, match="no such file"):
         read_mesh(tmp_path / "missing.obj")
@@ -217,11 +217,14 @@ def _valid_files(tmp_path) -> dict:
         write_ply(p, fmt, uv, faces)
         out[fmt] = p.read_bytes()
     out["obj"] = quad_obj().encode()
+    doc, blob = _gltf_doc(uv, [f[:3] for f in faces], np.zeros((len(uv), 3)))
+    del doc["buffers"][0]["uri"]
+    out["glb"] = _glb(doc, blob)
     return out
 
 
 @settings(max_examples=25)
-@given(kind=st.sampled_from(["ascii", "binary_little_endian", "obj"]), data=st.data())
+@given(kind=st.sampled_from(["ascii", "binary_little_endian", "obj", "glb"]), data=st.data())
 def test_damaged_files_are_read_or_refused_with_a_mesh_error(tmp_path_factory, kind, data):
     """Bytes overwritten, or the file cut short: a `MeshError` (or a mesh), never another exception."""
     tmp = tmp_path_factory.mktemp("damaged")
@@ -229,7 +232,7 @@ def test_damaged_files_are_read_or_refused_with_a_mesh_error(tmp_path_factory, k
     for _ in range(data.draw(st.integers(1, 4))):
         raw[data.draw(st.integers(0, len(raw) - 1))] = data.draw(st.integers(0, 255))
     raw = raw[: data.draw(st.integers(len(raw) // 2, len(raw)))]
-    path = tmp / ("m.obj" if kind == "obj" else "m.ply")
+    path = tmp / {"obj": "m.obj", "glb": "m.glb"}.get(kind, "m.ply")
     path.write_bytes(bytes(raw))
     try:
         mesh = read_mesh(path)
@@ -237,3 +240,94 @@ def test_damaged_files_are_read_or_refused_with_a_mesh_error(tmp_path_factory, k
         assert str(err).startswith(str(path)) and "\n" not in str(err)
     else:
         assert np.isfinite(mesh.uv).all() and mesh.triangles_uv.min() >= 0
+
+
+# --- glTF ---------------------------------------------------------------------------------
+
+
+def _gltf_doc(uv, tris, colours=None, uri="data"):
+    """A glTF 2.0 document of one primitive, and its binary buffer."""
+    import base64
+
+    pos = np.column_stack([uv, np.zeros(len(uv))]).astype("<f4")
+    tex = np.column_stack([uv[:, 0], 1 - uv[:, 1]]).astype("<f4")  # glTF's v runs down
+    idx = np.asarray(tris, dtype="<u2").ravel()
+    parts = [pos.tobytes(), tex.tobytes(), idx.tobytes() + b"\0" * (-idx.nbytes % 4)]
+    if colours is not None:
+        parts.append(np.asarray(colours, dtype="u1").tobytes())
+    offsets = np.cumsum([0] + [len(p) for p in parts])
+    blob = b"".join(parts)
+    views = [{"buffer": 0, "byteOffset": int(offsets[k]), "byteLength": len(p)} for k, p in enumerate(parts)]
+    accessors = [
+        {"bufferView": 0, "componentType": 5126, "count": len(uv), "type": "VEC3"},
+        {"bufferView": 1, "componentType": 5126, "count": len(uv), "type": "VEC2"},
+        {"bufferView": 2, "componentType": 5123, "count": idx.size, "type": "SCALAR"},
+    ]
+    attrs = {"POSITION": 0, "TEXCOORD_0": 1}
+    if colours is not None:
+        accessors.append({"bufferView": 3, "componentType": 5121, "normalized": True, "count": len(uv), "type": "VEC3"})
+        attrs["COLOR_0"] = 3
+    buffer = {"byteLength": len(blob)}
+    if uri == "data":
+        buffer["uri"] = "data:application/octet-stream;base64," + base64.b64encode(blob).decode()
+    doc = {
+        "asset": {"version": "2.0"}, "buffers": [buffer], "bufferViews": views, "accessors": accessors,
+        "meshes": [{"primitives": [{"attributes": attrs, "indices": 2}]}],
+        "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+        "textures": [{"source": 0}], "images": [{"uri": "tex%20a.png"}],
+    }  # fmt: skip
+    doc["meshes"][0]["primitives"][0]["material"] = 0
+    return doc, blob
+
+
+def _glb(doc, blob) -> bytes:
+    import json
+    import struct
+
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    blob += b"\0" * (-len(blob) % 4)
+    body = struct.pack("<II", len(text), 0x4E4F534A) + text + struct.pack("<II", len(blob), 0x004E4942) + blob
+    return b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body
+
+
+def test_gltf_and_glb_read_like_the_mesh_they_hold(tmp_path):
+    import json
+
+    uv = np.array([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9], [0.5, 0.5]])
+    tris = [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]
+    colours = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [51, 102, 153], [0, 0, 0]])
+    doc, blob = _gltf_doc(uv, tris, colours)
+    (tmp_path / "m.gltf").write_text(json.dumps(doc))
+    doc2 = json.loads(json.dumps(doc))
+    del doc2["buffers"][0]["uri"]
+    (tmp_path / "m.glb").write_bytes(_glb(doc2, blob))
+    for name in ("m.gltf", "m.glb"):
+        mesh = read_mesh(tmp_path / name)
+        np.testing.assert_allclose(mesh.uv, uv, atol=1e-7)  # v flipped back to run up
+        assert mesh.triangles_uv.tolist() == tris
+        np.testing.assert_allclose(mesh.attributes["blue"], colours[:, 2] / 255)
+        assert mesh.texture == str(tmp_path / "tex a.png")
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda d: d["accessors"][1].update(count=500), "reaches beyond its buffer view"),
+        (lambda d: d["asset"].update(version="1.0"), "only glTF 2 is read"),
+        (lambda d: d["accessors"][2].update(count=2), "2 indices are not whole triangles"),
+        (lambda d: d["meshes"][0]["primitives"][0]["attributes"].pop("TEXCOORD_0"), "no texture coordinates"),
+        (lambda d: d["meshes"][0]["primitives"][0].update(indices=9), "accessors[9] does not exist"),
+        (lambda d: d["buffers"][0].update(uri="data:,%%%"), "not base64"),
+        (lambda d: d["buffers"][0].update(uri="missing.bin"), "missing.bin: no such file"),
+    ],
+)
+def test_gltf_errors_name_the_file(tmp_path, change, message):
+    import json
+
+    doc, _ = _gltf_doc(np.array([[0.1, 0.1], [0.9, 0.1], [0.5, 0.9]]), [[0, 1, 2]])
+    change(doc)
+    path = tmp_path / "bad.gltf"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(MeshError, match=message.replace("[", "\\[").replace("]", "\\]")):
+        read_mesh(path)

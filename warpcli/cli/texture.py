@@ -55,7 +55,7 @@ def texture(src_path, dst_path, output_path, texture, src_corners, dst_corners, 
     """Move SRC_MESH's texture (or vertex colours) onto DST_MESH through the map between their UV charts.
 
     Each mesh is a disk-shaped patch with texture coordinates (OBJ with vt;
-    PLY with u,v or s,t); its UV chart's boundary is the polygon, and the
+    PLY with u,v or s,t; glTF, read only); its UV chart's boundary is the polygon, and the
     two charts are mapped onto each other bijectively (the paper's 4.2). If
     OUT is an image, SRC's texture is resampled into DST's UV layout; if it
     is a mesh (DST's format), DST is written with SRC's vertex attributes

@@ -3,7 +3,7 @@
 One module per job, each importing only those before it:
 
 - `mesh`: the `UVMesh` value and `MeshError`;
-- `obj`, `ply`: strict readers of Wavefront OBJ and Stanford PLY, and writers of new vertex values;
+- `obj`, `ply`, `gltf`: strict readers of Wavefront OBJ, Stanford PLY and glTF 2.0; writers of new vertex values (OBJ, PLY);
 - `formats`: `read_mesh`, by extension;
 - `chart`: a chart's topology (a disk, unfolded) and its boundary loop; UV to pixels;
 - `correspond`: two boundary loops as polygons of one vertex count (start, or corners and arclength);

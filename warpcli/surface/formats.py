@@ -1,9 +1,10 @@
-"""Surface mesh files by extension: OBJ or PLY, read into a `UVMesh`."""
+"""Surface mesh files by extension: OBJ, PLY or glTF, read into a `UVMesh`."""
 
 from __future__ import annotations
 
 import os
 
+from .gltf import read_gltf
 from .mesh import MeshError, UVMesh
 from .obj import read_obj
 from .ply import read_ply
@@ -12,14 +13,16 @@ __all__ = ["read_mesh"]
 
 
 def read_mesh(path: str | os.PathLike[str]) -> UVMesh:
-    """Read an OBJ or PLY surface patch with texture coordinates.
+    """Read an OBJ, PLY or glTF surface patch with texture coordinates.
 
     Parameters
     ----------
     path : path-like
         ``.obj`` (``v``, ``vt``, ``f`` in the forms ``v/vt`` and ``v/vt/vn``,
-        ``mtllib``/``usemtl``; vertex colours as ``v x y z r g b``) or ``.ply``
-        (ASCII or binary; per-vertex ``u, v`` or ``s, t``).
+        ``mtllib``/``usemtl``; vertex colours as ``v x y z r g b``), ``.ply``
+        (ASCII or binary; per-vertex ``u, v`` or ``s, t``), or ``.gltf`` /
+        ``.glb`` (the first triangle primitive; see
+        `warpcli.surface.gltf.read_gltf`).
 
     Returns
     -------
@@ -36,4 +39,6 @@ def read_mesh(path: str | os.PathLike[str]) -> UVMesh:
         return read_obj(name).mesh
     if kind == ".ply":
         return read_ply(name).mesh
-    raise MeshError(f"{name}: a surface mesh must be an .obj or .ply file")
+    if kind in (".gltf", ".glb"):
+        return read_gltf(name)
+    raise MeshError(f"{name}: a surface mesh must be an .obj, .ply, .gltf or .glb file")

@@ -100,6 +100,8 @@ def transfer_file(
     corr = dict(flip_v=flip_v, src_start=src_start, dst_start=dst_start, src_corners=src_corners, dst_corners=dst_corners)
     theta_file = opts.map.theta_file
     inputs = tuple(p for p in (src_name, dst_name, texture, theta_file) if p is not None)
+    if out_kind in (".gltf", ".glb"):
+        raise InputError(f"{out_name}: glTF meshes are read, not written: give a DST and an OUT of .ply or .obj")
     if out_kind in MESH_KINDS:
         dst_kind = os.path.splitext(dst_name)[1].lower()
         if out_kind != dst_kind:
