@@ -69,9 +69,14 @@ def chart_of(mesh: UVMesh) -> Chart:
     name = mesh.name
     t = mesh.triangles_uv
     lines = mesh.face_lines
+
+    def where(f) -> str:
+        """Where triangle f is in the file: its line (OBJ), its face row (PLY) or triangle (glTF)."""
+        return f"{mesh.face_word} {int(lines[int(f)])}"
+
     bad = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 2] == t[:, 0])
     if bad.any():
-        raise MeshError(f"{name}: line {lines[np.argmax(bad)]}: a face uses one texture coordinate twice")
+        raise MeshError(f"{name}: {where(np.argmax(bad))}: a face uses one texture coordinate twice")
     nuv = len(mesh.uv)
     a = t.ravel()
     b = t[:, [1, 2, 0]].ravel()
@@ -84,15 +89,15 @@ def chart_of(mesh: UVMesh) -> Chart:
     uniq, counts = np.unique(undirected, return_counts=True)
     if (counts > 2).any():
         e = int(uniq[np.argmax(counts > 2)])
-        faces = lines[face[undirected == e]]
+        faces = face[undirected == e]
         raise MeshError(
-            f"{name}: lines {', '.join(map(str, faces[:3]))}: {int(counts.max())} faces share one edge "
+            f"{name}: {', '.join(where(f) for f in faces[:3])}: {int(counts.max())} faces share one edge "
             "(the chart is not a manifold)"
         )
     if dup.size:
         f1, f2 = face[order[dup[0]]], face[order[dup[0] + 1]]
         raise MeshError(
-            f"{name}: lines {lines[f1]} and {lines[f2]}: two faces run along an edge in the same direction "
+            f"{name}: {where(f1)} and {where(f2)}: two faces run along an edge in the same direction "
             "(the faces are not consistently oriented)"
         )
     reverse = b * nuv + a
@@ -134,13 +139,13 @@ def chart_of(mesh: UVMesh) -> Chart:
     scale = np.abs(np.concatenate([q - p, r - p], axis=1)).max(axis=1) ** 2
     flat = np.abs(area) <= 1e-12 * np.maximum(scale, 1e-300)
     if flat.any():
-        raise MeshError(f"{name}: line {lines[np.argmax(flat)]}: a face has no area in UV space")
+        raise MeshError(f"{name}: {where(np.argmax(flat))}: a face has no area in UV space")
     sign = np.sign(area)
     major = 1.0 if (sign > 0).sum() >= (sign < 0).sum() else -1.0
     flipped = sign != major
     if flipped.any():
         raise MeshError(
-            f"{name}: line {lines[np.argmax(flipped)]}: the UV chart folds over ({int(flipped.sum())} face(s) flipped "
+            f"{name}: {where(np.argmax(flipped))}: the UV chart folds over ({int(flipped.sum())} face(s) flipped "
             "against the others)"
         )
     loop_arr = np.array(loop, dtype=np.int64)

@@ -124,7 +124,8 @@ def read_gltf(path: str | os.PathLike[str]) -> UVMesh:
         for c, key in enumerate(("red", "green", "blue", "alpha")[: colour.shape[1]]):
             attributes[key] = colour[:, c]
             types[key] = "float"
-    return UVMesh(pos.astype(np.float64), uv, tris, tris, attributes, types, name, _texture(doc, prim, base))
+    texture = _texture(doc, prim, base)
+    return UVMesh(pos.astype(np.float64), uv, tris, tris, attributes, types, name, texture, None, "triangle")
 
 
 def _container(raw: bytes, name: str) -> tuple[dict, bytes | None]:

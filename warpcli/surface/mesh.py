@@ -55,7 +55,11 @@ class UVMesh:
         The texture image the file names (an OBJ material's ``map_Kd``, a
         PLY's ``comment TextureFile``), resolved against the file's directory.
     face_lines : (F,) ndarray of int
-        For messages: the line (OBJ) or face row (PLY) of each triangle, from 1.
+        For messages: where each triangle is in the file, as ``face_word`` says.
+    face_word : str
+        ``"line"`` (an OBJ's lines, from 1), ``"face"`` (a PLY's face rows, from
+        0) or ``"triangle"`` (the triangles' own numbers, from 0: a glTF
+        primitive's, or a mesh made in code).
     """
 
     positions: NDArray[np.float64]
@@ -67,6 +71,7 @@ class UVMesh:
     name: str = "mesh"
     texture: str | None = None
     face_lines: NDArray[np.int64] | None = field(default=None, repr=False)
+    face_word: str = "triangle"
 
     def __post_init__(self) -> None:
         pos = np.asarray(self.positions, dtype=np.float64).reshape(-1, 3)
@@ -82,7 +87,7 @@ class UVMesh:
         for key, values in self.attributes.items():
             if np.shape(values) != (len(pos),):
                 raise MeshError(f"{self.name}: attribute {key} has {np.size(values)} values for {len(pos)} vertices")
-        lines = np.arange(1, len(tp) + 1) if self.face_lines is None else np.asarray(self.face_lines, dtype=np.int64)
+        lines = np.arange(len(tp)) if self.face_lines is None else np.asarray(self.face_lines, dtype=np.int64)
         for name, arr in (("positions", pos), ("uv", uv), ("triangles_pos", tp), ("triangles_uv", tu), ("face_lines", lines)):
             object.__setattr__(self, name, arr)
 

@@ -180,7 +180,7 @@ def read_obj(path: str | os.PathLike[str]) -> ObjFile:
     mesh = UVMesh(
         np.array(pos, dtype=np.float64).reshape(-1, 3), np.array(uv, dtype=np.float64).reshape(-1, 2),
         np.array(tri_p, dtype=np.int64), np.array(tri_t, dtype=np.int64), attributes, types, name, texture,
-        np.array(face_line, dtype=np.int64),
+        np.array(face_line, dtype=np.int64), "line",
     )  # fmt: skip
     return ObjFile(mesh, lines, np.array(vlines, dtype=np.int64))
 

@@ -380,7 +380,7 @@ def _mesh(elements, name: str, texture: str | None) -> UVMesh:
     tris = np.stack([flat[starts[face_of]], flat[starts[face_of] + j + 1], flat[starts[face_of] + j + 2]], axis=1)
     attributes = {k: v.astype(np.float64) for k, v in scalars.items() if k not in GEOMETRY}
     types = {p.name: p.type for p in vertex.properties if p.name in attributes}
-    return UVMesh(positions, uv, tris, tris, attributes, types, name, texture, face_of + 1)
+    return UVMesh(positions, uv, tris, tris, attributes, types, name, texture, face_of, "face")
 
 
 def _serialize(fmt: str, comments, elements) -> bytes:

@@ -167,8 +167,8 @@ def _mesh_output(src_name, dst_name, out_name, opts: WarpOptions, names, corr) -
             colour = k in COLOURS
             if k in have:
                 types[k] = have[k]
-            elif colour and stype == "float" and src.name.lower().endswith(".obj"):
-                types[k] = "uchar"  # OBJ colours (0..1) become PLY's usual 8-bit colours
+            elif colour and stype == "float" and not src.name.lower().endswith(".ply"):
+                types[k] = "uchar"  # OBJ and glTF colours (0..1) become PLY's usual 8-bit colours
             else:
                 types[k] = stype
             if colour:
