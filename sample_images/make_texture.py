@@ -16,7 +16,6 @@ texture with SRC's wireframe, and the texture moved by the installed
 
 from __future__ import annotations
 
-import math
 import os
 import subprocess
 import sys

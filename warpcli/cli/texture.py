@@ -6,7 +6,16 @@ import click
 
 from ..options import WarpOptions
 from .exits import EXIT_CODES
-from .options import CONTEXT, background_option, collected, dtype_option, interp_option, map_options, parse_size, quiet_option
+from .options import (
+    CONTEXT,
+    background_option,
+    collected,
+    dtype_option,
+    interp_option,
+    map_options,
+    parse_size,
+    quiet_option,
+)
 
 
 def _indices(ctx, param, value):

@@ -18,7 +18,13 @@ from .correspond import LoopPair, corresponding_loops
 from .formats import read_mesh
 from .mesh import MeshError, UVMesh
 from .run import TransferResult, transfer_file
-from .transfer import ChartMap, TextureTransfer, chart_map, transfer_attributes, transfer_texture
+from .transfer import (
+    ChartMap,
+    TextureTransfer,
+    chart_map,
+    transfer_attributes,
+    transfer_texture,
+)
 
 __all__ = [
     "Chart", "ChartMap", "LoopPair", "MeshError", "TextureTransfer", "TransferResult", "UVMesh", "chart_map", "chart_of",

@@ -14,7 +14,14 @@ from ..options import WarpOptions, resolve_options
 from ..outputs import PendingOutputs, check_output_path, write_checked
 from .formats import read_mesh
 from .mesh import MESH_KINDS, MeshError
-from .transfer import ATTRIBUTE_SIZE, PADDING, ChartMap, chart_map, transfer_attributes, transfer_texture
+from .transfer import (
+    ATTRIBUTE_SIZE,
+    PADDING,
+    ChartMap,
+    chart_map,
+    transfer_attributes,
+    transfer_texture,
+)
 
 __all__ = ["COLOURS", "TransferResult", "transfer_file"]
 
@@ -132,7 +139,8 @@ def transfer_file(
 def _mesh_output(src_name, dst_name, out_name, opts: WarpOptions, names, corr) -> TransferResult:
     src = read_mesh(src_name)
     if out_name.lower().endswith(".obj"):
-        from .obj import COLOURS as OBJ_COLOURS, read_obj
+        from .obj import COLOURS as OBJ_COLOURS
+        from .obj import read_obj
 
         target = read_obj(dst_name)
         chosen = list(names) if names is not None else [k for k in OBJ_COLOURS if k in src.attributes]
