@@ -61,7 +61,7 @@ LAYERS = [
     ("sampling", {"sampling": ("plan", "composite", "sequence", "keyframes", "transform", "annotations")}),
     # What runs a warp from files: 2D runs beside 3D, neither knowing the other (see NEVER).
     ("runs", {
-        "runs": ("tiled", "pipeline", "batch", "distributed", "points"),
+        "runs": ("tiled", "pipeline", "batch", "distributed", "points", "surface"),
         "volume": ("volume",),
     }),
     # Applications over the runs: the browser editor (its server, session and preview).

@@ -21,6 +21,7 @@ _EXPORTS = {
     "ImageInputError": "errors",
     "InputError": "errors",
     "MapOptions": "options",
+    "MeshError": "surface",
     "MeshingError": "errors",
     "Polygon": "polygon",
     "PolygonTransform": "transform",
@@ -30,6 +31,7 @@ _EXPORTS = {
     "SamplingPlan": "plan",
     "Theta": "maps.theta",
     "ThetaMap": "maps.base",
+    "UVMesh": "surface",
     "WarpError": "errors",
     "WarpOptions": "options",
     "WarpResult": "pipeline",
@@ -52,6 +54,10 @@ _EXPORTS = {
     "warp_image": "pipeline",
     "warp_sequence": "batch",
     "read_keyframes": "keyframes",
+    "read_mesh": "surface",
+    "transfer_attributes": "surface",
+    "transfer_file": "surface",
+    "transfer_texture": "surface",
     "parse_frames": "sequence",
     "write_image": "raster.imageio",
 }
@@ -86,6 +92,7 @@ if TYPE_CHECKING:
     from .raster.resample import resample
     from .raster.stmap import load_stmap, save_stmap
     from .report import build_report
+    from .surface import MeshError, UVMesh, read_mesh, transfer_attributes, transfer_file, transfer_texture
 
 
 def __getattr__(name: str):

@@ -1,11 +1,11 @@
 """Command-line interface: the ``warp`` command and its subcommands, a thin click layer over the library.
 
-One module per command (`warp`, `apply_map`, `points`, `volume`), the options
+One module per command (`warp`, `apply_map`, `points`, `texture`, `volume`), the options
 they share (`options`), the progress line (`progress`), the group
 (`group`), exit statuses (`exits`) and running it all (`run`). click is
 imported here and nowhere else in warpcli.
 
-Note that the names ``warp``, ``apply_map``, ``points`` and ``volume`` of this
+Note that the names ``warp``, ``apply_map``, ``points``, ``texture`` and ``volume`` of this
 package are the click commands, not the modules that define them: reach a
 module through ``sys.modules`` or ``from warpcli.cli.warp import ...``.
 """
@@ -17,6 +17,7 @@ from .exits import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, EXIT
 from .points import points
 from .progress import Progress
 from .run import cli, main, run
+from .texture import texture
 from .volume import volume
 from .warp import warp
 
@@ -33,6 +34,7 @@ __all__ = [
     "main",
     "points",
     "run",
+    "texture",
     "volume",
     "warp",
 ]

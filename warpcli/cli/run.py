@@ -16,12 +16,13 @@ from .exits import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, e
 from .group import DefaultGroup
 from .options import CONTEXT
 from .points import points
+from .texture import texture
 from .volume import volume
 from .warp import warp
 
-#: The ``warp`` command line: ``warp ...`` warps, ``warp apply-map|edit|points|volume ...`` the others.
+#: The ``warp`` command line: ``warp ...`` warps, ``warp apply-map|edit|points|texture|volume ...`` the others.
 cli = DefaultGroup(
-    "warp", commands={"warp": warp, "apply-map": apply_map, "edit": edit, "points": points, "volume": volume}, default="warp", context_settings=CONTEXT
+    "warp", commands={"warp": warp, "apply-map": apply_map, "edit": edit, "points": points, "texture": texture, "volume": volume}, default="warp", context_settings=CONTEXT
 )
 
 

@@ -20,8 +20,9 @@ from .progress import Progress
 WARP_EPILOG = EXIT_CODES + """
 \b
 Also: warp apply-map MAP.exr INPUT OUTPUT applies a saved map; warp points maps points and OBJ UVs;
+warp texture SRC.obj DST.obj OUT.png moves a texture between two meshes' UV charts;
 warp edit IMAGE draws the polygons in the browser (see warp apply-map --help, warp points --help,
-warp edit --help).
+warp texture --help, warp edit --help).
 """
 
 
