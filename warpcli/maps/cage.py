@@ -29,10 +29,10 @@ from ..grid import inside_polygon, window
 from ..mapping import Certificate, Mapped, as_points
 from ..options import MapOptions
 from ..polygon import Polygon
-from ..polygon.partition import Partition, validate_pair
+from ..polygon.partition import Partition, check_shapes, validate_pair
 from .compose import BijectiveMap, PullBack, Region, build_map
 
-__all__ = ["CageMap", "CagePullBack", "build_cage_map", "face_labels"]
+__all__ = ["CageMap", "CagePullBack", "build_cage_map", "face_labels", "map_between"]
 
 
 @dataclass(frozen=True)
@@ -399,3 +399,23 @@ def build_cage_map(
         )
     maps = [build_map(a, b, opts, regions=regions) for a, b in zip(src.face_polygons(), dst.face_polygons())]
     return CageMap(src, dst, maps)
+
+
+def map_between(
+    src: Polygon | Partition,
+    dst: Polygon | Partition,
+    options: MapOptions | None = None,
+    *,
+    regions: tuple[Region | None, Region | None] = (None, None),
+) -> BijectiveMap | CageMap:
+    """The map between two polygons (`BijectiveMap.between`) or two cage meshes (`build_cage_map`).
+
+    Raises
+    ------
+    PolygonError
+        For a polygon facing a cage mesh, or shapes that do not correspond.
+    """
+    check_shapes(src, dst)
+    if isinstance(src, Partition):
+        return build_cage_map(src, dst, options, regions=regions)  # type: ignore[arg-type]
+    return BijectiveMap.between(src, dst, options, regions=regions)  # type: ignore[arg-type]

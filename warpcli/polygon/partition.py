@@ -33,10 +33,10 @@ from ..errors import PolygonError
 from ..files import read_small_file
 from .formats import MAX_FILE_BYTES, parse_json, points_of
 from .messages import LongInteger, format_point, short_value
-from .shape import COORD_LIMIT, Polygon
+from .shape import COORD_LIMIT, Polygon, check_pair
 
 __all__ = [
-    "WELD_TOLERANCE", "Partition", "is_partition_document", "partition_of", "read_partition", "read_shape",
+    "WELD_TOLERANCE", "Partition", "check_shapes", "is_partition_document", "partition_of", "read_partition", "read_shape",
     "validate_pair",
 ]  # fmt: skip
 
@@ -83,6 +83,11 @@ class Partition:
         loop = _topology(faces, len(verts), self.name)
         object.__setattr__(self, "_loop", loop)
         _geometry(verts, faces, loop, self.name)
+
+    @property
+    def points(self) -> NDArray[np.float64]:
+        """The vertices (as `Polygon.points`: what keyframes blend and compare)."""
+        return self.vertices
 
     @property
     def n_faces(self) -> int:
@@ -177,6 +182,26 @@ def validate_pair(src: Partition, dst: Partition, src_name: str | None = None, d
                 else f"is {list(b)} but {sname}'s face {k} is {list(a)}; both need the same faces"
             )  # fmt: skip
             raise PolygonError(f"{dname}: face {k} {why}")
+
+
+def check_shapes(src: Polygon | Partition, dst: Polygon | Partition) -> None:
+    """`check_pair` for two polygons, `validate_pair` for two cage meshes; a polygon and a mesh are refused.
+
+    Raises
+    ------
+    PolygonError
+        One line naming the target's file.
+    """
+    if isinstance(src, Partition) and isinstance(dst, Partition):
+        validate_pair(src, dst)
+    elif isinstance(src, Partition) or isinstance(dst, Partition):
+        mesh, poly = (src, dst) if isinstance(src, Partition) else (dst, src)
+        raise PolygonError(
+            f"{poly.name}: holds one polygon but {mesh.name} is a cage mesh ({mesh.n_faces} faces); "
+            "give both as cage meshes with the same faces, or both as polygons"
+        )
+    else:
+        check_pair(src, dst)
 
 
 def _cyclic_equal(a: tuple[int, ...], b: tuple[int, ...]) -> bool:
@@ -473,7 +498,7 @@ def welded(rings: list, name: str, what: str = "polygon", tolerance: float = WEL
         poly = Polygon(ring, name=f"{name}: {what} {k}")
         face = []
         for p in poly.points:
-            cx, cy = int(math.floor(p[0] / cell)), int(math.floor(p[1] / cell))
+            cx, cy = math.floor(p[0] / cell), math.floor(p[1] / cell)
             found = None
             for dx in (-1, 0, 1):
                 for dy in (-1, 0, 1):
