@@ -394,8 +394,9 @@ def build_cage_map(
         )
     if opts.src_boundary != opts.dst_boundary:
         raise InputError(
-            f"{dst.name}: a cage mesh needs the same boundary behaviour on both sides (got {opts.src_boundary} and "
-            f"{opts.dst_boundary}): otherwise neighbouring faces would not meet on their shared edge"
+            f"{dst.name}: a cage mesh needs the same boundary behaviour on both sides (got {opts.src_boundary} for the "
+            f"source, {opts.dst_boundary} for the target; --boundary sets the target's only, --src-boundary the "
+            "source's): otherwise neighbouring faces would not meet on their shared edge"
         )
     maps = [build_map(a, b, opts, regions=regions) for a, b in zip(src.face_polygons(), dst.face_polygons())]
     return CageMap(src, dst, maps)
