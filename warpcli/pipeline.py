@@ -150,17 +150,18 @@ def warp_image(
     ----------
     image : (H, W) or (H, W, C) array_like
         Pixels in any numeric type; the result has the same type.
-    src, dst : Polygon or (n, 2) array_like of float
+    src, dst : Polygon, Partition or (n, 2) array_like of float
         Corresponding polygons: ``src`` in the input image's coordinates, ``dst``
-        in the output's (x right, y down, pixel centres at +0.5).
+        in the output's (x right, y down, pixel centres at +0.5); or two cage
+        meshes with the same faces (`warpcli.maps.cage`).
     options : WarpOptions or None
         Map, resampling and output options; the defaults otherwise.
     alpha_channel : int or None
         Index of an alpha channel: colour is resampled premultiplied.
     associated_alpha : bool
         Whether the colour is already premultiplied by alpha.
-    warp_map : BijectiveMap or None
-        A map already built between these polygons, to reuse.
+    warp_map : BijectiveMap, CageMap or None
+        A map already built between these polygons (or cage meshes), to reuse.
     progress : callable or None
         Called with the name of each stage as it starts.
     **changes

@@ -428,12 +428,24 @@ def partition_of(doc: object, name: str, label: str | None = None) -> Partition 
             raise PolygonError(f'{name}: a cage mesh has "faces" but no "vertices"')
         return Partition(doc["vertices"], doc["faces"], name)
     if "shapes" in doc:
-        rings = [s.get("points") for s in _labelme_polygons(doc)]
-        what = "labelme polygon"
+        shapes = _labelme_polygons(doc)
+        rings = [s.get("points") for s in shapes]
+        what, labels = "labelme", [s.get("label") for s in shapes]
     else:
         rings = _geojson_rings(doc, name)
-        what = "GeoJSON polygon"
-    return welded(rings, name, what)
+        what, labels = "GeoJSON", []
+    try:
+        return welded(rings, name, f"{what} polygon")
+    except PolygonError as err:
+        # Several polygons meant as one of them, with the label forgotten, must
+        # read as before: name both readings.
+        reason = str(err).removeprefix(f"{name}: ")
+        text = [v if isinstance(v, str) and v.isprintable() and len(v) <= 40 else short_value(v) for v in labels[:10]]
+        shown = f" ({', '.join(text)}{', ...' if len(labels) > 10 else ''})" if labels else ""
+        raise PolygonError(
+            f"{name}: {what} file has {len(rings)} polygons{shown}, which do not form a cage mesh ({reason}); "
+            "choose one with a label option"
+        ) from None
 
 
 def _geojson_rings(doc: dict, name: str) -> list:
@@ -531,6 +543,29 @@ def read_shape(path: str | os.PathLike[str], label: str | None = None) -> Polygo
     (welded within `WELD_TOLERANCE`), read without a label; anything else is
     read as `warpcli.polygon.read_polygon` reads it.
 
+    Parameters
+    ----------
+    path : path-like
+        The polygon file.
+    label : str or None
+        Which polygon of a labelme or GeoJSON file holding several: then one
+        polygon is read, as `warpcli.polygon.read_polygon` reads it.
+
+    Returns
+    -------
+    Polygon or Partition
+
+    Examples
+    --------
+    >>> import json, os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "cage.json")
+    >>> square = [[0, 0], [10, 0], [20, 0], [20, 10], [10, 10], [0, 10]]
+    >>> with open(path, "w") as fh:
+    ...     json.dump({"vertices": square, "faces": [[0, 1, 4, 5], [1, 2, 3, 4]]}, fh)
+    >>> mesh = read_shape(path)
+    >>> mesh.n_faces, mesh.outline.points.tolist()
+    (2, [[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [20.0, 10.0], [10.0, 10.0], [0.0, 10.0]])
+
     Raises
     ------
     PolygonError
@@ -552,6 +587,15 @@ def read_shape(path: str | os.PathLike[str], label: str | None = None) -> Polygo
 
 def read_partition(path: str | os.PathLike[str]) -> Partition:
     """Read a cage mesh file (see `read_shape`).
+
+    Parameters
+    ----------
+    path : path-like
+        A JSON cage mesh, or a labelme or GeoJSON file with several polygons.
+
+    Returns
+    -------
+    Partition
 
     Raises
     ------
