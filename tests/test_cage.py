@@ -232,6 +232,9 @@ def test_fem_faces_meet_on_every_shared_edge():
         one = fmap.face_maps[k].inverse(pts + 1e-10 * normal)
         two = fmap.face_maps[other].inverse(pts - 1e-10 * normal)
         assert np.abs(one - two).max() <= 1e-9
+    # Vertices go to vertices, through whichever face holds them (points API).
+    assert np.abs(fmap.forward(src.vertices) - dst.vertices).max() <= 1e-9
+    assert np.abs(fmap.inverse(dst.vertices) - src.vertices).max() <= 1e-9
     # Along each edge of the outline the map is linear too: vertex to vertex, parameter to parameter.
     t = np.linspace(0, 1, 7)
     for i in range(dst.outline.n):

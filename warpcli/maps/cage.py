@@ -271,8 +271,11 @@ class CageMap:
         for k, fmap in enumerate(maps):
             if not todo.any():
                 break
-            idx = np.flatnonzero(todo)
-            inside = idx[inside_polygon(p[idx], side.face_points(k))]
+            # Only points in the face's bounding box are tested against its edges.
+            face = side.face_points(k)
+            lo, hi = face.min(axis=0), face.max(axis=0)
+            idx = np.flatnonzero(todo & (p >= lo).all(axis=1) & (p <= hi).all(axis=1))
+            inside = idx[inside_polygon(p[idx], face)]
             if inside.size:
                 m = getattr(fmap, how)(p[inside])
                 ok = np.isfinite(m.points[:, 0])

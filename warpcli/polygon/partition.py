@@ -371,7 +371,7 @@ def _geometry(verts: NDArray[np.float64], faces: tuple[tuple[int, ...], ...], lo
     bad = np.flatnonzero(winding != 0)
     if bad.size:
         v = int(bad[0])
-        where = "round" if expected[v] == 2 * np.pi and v not in set(loop.tolist()) else "at"
+        where = "at" if v in set(loop.tolist()) else "round"
         raise PolygonError(
             f"{name}: the faces {where} vertex {v} {format_point(verts[v])} overlap: their angles there sum to "
             f"{math.degrees(total[v]):.6g} degrees, not {math.degrees(expected[v]):.6g}"
