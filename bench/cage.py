@@ -66,8 +66,12 @@ def one_run(kind: str, k: int, size: int) -> dict:
 
         src, dst = grid(k, size, triangles=True)
         t0 = clock()
-        tform = PiecewiseAffineTransform()
-        tform.estimate(dst.vertices, src.vertices)
+        make = getattr(PiecewiseAffineTransform, "from_estimate", None)  # scikit-image 0.26 on
+        if make is not None:
+            tform = make(dst.vertices, src.vertices)
+        else:
+            tform = PiecewiseAffineTransform()
+            tform.estimate(dst.vertices, src.vertices)
         t1 = clock()
         tform(pixel_centres(size, size))
         return {"build": t1 - t0, "pull-back": clock() - t1, "labels": 0.0}

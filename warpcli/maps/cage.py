@@ -19,6 +19,7 @@ takes it as it takes a `BijectiveMap`.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -367,7 +368,9 @@ def build_cage_map(
         Corresponding cage meshes: the same faces, vertex i of ``src`` onto
         vertex i of ``dst``.
     options : MapOptions or None
-        As for `build_map` (any method and Theta), for every face. Mixed
+        As for `build_map` (any method and Theta), for every face; FEM's
+        automatic ``max_area`` is the whole outline's (one density for all
+        faces, as for one polygon of that outline). Mixed
         boundary conditions and different boundary behaviours on the two
         sides are refused: the faces of an edge would not meet on it.
     regions : (region, region)
@@ -400,6 +403,15 @@ def build_cage_map(
             f"{dst.name}: a cage mesh needs the same boundary behaviour on both sides (got {opts.src_boundary} for the "
             f"source, {opts.dst_boundary} for the target; --boundary sets the target's only, --src-boundary the "
             "source's): otherwise neighbouring faces would not meet on their shared edge"
+        )
+    if opts.method == "fem" and opts.max_area is None:
+        # The automatic density of the whole outline, not of each face: a
+        # face's own (sqrt(area) / 35) would mesh k faces sqrt(k) times as
+        # finely in all, for the same accuracy per square pixel.
+        from .fem.mesh import auto_max_area
+
+        opts = dataclasses.replace(
+            opts, max_area=(auto_max_area(src.outline, regions[0]), auto_max_area(dst.outline, regions[1]))
         )
     maps = [build_map(a, b, opts, regions=regions) for a, b in zip(src.face_polygons(), dst.face_polygons())]
     return CageMap(src, dst, maps)
