@@ -446,3 +446,22 @@ def test_what_a_cage_mesh_cannot_take_is_refused_in_one_line(files, tmp_path):
         assert code == 2, err
         assert words in err and err.count("\n") == 1, err
         assert not out.exists()
+
+
+def test_the_editor_refuses_a_cage_mesh_in_one_line(files):
+    from warpcli.edit.session import EditSession
+
+    tmp, _, src, _, _ = files
+    with pytest.raises(PolygonError, match=r"^.*src.json: holds a cage mesh \(2 faces\); warp edit draws one polygon"):
+        EditSession._existing(src)
+    with pytest.raises(PolygonError, match="holds a cage mesh"):
+        EditSession.load({"name": "src.json", "text": open(src).read()})
+
+
+def test_keypoints_through_a_cage_mesh(files):
+    from warpcli import warp_points
+
+    tmp, _, src, dst, dst_mesh = files
+    src_mesh = read_shape(src)
+    got = warp_points(src_mesh.vertices, src, dst, max_area=16.0)
+    assert got.inside.all() and np.abs(got.points - dst_mesh.vertices).max() <= 1e-9
