@@ -52,8 +52,10 @@ class Keyframes:
     ----------
     frames : sequence of int
         The keyframes' frame numbers, strictly increasing.
-    polygons : sequence of Polygon
-        The polygon at each keyframe.
+    polygons : sequence of Polygon or Partition
+        The polygon at each keyframe; or the cage mesh
+        (`warpcli.polygon.partition.Partition`, the same faces in every
+        keyframe: its vertices move, `at` gives a `Partition`).
     name : str
         How error messages refer to the animation, usually its file name.
 

@@ -413,8 +413,43 @@ def build_cage_map(
         opts = dataclasses.replace(
             opts, max_area=(auto_max_area(src.outline, regions[0]), auto_max_area(dst.outline, regions[1]))
         )
-    maps = [build_map(a, b, opts, regions=regions) for a, b in zip(src.face_polygons(), dst.face_polygons())]
+    pairs = list(zip(src.face_polygons(), dst.face_polygons()))
+    if len(pairs) <= CONCURRENT_FACES:
+        maps = [build_map(a, b, opts, regions=regions) for a, b in pairs]
+    else:
+        maps = [_face_map(a, b, opts, regions) for a, b in pairs]
     return CageMap(src, dst, maps)
+
+
+#: Meshes of at most this many faces build each face with `build_map`, its two
+#: maps at once (a child process and a thread); more faces are built one map
+#: after the other on this thread: on small faces starting the child and the
+#: threads cost more than the maps (measured: 0.08 s against 0.013 s for a
+#: triangle of 1700 px^2; 128 triangles took 16 s instead of 2). The maps are
+#: the same either way (each is independent of the scheduling).
+CONCURRENT_FACES = 4
+
+
+def _face_map(src: Polygon, dst: Polygon, opts: MapOptions, regions: tuple[Region | None, Region | None]) -> BijectiveMap:
+    """`build_map`'s policy for one face, both maps built on this thread."""
+    from .registry import METHODS
+    from .compose import theta_for
+
+    theta = theta_for(src, dst, opts)
+    method = METHODS[opts.method].load()
+    maps = []
+    for polygon, role, region, side in ((src, "source", regions[0], "inverse"), (dst, "target", regions[1], "grid")):
+        phi = method.build(polygon, theta, opts, role, region)
+        if region is not None and hasattr(phi, "precompute"):
+            phi.precompute(side)
+        maps.append(phi)
+    result = BijectiveMap(*maps)
+    for phi in maps:
+        for stage, seconds in phi.timings.items():
+            result.timings[stage] = result.timings.get(stage, 0.0) + seconds
+    if opts.check:
+        result.check_bijective()
+    return result
 
 
 def map_between(
