@@ -424,10 +424,12 @@ def build_cage_map(
 #: Meshes of at most this many faces build each face with `build_map`, its two
 #: maps at once (a child process and a thread); more faces are built one map
 #: after the other on this thread: on small faces starting the child and the
-#: threads cost more than the maps (measured: 0.08 s against 0.013 s for a
-#: triangle of 1700 px^2; 128 triangles took 16 s instead of 2). The maps are
-#: the same either way (each is independent of the scheduling).
-CONCURRENT_FACES = 4
+#: threads cost more than the maps (measured on a busy machine: 0.08 s against
+#: 0.013 s for a triangle of 1700 px^2; 128 triangles took 16 s instead of 2.2,
+#: and 16 faces built this way took less than 4 built concurrently; see
+#: bench/cage.py). The maps are the same either way (each is independent of
+#: the scheduling).
+CONCURRENT_FACES = 2
 
 
 def _face_map(src: Polygon, dst: Polygon, opts: MapOptions, regions: tuple[Region | None, Region | None]) -> BijectiveMap:
