@@ -10,13 +10,14 @@ is scikit-image's PiecewiseAffineTransform; fuzzed meshes never fold
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import read_pixels, run_cli, write_png, write_polygon
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from helpers import run_cli, write_png, write_polygon
 from warpcli.errors import PolygonError
 from warpcli.grid import inside_polygon, pixel_centres
 from warpcli.maps.cage import build_cage_map, face_labels
@@ -322,21 +323,22 @@ def test_a_triangle_mesh_is_piecewise_affine(seed):
     assert np.abs(got[inner] - expected[inner]).max() <= 1e-6
 
 
-def test_a_triangle_mesh_that_folds_is_refused_naming_the_face():
-    src, dst = _delaunay_pair(3)
-    v = dst.vertices.copy()
-    # Vertex 5 moved across the far edge of a triangle round it: that triangle flips.
-    k = next(i for i, f in enumerate(dst.faces) if 5 in f)
-    f = list(dst.faces[k])
-    a, b = (x for x in f if x != 5)
-    v[5] = v[a] + v[b] - v[5]  # reflected through the midpoint of the opposite edge
-    with pytest.raises(PolygonError) as err:
-        Partition(v, dst.faces, "dst.json")
-    message = str(err.value)
-    assert message.startswith("dst.json: ") and "\n" not in message
-    if "face" in message and "flipped" in message:
-        named = int(message.split("face ")[1].split(" ")[0])
-        assert signed_area(v[list(dst.faces[named])]) < 0
+@pytest.mark.parametrize("seed", [3, 8])
+def test_a_triangle_mesh_that_folds_is_refused_naming_the_face(seed):
+    _, dst = _delaunay_pair(seed)
+    for vertex in (5, 6):  # the interior vertices
+        for f in (list(face) for face in dst.faces if vertex in face):
+            # The vertex reflected through the midpoint of the triangle's far edge: that triangle flips.
+            v = dst.vertices.copy()
+            a, b = (x for x in f if x != vertex)
+            v[vertex] = v[a] + v[b] - v[vertex]
+            with pytest.raises(PolygonError) as err:
+                Partition(v, dst.faces, "dst.json")
+            message = str(err.value)
+            assert message.startswith("dst.json: face ") and "flipped over" in message and "\n" not in message
+            named = int(message.split("face ")[1].split(" ")[0])
+            assert signed_area(v[list(dst.faces[named])]) < 0  # the face named is flipped indeed
+            assert signed_area(v[f]) < 0  # and so is the one reflected
 
 
 @settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
@@ -416,9 +418,9 @@ def test_a_one_face_mesh_is_the_polygon_warp(files):
 
 
 def test_a_keyframed_cage_mesh(files):
-    tmp, image, src, dst, dst_mesh = files
+    tmp, image, src, dst, _ = files
     keys = tmp / "anim.json"
-    keys.write_text(json.dumps({"frames": {"1": json.loads(open(src).read()), "3": json.loads(open(dst).read())}}))
+    keys.write_text(json.dumps({"frames": {"1": json.loads(Path(src).read_text()), "3": json.loads(Path(dst).read_text())}}))
     code, err = run_cli([image, "--src", src, "--dst", keys, tmp / "k.png", "--frame", "3", "--max-area", "16"])
     assert code == 0, err
     assert run_cli([image, "--src", src, "--dst", dst, tmp / "d.png", "--max-area", "16"])[0] == 0
@@ -451,17 +453,47 @@ def test_what_a_cage_mesh_cannot_take_is_refused_in_one_line(files, tmp_path):
 def test_the_editor_refuses_a_cage_mesh_in_one_line(files):
     from warpcli.edit.session import EditSession
 
-    tmp, _, src, _, _ = files
+    _, _, src, _, _ = files
     with pytest.raises(PolygonError, match=r"^.*src.json: holds a cage mesh \(2 faces\); warp edit draws one polygon"):
         EditSession._existing(src)
     with pytest.raises(PolygonError, match="holds a cage mesh"):
-        EditSession.load({"name": "src.json", "text": open(src).read()})
+        EditSession.load({"name": "src.json", "text": Path(src).read_text()})
 
 
 def test_keypoints_through_a_cage_mesh(files):
     from warpcli import warp_points
 
-    tmp, _, src, dst, dst_mesh = files
+    _, _, src, dst, dst_mesh = files
     src_mesh = read_shape(src)
     got = warp_points(src_mesh.vertices, src, dst, max_area=16.0)
     assert got.inside.all() and np.abs(got.points - dst_mesh.vertices).max() <= 1e-9
+
+
+def test_batches_sequences_and_retouches_take_a_cage_mesh(files):
+    tmp, image, src, dst, dst_mesh = files
+    opts = ["--max-area", "16"]
+    assert run_cli([image, "--src", src, "--dst", dst, tmp / "one.png", *opts])[0] == 0
+    (tmp / "batch").mkdir()
+    code, err = run_cli([image, "--src", src, "--dst", dst, "--out-dir", tmp / "batch", *opts])
+    assert code == 0, err
+    assert (tmp / "batch" / "in.png").read_bytes() == (tmp / "one.png").read_bytes()
+    # A sequence whose target mesh is keyframed: frame 3 is the target mesh itself.
+    for f in (2, 3):
+        (tmp / f"f.000{f}.png").write_bytes(Path(image).read_bytes())
+    keys = tmp / "anim.json"
+    keys.write_text(json.dumps({"frames": {"1": json.loads(Path(src).read_text()), "3": json.loads(Path(dst).read_text())}}))
+    code, err = run_cli([tmp / "f.#.png", tmp / "o.#.png", "--frames", "2-3", "--src", src, "--dst", keys,
+                         "--save-map", tmp / "m.#.exr", *opts])  # fmt: skip
+    assert code == 0, err
+    assert (tmp / "o.0003.png").read_bytes() == (tmp / "one.png").read_bytes()
+    assert (tmp / "o.0002.png").read_bytes() != (tmp / "one.png").read_bytes() and (tmp / "m.0002.exr").exists()
+    # A retouch: outside the target mesh's outline (a pixel away) the input's bytes.
+    code, err = run_cli([image, "--src", src, "--dst", dst, tmp / "r.png", "--outside", "input", *opts])
+    assert code == 0, err
+    before, after = read_pixels(image), read_pixels(tmp / "r.png")
+    centres = pixel_centres(48, 48)
+    near = inside_polygon(centres, dst_mesh.outline.points)
+    for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (-1, -1), (1, -1), (-1, 1)):
+        near |= inside_polygon(centres + [dx, dy], dst_mesh.outline.points)
+    away = ~near.reshape(48, 48)
+    assert away.sum() > 0 and np.array_equal(before[away], after[away])

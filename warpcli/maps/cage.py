@@ -434,8 +434,8 @@ CONCURRENT_FACES = 2
 
 def _face_map(src: Polygon, dst: Polygon, opts: MapOptions, regions: tuple[Region | None, Region | None]) -> BijectiveMap:
     """`build_map`'s policy for one face, both maps built on this thread."""
-    from .registry import METHODS
     from .compose import theta_for
+    from .registry import METHODS
 
     theta = theta_for(src, dst, opts)
     method = METHODS[opts.method].load()
