@@ -15,6 +15,7 @@ __version__ = "0.2.0"
 _EXPORTS = {
     "BatchItem": "batch",
     "BijectiveMap": "maps.compose",
+    "CageMap": "maps.cage",
     "Certificate": "mapping",
     "FoldOverError": "errors",
     "ImageIOError": "errors",
@@ -24,6 +25,7 @@ _EXPORTS = {
     "MeshError": "surface",
     "MeshingError": "errors",
     "Polygon": "polygon",
+    "Partition": "polygon.partition",
     "PolygonTransform": "transform",
     "PolygonError": "errors",
     "PullBack": "maps.compose",
@@ -38,12 +40,15 @@ _EXPORTS = {
     "WarpedBoxes": "annotations",
     "WarpedPoints": "annotations",
     "apply_map_file": "pipeline",
+    "build_cage_map": "maps.cage",
     "build_map": "maps.compose",
     "build_report": "report",
     "load_stmap": "raster.stmap",
     "pixel_centres": "grid",
     "read_image": "raster.imageio",
+    "read_partition": "polygon.partition",
     "read_polygon": "polygon",
+    "read_shape": "polygon.partition",
     "save_stmap": "raster.stmap",
     "resample": "raster.resample",
     "warp_batch": "batch",
@@ -78,6 +83,7 @@ if TYPE_CHECKING:
     from .grid import pixel_centres
     from .mapping import Certificate
     from .maps.base import ThetaMap
+    from .maps.cage import CageMap, build_cage_map
     from .maps.compose import BijectiveMap, PullBack, build_map
     from .maps.theta import Theta
     from .options import MapOptions, WarpOptions
@@ -87,6 +93,7 @@ if TYPE_CHECKING:
     from .plan import SamplingPlan
     from .sequence import parse_frames
     from .polygon import Polygon, read_polygon
+    from .polygon.partition import Partition, read_partition, read_shape
     from .transform import PolygonTransform
     from .raster.imageio import RasterImage, read_image, write_image
     from .raster.resample import resample

@@ -20,6 +20,7 @@ coordinates (pixel ``(r, c)`` has its centre at ``(c + 0.5, r + 0.5)``):
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from typing import Any, NamedTuple
 
@@ -27,9 +28,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import InputError
+from .maps.cage import map_between
 from .maps.compose import BijectiveMap
 from .options import MapOptions
-from .polygon import Polygon, read_polygon
+from .polygon import Polygon
+from .polygon.partition import Partition, read_shape
 
 __all__ = ["WarpedBoxes", "WarpedPoints", "map_of", "warp_boxes", "warp_labels", "warp_points"]
 
@@ -93,11 +96,11 @@ def map_of(where: Any) -> BijectiveMap:
     return fmap
 
 
-def _polygon(poly: Polygon | ArrayLike | str | os.PathLike[str], name: str) -> Polygon:
-    if isinstance(poly, Polygon):
+def _polygon(poly: Polygon | Partition | ArrayLike | str | os.PathLike[str], name: str) -> Polygon | Partition:
+    if isinstance(poly, (Polygon, Partition)):
         return poly
     if isinstance(poly, (str, os.PathLike)):
-        return read_polygon(poly)
+        return read_shape(poly)  # a polygon file, or a cage mesh's
     return Polygon(np.asarray(poly, dtype=np.float64), name=name)
 
 
@@ -108,7 +111,16 @@ def _the_map(src, dst, fmap, options: MapOptions | None, changes: dict) -> Bijec
         return map_of(fmap)
     if src is None or dst is None:
         raise InputError("give the polygons src and dst, or a map (fmap=...)")
-    return BijectiveMap.between(_polygon(src, "src"), _polygon(dst, "dst"), options, **changes)
+    a, b = _polygon(src, "src"), _polygon(dst, "dst")
+    if isinstance(a, Partition) or isinstance(b, Partition):
+        opts = options or MapOptions()
+        if changes:
+            try:
+                opts = dataclasses.replace(opts, **changes)
+            except TypeError as err:
+                raise InputError(f"unknown map option: {err}") from None
+        return map_between(a, b, opts)  # type: ignore[return-value]
+    return BijectiveMap.between(a, b, options, **changes)
 
 
 def _as_points(points: ArrayLike, what: str, width: int) -> NDArray[np.float64]:
@@ -137,9 +149,10 @@ def warp_points(
     points : (K, 2) array_like of float
         ``(x, y)`` in warpcli's pixel coordinates (pixel centres at +0.5;
         add 0.5 to scikit-image's or OpenCV's integer centres).
-    src, dst : Polygon, (n, 2) array_like or path-like, optional
+    src, dst : Polygon, Partition, (n, 2) array_like or path-like, optional
         The polygons of the warp (vertex i of ``src`` onto vertex i of
-        ``dst``); a path is read as a polygon file.
+        ``dst``), or two cage meshes; a path is read as a polygon file (or a
+        cage mesh's, `warpcli.polygon.partition.read_shape`).
     fmap : BijectiveMap, WarpResult or PolygonTransform, optional
         The map an image was warped with, instead of ``src`` and ``dst``:
         the points then move exactly as that image's pixels did.

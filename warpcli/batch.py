@@ -22,12 +22,14 @@ from typing import Any
 
 from .errors import ImageInputError, InputError, WarpError, naming
 from .files import check_regular_file
+from .maps.cage import map_between
 from .maps.compose import BijectiveMap
 from .options import WarpOptions, resolve_options
 from .outputs import RunInputs
 from .pipeline import read_header_or_none, write_like
 from .plan import SamplingPlan, background_values, check_paste, plan_for
-from .polygon import Polygon, check_pair, read_polygon
+from .polygon import Polygon
+from .polygon.partition import check_shapes, read_shape
 from .raster.imageio import check_image_output, read_image
 from .tiled import in_parts, warp_file_tiled
 
@@ -151,7 +153,7 @@ def warp_batch(
     tasks, src, dst = prepare_batch(
         input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=opts.map.theta_file
     )
-    plans = PlanCache(BijectiveMap.between(src, dst, opts.map), opts)
+    plans = PlanCache(map_between(src, dst, opts.map), opts)
     return _each(lambda task: warp_one(task[0], task[1], plans), tasks, jobs, on_item)
 
 
@@ -178,9 +180,9 @@ def prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, 
             raise InputError(f"{out}: both {seen[key]} and {os.fspath(inp)} would be written there")
         seen[key] = os.fspath(inp)
         check_image_output(out, inputs=inputs)
-    src = read_polygon(src_path, src_label)
-    dst = read_polygon(dst_path, dst_label)
-    check_pair(src, dst)
+    src = read_shape(src_path, src_label)
+    dst = read_shape(dst_path, dst_label)
+    check_shapes(src, dst)
     return [(os.fspath(inp), out) for inp, out in zip(input_paths, outputs)], src, dst
 
 
@@ -427,7 +429,7 @@ def warp_run(
                 on_item(item)
         return done
     try:
-        plans = PlanCache(BijectiveMap.between(src, dst, opts.map), opts)
+        plans = PlanCache(map_between(src, dst, opts.map), opts)
     except WarpError as err:  # a map that cannot be built fails its frames, not the others
         done = [missing.get(f) or BatchItem(inp, out, err.with_traceback(None)) for inp, out, f in tasks]
         for item in done:
@@ -593,7 +595,7 @@ def warp_sequence(
     for f, _ in ins:
         if f not in pairs and f not in missing:
             pairs[f] = (src_keys.at(f), dst_keys.at(f))
-            check_pair(*pairs[f])
+            check_shapes(*pairs[f])
     # Runs of frames with the same pair share one map (a missing frame breaks
     # no run); the frames of a run go to the threads.
     runs: list[tuple[tuple[bytes, bytes] | None, list[tuple[str, str, int]]]] = []

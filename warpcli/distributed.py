@@ -181,7 +181,7 @@ def warp_batch_dask(
         from dask.distributed import Client, LocalCluster
     except ImportError:
         raise InputError("--scheduler needs dask.distributed: pip install 'warpcli[dask]'") from None
-    from .maps.compose import BijectiveMap
+    from .maps.cage import map_between
 
     check_scheduler(scheduler)
     timeout = connect_timeout()
@@ -191,7 +191,7 @@ def warp_batch_dask(
     )
     # One sampling plan per output size, made here and shipped; an input whose
     # header cannot be read fails in its task, with the message a local run gives.
-    cache = PlanCache(BijectiveMap.between(src, dst, opts.map), opts)
+    cache = PlanCache(map_between(src, dst, opts.map), opts)
     for inp, _ in tasks:
         header = read_header_or_none(inp) if opts.size is None else None
         if opts.size is not None or header is not None:

@@ -19,10 +19,11 @@ from .errors import InputError, PolygonError
 from .files import read_small_file
 from .polygon import MAX_FILE_BYTES, Polygon, read_polygon
 from .polygon.formats import parse_int, parse_json, points_of
+from .polygon.partition import Partition, is_partition_document, partition_of
 from .polygon.messages import short_value
 from .sequence import FRAME_LIMIT
 
-__all__ = ["Keyframes", "read_animated", "read_keyframes", "read_polygon_at"]
+__all__ = ["Keyframes", "read_animated", "read_keyframes", "read_polygon_at", "read_shape_at"]
 
 # A keyframe's key: a whole number, optionally negative, in ASCII digits
 # ("1001", "-5", "0042"). Not "+5", "1.0", "1e3", " 7" or other scripts' digits.
@@ -51,8 +52,10 @@ class Keyframes:
     ----------
     frames : sequence of int
         The keyframes' frame numbers, strictly increasing.
-    polygons : sequence of Polygon
-        The polygon at each keyframe.
+    polygons : sequence of Polygon or Partition
+        The polygon at each keyframe; or the cage mesh
+        (`warpcli.polygon.partition.Partition`, the same faces in every
+        keyframe: its vertices move, `at` gives a `Partition`).
     name : str
         How error messages refer to the animation, usually its file name.
 
@@ -99,6 +102,14 @@ class Keyframes:
                 raise PolygonError(f"{self.name}: keyframes must increase, but {b} follows {a}")
         first = polygons[0]
         for f, poly in zip(frames[1:], polygons[1:]):
+            # A cage mesh (`Partition`) moves its vertices; its faces stay.
+            if isinstance(poly, Partition) != isinstance(first, Partition) or (
+                isinstance(first, Partition) and poly.faces != first.faces
+            ):
+                raise PolygonError(
+                    f"{self.name}: keyframe {f} has other faces than keyframe {frames[0]}; every keyframe of a "
+                    "cage mesh needs the same faces (and a polygon file only polygons)"
+                )
             if poly.n != first.n:
                 raise PolygonError(
                     f"{self.name}: keyframe {f} has {poly.n} vertices but keyframe {frames[0]} has {first.n}; "
@@ -176,7 +187,10 @@ class Keyframes:
         if t == 0.0 or np.array_equal(self.polygons[i].points, self.polygons[i + 1].points):
             return self.polygons[i]
         a, b = self.frames[i], self.frames[i + 1]
-        return Polygon(self._blend(i, t), name=f"{self.name} (frame {_fmt_frame(frame)}, between keyframes {a} and {b})")
+        name = f"{self.name} (frame {_fmt_frame(frame)}, between keyframes {a} and {b})"
+        if isinstance(self.polygons[i], Partition):
+            return self.polygons[i].moved(self._blend(i, t), name)
+        return Polygon(self._blend(i, t), name=name)
 
     def same(self, a: float, b: float) -> bool:
         """Whether the polygon is exactly the same at frames ``a`` and ``b``.
@@ -336,9 +350,10 @@ def _load(name: str) -> tuple[object, str]:
     return parse_json(text, name), text
 
 
-def _polygon(doc: object, name: str, label: str | None) -> Polygon:
+def _polygon(doc: object, name: str, label: str | None) -> Polygon | Partition:
     try:
-        return Polygon(points_of(doc, name, label), name=name)
+        mesh = partition_of(doc, name, label)
+        return mesh if mesh is not None else Polygon(points_of(doc, name, label), name=name)
     except RecursionError as err:  # as read_polygon: arrays nested ~1000 deep
         raise PolygonError(f"{name}: invalid polygon file: arrays nested too deeply") from err
 
@@ -470,3 +485,42 @@ def read_polygon_at(path: str | os.PathLike[str], label: str | None = None, fram
         raise TypeError(f"a frame number must be an integer, not {type(frame).__name__}")
     keys = read_keyframes(name, label)
     return read_polygon(name, label) if keys is None else keys.at(int(frame))
+
+
+def read_shape_at(
+    path: str | os.PathLike[str], label: str | None = None, frame: int | None = None
+) -> Polygon | Partition:
+    """`read_polygon_at`, where the file may also hold a cage mesh (or keyframes of one).
+
+    A cage mesh (`warpcli.polygon.partition.read_shape`: ``"faces"``, or a
+    labelme or GeoJSON file with several polygons and no ``label``) comes back
+    as a `Partition`, a keyframed one at ``frame`` (its vertices blended,
+    its faces kept); any other file exactly as `read_polygon_at` reads it.
+
+    Raises
+    ------
+    PolygonError
+        As `read_polygon_at`, and for invalid cage meshes.
+    """
+    name = os.fspath(path)
+    try:
+        doc, text = _load(name)
+    except PolygonError:
+        return read_polygon_at(name, label, frame)  # it says why, as it always did
+    if isinstance(doc, dict) and "frames" in doc and isinstance(doc["frames"], dict):
+        values = list(doc["frames"].values())
+        if values and any(is_partition_document(v, label) for v in values):
+            keys = _keyframes(doc, text, name, label)
+            if frame is None:
+                raise PolygonError(
+                    f"{name}: holds keyframes (frames {_fmt_frame(keys.frames[0])} to {_fmt_frame(keys.frames[-1])}), "
+                    "not one cage mesh: choose one frame with --frame N (or warp an image sequence with --frames)"
+                )
+            if isinstance(frame, bool) or not isinstance(frame, numbers.Integral):
+                raise TypeError(f"a frame number must be an integer, not {type(frame).__name__}")
+            return keys.at(int(frame))
+    elif is_partition_document(doc, label):
+        mesh = partition_of(doc, name, label)
+        assert mesh is not None
+        return mesh
+    return read_polygon_at(name, label, frame)

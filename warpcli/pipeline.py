@@ -24,13 +24,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from .annotations import warp_labels
 from .errors import ImageInputError, InputError, WarpError, naming
+from .maps.cage import map_between
 from .maps.compose import BijectiveMap, PullBack
 from .budget import check_fits
 from .options import WarpOptions, resolve_options
 from .outputs import PendingOutputs, check_output_path, write_checked
 from .plan import SamplingPlan, background_values, check_paste, plan_for, warn_if_outside
-from .keyframes import read_polygon_at
-from .polygon import Polygon, check_pair
+from .keyframes import read_shape_at
+from .polygon import Polygon
+from .polygon.partition import Partition, check_shapes
 from .raster.imageio import (
     ImageHeader,
     RasterImage,
@@ -148,17 +150,18 @@ def warp_image(
     ----------
     image : (H, W) or (H, W, C) array_like
         Pixels in any numeric type; the result has the same type.
-    src, dst : Polygon or (n, 2) array_like of float
+    src, dst : Polygon, Partition or (n, 2) array_like of float
         Corresponding polygons: ``src`` in the input image's coordinates, ``dst``
-        in the output's (x right, y down, pixel centres at +0.5).
+        in the output's (x right, y down, pixel centres at +0.5); or two cage
+        meshes with the same faces (`warpcli.maps.cage`).
     options : WarpOptions or None
         Map, resampling and output options; the defaults otherwise.
     alpha_channel : int or None
         Index of an alpha channel: colour is resampled premultiplied.
     associated_alpha : bool
         Whether the colour is already premultiplied by alpha.
-    warp_map : BijectiveMap or None
-        A map already built between these polygons, to reuse.
+    warp_map : BijectiveMap, CageMap or None
+        A map already built between these polygons (or cage meshes), to reuse.
     progress : callable or None
         Called with the name of each stage as it starts.
     **changes
@@ -211,9 +214,9 @@ def _warp(
         raise InputError(f"image must be a non-empty (H, W) or (H, W, C) array, got shape {img.shape}")
     if img.dtype.kind not in "uif":
         raise InputError(f"image must hold numbers, got dtype {img.dtype}")
-    src = src if isinstance(src, Polygon) else Polygon(src, name="src")
-    dst = dst if isinstance(dst, Polygon) else Polygon(dst, name="dst")
-    check_pair(src, dst)
+    src = src if isinstance(src, (Polygon, Partition)) else Polygon(src, name="src")
+    dst = dst if isinstance(dst, (Polygon, Partition)) else Polygon(dst, name="dst")
+    check_shapes(src, dst)
     width, height = opts.size if opts.size is not None else (img.shape[1], img.shape[0])
     check_output(opts, (width, height), (img.shape[1], img.shape[0]), img[:1, :1])
     stage = progress or (lambda name: None)
@@ -225,9 +228,9 @@ def _warp(
         if early is not None and early.regions == regions:
             fmap = early.take()
         else:
-            fmap = BijectiveMap.between(src, dst, opts.map, regions=regions)
+            fmap = map_between(src, dst, opts.map, regions=regions)
         timings.update(fmap.timings)
-    elif not (_same_polygon(fmap.src, src) and _same_polygon(fmap.dst, dst)):
+    elif not (_same_polygon(_shape_of(fmap, "src"), src) and _same_polygon(_shape_of(fmap, "dst"), dst)):
         raise InputError("warp_map was built between other polygons than src and dst")
     clock = time.perf_counter
     t0 = clock()
@@ -241,7 +244,16 @@ def _warp(
     return WarpResult(out, fmap, plan.pull, timings, plan=plan)
 
 
-def _same_polygon(a: Polygon, b: Polygon) -> bool:
+def _shape_of(fmap: Any, side: str) -> Polygon | Partition:
+    """A map's source or target: its polygon, or a cage map's mesh."""
+    return getattr(fmap, f"{side}_mesh", None) or getattr(fmap, side)
+
+
+def _same_polygon(a: Polygon | Partition, b: Polygon | Partition) -> bool:
+    if isinstance(a, Partition) != isinstance(b, Partition):
+        return False
+    if isinstance(a, Partition) and a.faces != b.faces:  # type: ignore[union-attr]
+        return False
     return a.points.shape == b.points.shape and bool(np.array_equal(a.points, b.points))
 
 
@@ -308,7 +320,7 @@ class _EarlyMap:
         log.addFilter(_hold_back)  # once: the same function
         context = contextvars.copy_context()
         context.run(_HELD_RECORDS.set, self._records)
-        build = functools.partial(BijectiveMap.between, src, dst, opts.map, regions=regions)
+        build = functools.partial(map_between, src, dst, opts.map, regions=regions)
         self._task = context.run(Task, build, name="warp-map")
 
     def take(self) -> BijectiveMap:
@@ -460,9 +472,11 @@ def warp_file(
     ]
     if len(set(outputs)) != len(outputs):
         raise InputError(f"{os.fspath(output_path)}: the same path is given for two outputs")
-    src = read_polygon_at(src_path, src_label, frame)
-    dst = read_polygon_at(dst_path, dst_label, frame)
-    check_pair(src, dst)
+    src = read_shape_at(src_path, src_label, frame)
+    dst = read_shape_at(dst_path, dst_label, frame)
+    check_shapes(src, dst)
+    if isinstance(src, Partition) and save_theta is not None:
+        raise InputError(f"{os.fspath(save_theta)}: --save-theta writes one Theta, but a cage mesh has one per face")
     header = read_header_or_none(input_path)
     if in_parts(input_path, header, opts.size, tiled):
         return _warp_file_tiled(
@@ -489,7 +503,7 @@ def warp_file(
             src.name,
             dst.name,
         )
-    else:
+    elif isinstance(src, Polygon):
         _warn_if_relabelled(src, dst)
     try:  # an image with other channels than the background's: name the image
         background_values(opts.background, image.pixels)

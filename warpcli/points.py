@@ -31,12 +31,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
-from .maps.compose import BijectiveMap
 from .options import MapOptions
 from .files import read_small_file
 from .outputs import PendingOutputs, check_output_path, write_checked
-from .keyframes import read_polygon_at
-from .polygon import check_pair
+from .keyframes import read_shape_at
+from .maps.cage import map_between
+from .polygon.partition import check_shapes
 
 log = logging.getLogger("warpcli")
 
@@ -144,16 +144,16 @@ def map_points_file(
     if kind == ".obj" and texture_size is None:
         raise InputError(f"{name}: an OBJ file's UVs need the texture size (--texture-size WxH)")
     raw = _read(name)
-    src = read_polygon_at(src_path, src_label, frame)
-    dst = read_polygon_at(dst_path, dst_label, frame)
-    check_pair(src, dst)
+    src = read_shape_at(src_path, src_label, frame)
+    dst = read_shape_at(dst_path, dst_label, frame)
+    check_shapes(src, dst)
     if kind == ".json":
         pts, write = _json_points(raw, name, precision)
     elif kind in (".csv", ".txt"):
         pts, write = _table_points(raw, name, kind, columns, precision)
     else:
         pts, write = _obj_points(raw, name, texture_size)  # type: ignore[arg-type]
-    fmap = BijectiveMap.between(src, dst, options or MapOptions())
+    fmap = map_between(src, dst, options or MapOptions())
     moved = fmap.inverse(pts) if inverse else fmap.forward(pts)
     lost = ~np.isfinite(moved).all(axis=1)
     if lost.any():

@@ -43,6 +43,7 @@ from numpy.typing import NDArray
 
 from .budget import MAX_COMPRESSION
 from .errors import InputError
+from .maps.cage import map_between
 from .maps.compose import BijectiveMap
 from .options import WarpOptions
 from .plan import SamplingPlan, check_paste, plan_for, warn_if_outside
@@ -113,7 +114,7 @@ def warp_file_tiled(
         stage("building the map")
         t0 = clock()
         regions = ((0.0, 0.0, float(header.width), float(header.height)), (0.0, 0.0, float(width), float(height)))
-        fmap = BijectiveMap.between(src, dst, opts.map, regions=regions)
+        fmap = map_between(src, dst, opts.map, regions=regions)
         timings.update(fmap.timings)
         timings["map"] = clock() - t0
     out_header = dataclasses.replace(header, dtype=np.dtype(DTYPES[opts.dtype])) if opts.dtype else header

@@ -102,8 +102,9 @@ single_outputs = collected(
 @click.command(cls=DefaultCommand, context_settings=CONTEXT, epilog=WARP_EPILOG)
 @click.argument("paths", metavar="INPUT OUTPUT | INPUT... --out-dir DIR", nargs=-1, type=click.Path(dir_okay=True))
 @polygon_options(
-    "Source polygon file (JSON, labelme or GeoJSON), in INPUT's pixel coordinates.",
-    "Target polygon file (JSON, labelme or GeoJSON), in OUTPUT's pixel coordinates.",
+    "Source polygon file (JSON, labelme or GeoJSON), in INPUT's pixel coordinates; or a cage mesh: "
+    '{"vertices": [...], "faces": [[i, j, k, ...], ...]}, or several polygons sharing edges.',
+    "Target polygon file (JSON, labelme or GeoJSON), in OUTPUT's pixel coordinates; or a cage mesh with SRC's faces.",
     "Which polygon of a labelme or GeoJSON --{side} file holding several: its label, or #N for the N-th (from 0).",
 )
 @click.option(

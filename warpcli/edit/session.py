@@ -11,13 +11,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError, WarpError
+from ..errors import InputError, PolygonError, WarpError
 from ..maps.registry import METHODS, THETAS
 from ..options import BOUNDARIES, INTERPOLATIONS, OUTSIDE, MapOptions, WarpOptions
 from ..outputs import atomic_path, check_output_path, write_checked
-from ..polygon import Polygon, check_pair, read_polygon
+from ..polygon import Polygon, check_pair
 from ..raster.imageio import check_image_output, read_image
 from .preview import PreviewImage, PreviewMapper, encode_png, preview_image, with_preview_density
+
+#: The editor draws one polygon per side; a cage mesh file is refused with this line.
+_CAGE_REFUSED = (
+    "{name}: holds a cage mesh ({faces} faces); warp edit draws one polygon per side: edit a cage mesh as JSON "
+    "(or several polygons in labelme) and warp it with warp --src/--dst"
+)
 
 __all__ = ["MAX_VERTICES", "EditPaths", "EditSession", "mirror_warning", "rotated_start", "rotated_start_warning"]
 
@@ -164,7 +170,12 @@ class EditSession:
         """The polygon in ``path`` if the file exists (the CLI's errors if it is bad), else None."""
         if not os.path.exists(path):
             return None
-        return read_polygon(path).points.tolist()
+        from ..polygon.partition import Partition, read_shape
+
+        shape = read_shape(path)
+        if isinstance(shape, Partition):
+            raise PolygonError(_CAGE_REFUSED.format(name=path, faces=shape.n_faces))
+        return shape.points.tolist()
 
     # --- what the page asks ------------------------------------------------------
 
@@ -302,7 +313,12 @@ class EditSession:
         if not isinstance(name, str) or not isinstance(text, str) or not (label is None or isinstance(label, str)):
             raise InputError("load: expected a file name, its text and an optional label")
         name = os.path.basename(name) or "polygon"
-        points = points_of(parse_json(text.lstrip("\ufeff"), name), name, label)
+        parsed = parse_json(text.lstrip("\ufeff"), name)
+        from ..polygon.partition import is_partition_document
+
+        if is_partition_document(parsed, label):
+            raise PolygonError(_CAGE_REFUSED.format(name=name, faces="several"))
+        points = points_of(parsed, name, label)
         return {"points": Polygon(points, name=name).points.tolist()}
 
     # --- saving and exporting -------------------------------------------------------

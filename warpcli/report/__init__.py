@@ -61,7 +61,9 @@ def build_report(result: Measurable) -> dict:
     f = result.map
     result.timings["metrics"] = time.perf_counter() - t0
     timings = dict(result.timings)
-    theta = {"theta": {"name": f.theta.name, **f.theta.notes}} if f.theta.notes else {}
+    # A cage map (`warpcli.maps.cage.CageMap`) has a Theta per face, and a report per face.
+    theta = {"theta": {"name": f.theta.name, **f.theta.notes}} if f.theta is not None and f.theta.notes else {}
+    faces = _faces(f, result.pull, summarize) if hasattr(f, "face_maps") else {}
     return {
         "vertices": f.src.n,
         **theta,
@@ -70,5 +72,34 @@ def build_report(result: Measurable) -> dict:
         "min_jacobian_det": summary["min_jacobian_det"],
         "conformal": summary["conformal"],
         "isometric": summary["isometric"],
+        **faces,
         "timings": {k: round(v, 4) for k, v in timings.items()},
+    }
+
+
+def _faces(f: Any, pull: Any, summarize: Any) -> dict:
+    """A cage map's certificate and each face's: its map's certificates, mesh and distortion.
+
+    The whole map is certified when every face map is: the meshes were
+    validated as partitions with the same faces and orientation, so the
+    faces' images tile the target without overlap.
+    """
+    labels = getattr(pull, "faces", None)
+    per = []
+    for k, fmap in enumerate(f.face_maps):
+        c0, c1 = fmap.certificates()
+        entry: dict[str, Any] = {
+            "face": k, "vertices": fmap.src.n, **fmap.describe(), "certified": c0.ok and c1.ok,
+            "flipped_triangles": fmap.flipped_triangles(),
+        }  # fmt: skip
+        if labels is not None:
+            mine = labels == k
+            entry["pixels"] = int(mine.sum())
+            entry.update(summarize(pull.jacobian[mine]) if mine.any() else {})
+        per.append(entry)
+    return {
+        "certified": all(e["certified"] for e in per),
+        "certificate": "every face map certified one-to-one; the target faces a partition with the source's "
+        "faces and orientation (validated), so the whole map is one-to-one",
+        "faces": per,
     }

@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from ..grid import clip_segments
 from ..polygon import Polygon
+from ..polygon.partition import Partition
 from ..raster.pixels import to_unit
 from ..raster.resample import resample
 
@@ -87,8 +88,8 @@ def picture(rgb: NDArray[np.uint8]) -> RasterImage:
 def grid_figure(
     pixels: NDArray,
     inverse_map: NDArray[np.float64],
-    src: Polygon,
-    dst: Polygon,
+    src: Polygon | Partition,
+    dst: Polygon | Partition,
     *,
     alpha_channel: int | None = None,
     spacing: int | None = None,
@@ -106,7 +107,8 @@ def grid_figure(
         The input image.
     inverse_map : (H2, W2, 2) ndarray of float
         Source point of every output pixel centre (NaN outside the target).
-    src, dst : Polygon
+    src, dst : Polygon or Partition
+        Drawn on each half: a polygon's outline, a cage mesh's faces.
     alpha_channel : int or None
     spacing : int or None
         Grid spacing in pixels; about a sixteenth of the image by default.
@@ -126,9 +128,18 @@ def grid_figure(
     between = np.setdiff1d(np.arange(h), rows)
     gridded[np.ix_(between, cols)] = _light(gridded[np.ix_(between, cols)])
     warped = resample(gridded, inverse_map, interp="linear", background=_OUTSIDE)
-    left = draw_outline(gridded, src.points, _OUTLINE)
-    right = draw_outline(warped, dst.points, _OUTLINE)
+    left = _draw_shape(gridded, src)
+    right = _draw_shape(warped, dst)
     return side_by_side(left, right)
+
+
+def _draw_shape(img: NDArray[np.uint8], shape: Polygon | Partition) -> NDArray[np.uint8]:
+    """A polygon's outline, or every face of a cage mesh."""
+    if isinstance(shape, Partition):
+        for k in range(shape.n_faces):
+            img = draw_outline(img, shape.face_points(k), _OUTLINE)
+        return img
+    return draw_outline(img, shape.points, _OUTLINE)
 
 
 def _light(rgb: NDArray[np.uint8]) -> NDArray[np.uint8]:
