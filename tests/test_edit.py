@@ -296,6 +296,48 @@ def test_preview_map_is_build_map(server):
     assert cyc.rebuilt == ("source", "target")
 
 
+def _decoded(data: bytes):
+    n = int.from_bytes(data[:4], "little")
+    header = json.loads(data[4 : 4 + n])
+    if not header["ok"]:
+        return header, None
+    v = header["vertices"]
+    xyuv = np.frombuffer(data, "<f4", 4 * v, 4 + n).reshape(v, 4)
+    return header, xyuv
+
+
+@pytest.mark.parametrize("factor", [1, 2])
+def test_a_drag_rebuilds_only_its_side_at_the_drag_density_and_the_release_at_the_full_one(tmp_path, factor):
+    from warpcli.edit.preview import PREVIEW_DRAG_TRIANGLES, with_preview_density
+
+    image = str(tmp_path / "i.png")
+    write_smooth_image(image, 128 * factor, 128 * factor)
+    session = EditSession(EditPaths.defaults(image))
+    session.preview = preview_image(read_image(image), side=128)  # a factor whatever PREVIEW_SIDE is
+    assert session.preview.factor == factor
+    src = star(5) * factor
+    region = (0.0, 0.0, 128.0, 128.0)
+    steps = [(None, star(5, r_in=30)), ("dst", star(5, r_in=31)), ("dst", star(5, r_in=32)), (None, star(5, r_in=32)),
+             ("src", star(5, r_in=32))]  # fmt: skip
+    expected_rebuilt = [["source", "target"], ["target"], ["target"], ["target"], ["source"]]
+    for (drag, dst), rebuilt in zip(steps, expected_rebuilt):
+        if drag == "src":
+            src = star(5, r_out=56) * factor
+        header, xyuv = _decoded(session.preview_map({"src": src.tolist(), "dst": (dst * factor).tolist(), "drag": drag}))
+        assert header["rebuilt"] == rebuilt
+        psrc, pdst = Polygon(src / factor), Polygon(dst)
+        full = preview_areas(psrc, pdst)
+        coarse = preview_areas(psrc, pdst, PREVIEW_DRAG_TRIANGLES)
+        side = {"src": 0, "dst": 1}.get(drag)
+        assert header["max_area"] == [coarse[i] if i == side else full[i] for i in (0, 1)]
+        # The real map at that density: what BijectiveMap.between builds from the same options.
+        ref = BijectiveMap.between(psrc, pdst, with_preview_density(MapOptions(), psrc, pdst, drag), regions=(region, region))
+        np.testing.assert_array_equal(xyuv[:, :2], ref.phi1.mesh.vertices.astype(np.float32))
+        assert_inverse(xyuv[:, 2:].astype(float), xyuv[:, :2].astype(float), ref, atol=1e-3)
+    header, _ = _decoded(session.preview_map({"src": src.tolist(), "dst": (dst * factor).tolist(), "drag": "both"}))
+    assert not header["ok"] and "drag must be" in header["error"]
+
+
 @pytest.mark.parametrize("method", ["bem", "mfs"])
 def test_preview_of_meshless_methods(method):
     src, dst = Polygon(l_shape(), name="a"), Polygon(l_shape(notch=0.4), name="b")

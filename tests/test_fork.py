@@ -94,3 +94,36 @@ def test_fork_can_be_turned_off(monkeypatch):
     assert not _fork.available()
     sq = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), name="sq")
     assert fem.build_forked(sq, theta_for(sq, sq, MapOptions()), MapOptions()) is None
+
+
+def _echo_or(x):
+    if x == "die":
+        _die()
+    if x == "fail":
+        _fail()
+    return _say_and_return(x)
+
+
+def test_a_worker_answers_call_after_call_with_large_arrays_its_errors_and_its_records(caplog):
+    workers = [_fork.Worker(_echo_or) for _ in range(2)]  # two alive at once: each must still end when closed
+    try:
+        for x in (3, 300_000, 5):  # 300_000 values: 2.4 MB, out of band and longer than the pipe
+            for w in workers:
+                w.submit(x)
+            for w in workers:
+                with caplog.at_level(logging.WARNING, logger="warpcli"):
+                    caplog.clear()
+                    out = w.result()
+                assert out["twice"] == 2 * x and np.array_equal(out["array"], np.arange(x))
+                assert [r.getMessage() for r in caplog.records] == [f"from the child: {x}"]
+        workers[0].submit("fail")
+        with pytest.raises(InputError, match="nothing to mesh"):
+            workers[0].result()
+        workers[0].submit(7)
+        assert workers[0].result()["twice"] == 14  # still serving after an error
+        workers[1].submit("die")
+        with pytest.raises(_fork.ChildDied, match="SIGSEGV"):
+            workers[1].result()
+    finally:
+        for w in workers:
+            w.close()  # returns: the child saw the end of its requests (or was gone)

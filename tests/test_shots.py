@@ -323,17 +323,13 @@ def test_an_output_pattern_with_hash_runs_is_warned_about(tmp_path):
 @pytest.mark.parametrize("budget, processes", [(600_000, False), (10_000_000, True)])
 def test_worker_processes_stay_within_the_memory_budget(tmp_path, monkeypatch, budget, processes):
     """A frame of 96 x 72 RGB needs 0.44 MB (its pixels, the output and its map): 0.6 MB holds one at a time."""
-    import concurrent.futures
-
     _frames(tmp_path / "in", range(1, 4))
     src, dst = _animated(tmp_path, 3, 1, 3)
-    started = []
-    real = concurrent.futures.ProcessPoolExecutor
-    monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", lambda *a, **k: started.append(k["max_workers"]) or real(*a, **k))
+    peak = _count_builders(monkeypatch)
     monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", str(budget))
     code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", "1-3", "--jobs", 2])
     assert code == 0, err
-    assert started == ([2] if processes else [])
+    assert peak == ([2] if processes else [0])
 
 
 def test_a_feathered_retouch_of_an_animated_cage_is_each_frame_s_single_retouch(tmp_path):
@@ -353,3 +349,104 @@ def test_a_feathered_retouch_of_an_animated_cage_is_each_frame_s_single_retouch(
     assert (tmp_path / "one.png").read_bytes() == (tmp_path / "out.0002.png").read_bytes()
     assert read_pixels(tmp_path / "one.exr").tobytes() == read_pixels(tmp_path / "map.0002.exr").tobytes()
     assert (read_pixels(tmp_path / "map.0002.exr")[..., 3] == 1).mean() > 0.5  # the whole image, identity outside
+
+
+def _count_builders(monkeypatch):
+    """The most maps of a sequence built at once by worker processes (`warpcli.batch._pipelined`), as a one-item list."""
+    import warpcli._fork as fork
+
+    alive, peak = [0], [0]
+
+    class Counting(fork.Worker):
+        def submit(self, *args):
+            super().submit(*args)
+            alive[0] += 1
+            peak[0] = max(peak[0], alive[0])
+
+        def result(self):
+            try:
+                return super().result()
+            finally:
+                alive[0] -= 1
+
+    monkeypatch.setattr(fork, "Worker", Counting)
+    return peak
+
+
+def _failing_between(monkeypatch, fail_x, die_x=None):
+    """``BijectiveMap.between`` that refuses the pair whose source starts at x = ``fail_x`` (and kills
+    the process building the one at ``die_x``); forked children inherit it."""
+    import signal
+
+    from warpcli.errors import FoldOverError
+    from warpcli.maps.compose import BijectiveMap as Map
+
+    real = Map.between.__func__
+
+    def between(cls, src, dst, *args, **kwargs):
+        x = round(float(src.points[0, 0]), 6)
+        if x == fail_x:
+            raise FoldOverError(f"{src.name}: refused by the test")
+        if x == die_x:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real(cls, src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(Map, "between", classmethod(between))
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_pipelined_maps_give_the_items_bytes_and_messages_of_one_job(tmp_path, monkeypatch, seed):
+    """Generated shots: keyframes at random frames (holds make runs of several frames), missing frames,
+    an output size or not, a map that cannot be built: jobs 2 gives jobs 1's items, log and bytes."""
+    import logging
+
+    from warpcli.batch import warp_sequence
+
+    rng = np.random.default_rng(seed)
+    frames = list(range(1, 9))
+    present = [f for f in frames if f in (1, 8) or rng.uniform() > 0.2]
+    _frames(tmp_path / "in", present, seed=seed)
+    a = int(rng.integers(2, 5))
+    keys = [1, a, a + int(rng.integers(1, 3)), 8]
+    polys = {}
+    for name, r_in, r_out in (("src", 11, 30), ("dst", 9, 32)):
+        k = {str(f): star(n=5, cx=48 + rng.uniform(-4, 4), cy=36, r_in=r_in, r_out=r_out, phase=rng.uniform(0, 0.6)).tolist() for f in keys}
+        k[str(keys[2])] = k[str(keys[1])]  # a hold: the frames between those keys share one map
+        polys[name] = tmp_path / f"{name}.json"
+        polys[name].write_text(json.dumps({"frames": k}))
+    from warpcli.keyframes import read_animated
+
+    bad = int(rng.choice([f for f in present if not (keys[1] <= f <= keys[2])]))
+    _failing_between(monkeypatch, round(float(read_animated(polys["src"]).at(bad).points[0, 0]), 6))
+    size = None if seed % 2 else (60, 50)
+    peak = _count_builders(monkeypatch)
+    runs = {}
+    for jobs in (1, 2):
+        records = []
+        handler = logging.Handler()
+        handler.emit = lambda r: records.append(r.getMessage().replace(f"o{jobs}.", "o."))
+        log = logging.getLogger("warpcli")
+        log.addHandler(handler)
+        try:
+            items = warp_sequence(tmp_path / "in" / "shot.#.png", str(tmp_path / f"o{jobs}.#.png"), frames, polys["src"],
+                                  polys["dst"], jobs=jobs, size=size)  # fmt: skip
+        finally:
+            log.removeHandler(handler)
+        runs[jobs] = ([(os.path.basename(i.input_path), str(i.error).replace(f"o{jobs}.", "o.")) for i in items], records, _outputs(tmp_path, f"o{jobs}."))
+    assert peak[0] == 2  # the pipeline ran, two maps in flight
+    assert runs[1] == runs[2]
+    errors = dict(runs[1][0])
+    assert "refused by the test" in errors[f"shot.{bad:04d}.png"]
+    assert len(runs[1][2]) == sum(e == "None" for e in errors.values()) > 0
+
+
+def test_a_builder_that_dies_fails_its_frames_and_the_others_go_on(tmp_path, monkeypatch):
+    from warpcli.batch import warp_sequence
+    from warpcli.keyframes import read_animated
+
+    _frames(tmp_path / "in", range(1, 6))
+    src, dst = _animated(tmp_path, 7, 1, 5)
+    _failing_between(monkeypatch, None, round(float(read_animated(src).at(3).points[0, 0]), 6))
+    items = warp_sequence(tmp_path / "in" / "shot.#.png", str(tmp_path / "o.#.png"), [1, 2, 3, 4, 5], src, dst, jobs=2)
+    assert [i.error is None for i in items] == [True, True, False, True, True]
+    assert "shot.0003.png: the process building its map ended: killed by SIGKILL" in str(items[2].error)

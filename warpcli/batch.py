@@ -5,8 +5,10 @@ by the threads (`PlanCache`); each image is read, rendered through it and
 written (`warp_one`). An image too large for memory goes strip by strip
 (`warpcli.tiled`) with the same map. `warpcli.distributed` runs the same
 `warp_one` on Dask workers with plans shipped to them. An animated sequence
-(a new polygon pair every few frames) goes to worker processes run by run
-(`warp_run`): building a map holds the GIL, so threads would take turns.
+(a new polygon pair every few frames) has its maps built in forked children
+while this process warps the frames whose plans have arrived (`_pipelined`),
+or goes to worker processes run by run (`warp_run`): building a map holds
+the GIL, so threads would take turns.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from .outputs import RunInputs
 from .pipeline import read_header_or_none, write_like
 from .plan import SamplingPlan, background_values, check_paste, plan_for
 from .polygon import Polygon
-from .polygon.partition import check_shapes, read_shape
+from .polygon.partition import Partition, check_shapes, read_shape
 from .raster.imageio import check_image_output, read_image
 from .tiled import in_parts, warp_file_tiled
 
@@ -496,11 +498,15 @@ def warp_sequence(
     successive steps compose to the map of the whole step).
 
     With ``jobs`` > 1, one run of frames (still polygons) is warped by
-    threads sharing its map; several runs (animated polygons) go to
-    ``jobs`` worker processes, a run each, as many at once as the memory
-    budget holds (`warpcli.budget`): building a map holds the GIL, so on
-    threads the builds would take turns. Items, messages and output bytes
-    are those of ``jobs=1``, in frame order.
+    threads sharing its map; with several runs (animated polygons) the
+    maps of the next ``jobs`` runs are built in forked child processes, as
+    many at once as the memory budget holds (`warpcli.budget`), while this
+    process reads, resamples and writes the frames whose sampling plans
+    have arrived: building a map holds the GIL, so on threads the builds
+    would take turns. Where that cannot be (forward maps to write, frames
+    warped in strips, no ``fork``), the runs go to ``jobs`` worker
+    processes, a run each. Items, messages and output bytes are those of
+    ``jobs=1``, in frame order.
 
     Parameters
     ----------
@@ -610,6 +616,9 @@ def warp_sequence(
             runs[-1] = (key, runs[-1][1])
         runs[-1][1].append((inp, out, f))
     width = _processes(jobs, len(runs), ins, opts)
+    sizes = _pipeline_sizes(runs, opts, maps, missing) if width > 1 else None
+    if sizes is not None:  # maps built in forked children, frames warped here as they arrive
+        return _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing)
     if width <= 1:  # the frames of a run go to the threads
         items: list[BatchItem] = []
         for _, tasks in runs:
@@ -648,6 +657,147 @@ def _processes(jobs: int, runs: int, ins: list[tuple[int, str]], opts: WarpOptio
     # What `tiled.tiled_needed` counts for one frame: its pixels, and the output with its map.
     need = header.width * header.height * header.channels * header.dtype.itemsize + w * h * (header.channels + 12) * 4
     return max(1, min(jobs, runs, max_image_bytes() // max(1, need)))
+
+
+def _pipeline_sizes(runs, opts, maps, missing) -> list[list[tuple[int, int]]] | None:
+    """The output sizes of each run's frames, if the runs can go through `_pipelined`, else None.
+
+    Not without forked children (`warpcli._fork.available`), nor with
+    forward maps to write (they need the map itself, which stays in the
+    child), nor when a frame would be warped in strips (that needs the map
+    too): those runs go to worker processes whole (`_in_processes`).
+    """
+    from ._fork import available
+
+    if not available() or (maps is not None and maps.forward is not None):
+        return None
+    sizes = []
+    for _, tasks in runs:
+        found: list[tuple[int, int]] = []
+        for inp, _, f in tasks:
+            if f in missing:
+                continue
+            header = read_header_or_none(inp)
+            if header is None:
+                continue  # its read says why, in its item
+            try:
+                if in_parts(inp, header, opts.size, None):
+                    return None
+            except WarpError:
+                return None
+            size = tuple(opts.size) if opts.size is not None else (header.width, header.height)
+            if size not in found:
+                found.append(size)
+        sizes.append(found)
+    return sizes
+
+
+def _plans_in_child(
+    src: Polygon | Partition, dst: Polygon | Partition, opts: WarpOptions, sizes
+) -> dict[tuple[int, int], SamplingPlan]:
+    """In a forked child (`_pipelined`): a run's map, and its sampling plan for each output size."""
+    from ._fork import FORK_ENV
+
+    # This child is already one of the builders beside the parent: its two
+    # maps are built one after the other, not in a child of its own.
+    os.environ[FORK_ENV] = "0"
+    fmap = map_between(src, dst, opts.map)
+    return {size: plan_for(fmap, size[0], size[1], opts) for size in sizes}
+
+
+def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) -> list[BatchItem]:
+    """An animated sequence on all cores: the maps of the next ``width`` runs are
+    built in forked worker processes while this process reads, resamples and
+    writes the frames of the run whose map has arrived.
+
+    A map holds the GIL while it is built (triangle, SuperLU), so the builds go
+    to forked children, each with a GIL of its own (`warpcli._fork.Worker`:
+    forked once, not per map); only the sampling plans (arrays) come back.
+    Runs are taken in frame order, so items, ``on_item`` calls and log records
+    (a child's are logged when its plans are taken, as `warp_run` would have
+    logged them while building) come in the order of ``jobs=1``, and the plans
+    are those `warp_run` makes, bit for bit.
+    """
+    from collections import deque
+
+    from ._fork import ChildDied, Worker
+
+    items: list[BatchItem] = []
+    queue: deque = deque()  # (tasks, the worker building their plans or None), in run order
+    workers: list[Worker] = []
+    todo = iter(zip(runs, sizes))
+
+    def idle() -> Worker | None:
+        for worker in workers:
+            if not worker.busy:
+                return worker
+        if len(workers) < width:
+            try:
+                workers.append(Worker(_plans_in_child))
+            except OSError:  # no process left: the runs are built here, when their turn comes
+                return None
+            return workers[-1]
+        return None
+
+    def fill() -> None:
+        while sum(job is not None for _, job in queue) < width:
+            nxt = next(todo, None)
+            if nxt is None:
+                return
+            (_, tasks), run_sizes = nxt
+            src, dst = _pair_of(tasks, pairs, missing)
+            job = idle() if src is not None and run_sizes else None
+            if job is not None:
+                try:
+                    job.submit(src, dst, opts, run_sizes)
+                except ChildDied:
+                    workers.remove(job)
+                    job = None
+            queue.append((tasks, job))
+
+    def done(batch: list[BatchItem]) -> None:
+        for item in batch:
+            items.append(item)
+            if on_item is not None:
+                on_item(item)
+
+    failed = True
+    try:
+        fill()
+        while queue:
+            tasks, job = queue.popleft()
+            if job is None:  # every image missing, or none readable, or no worker: as with jobs=1
+                fill()
+                items.extend(warp_run(*_pair_of(tasks, pairs, missing), tasks, opts, maps=maps, jobs=jobs,
+                                      on_item=on_item, missing=missing))  # fmt: skip
+                continue
+            try:
+                plans = job.result()
+            except WarpError as err:  # a map that cannot be built fails its frames, not the others
+                fill()
+                done([missing.get(f) or BatchItem(inp, out, err.with_traceback(None)) for inp, out, f in tasks])
+                continue
+            except ChildDied as err:
+                workers.remove(job)
+                fill()
+                done([missing.get(f) or BatchItem(inp, out, WarpError(f"{inp}: the process building its map ended: {err}"))
+                      for inp, out, f in tasks])  # fmt: skip
+                continue
+            fill()  # the next maps are built while these frames are warped
+            cache = PlanCache(None, opts, plans)
+            run_maps = None if maps is None else RunMaps(maps)
+
+            def one(task, cache=cache, run_maps=run_maps):
+                if task[2] in missing:
+                    return missing[task[2]]
+                return warp_one(task[0], task[1], cache, frame=task[2], maps=run_maps)
+
+            items.extend(_each(one, list(tasks), jobs, on_item))
+        failed = False
+    finally:
+        for worker in workers:  # after an error, the builds still running are not waited for
+            worker.close(kill=failed)
+    return items
 
 
 def _in_processes(units, pairs, opts, maps, width, on_item, missing) -> list[BatchItem]:

@@ -22,7 +22,7 @@ from ..polygon import Polygon, check_pair
 from ..raster.imageio import RasterImage, convert_pixels
 
 __all__ = [
-    "PREVIEW_SIDE", "PREVIEW_TRIANGLES", "PreviewImage", "PreviewMapper", "PreviewMesh", "encode_png", "preview_areas",
+    "PREVIEW_DRAG_TRIANGLES", "PREVIEW_SIDE", "PREVIEW_TRIANGLES", "PreviewImage", "PreviewMapper", "PreviewMesh", "encode_png", "preview_areas",
     "preview_image",
 ]  # fmt: skip
 
@@ -31,6 +31,10 @@ PREVIEW_SIDE = 1024
 #: About how many triangles of the largest size each preview mesh has: the
 #: preview's density (`preview_areas`), coarse enough to rebuild during a drag.
 PREVIEW_TRIANGLES = 1500
+#: The same for the side being dragged, while the pointer is down: a third of the
+#: triangles rebuilds in half the time (the map at the full preview density
+#: follows when the pointer is released).
+PREVIEW_DRAG_TRIANGLES = 500
 
 
 @dataclass(frozen=True)
@@ -253,8 +257,13 @@ def z_order(points: NDArray[np.float64]) -> NDArray[np.intp]:
     return np.argsort(spread(q[:, 0]) | (spread(q[:, 1]) << np.uint64(1)), kind="stable")
 
 
-def with_preview_density(options: MapOptions, src: Polygon, dst: Polygon) -> MapOptions:
+def with_preview_density(options: MapOptions, src: Polygon, dst: Polygon, drag: str | None = None) -> MapOptions:
     """``options`` at the preview's density: its ``max_area`` (`preview_areas`), meshes not graded.
+
+    ``drag`` (``"src"`` or ``"dst"``): that side is being dragged, and gets
+    `PREVIEW_DRAG_TRIANGLES` instead of `PREVIEW_TRIANGLES`; the other side
+    keeps its density, so that its map (which the drag does not change) is
+    kept (`PreviewMapper`).
 
     The FEM meshes' grading towards reflex vertices refines them down to a
     tenth of a pixel, for accuracy far below a preview's pixel, and takes
@@ -262,4 +271,9 @@ def with_preview_density(options: MapOptions, src: Polygon, dst: Polygon) -> Map
     rebuilt several times faster. It is the same map, by the same code, at a
     coarser density: ``BijectiveMap.between(src, dst, with_preview_density(...))``.
     """
-    return dataclasses.replace(options, max_area=preview_areas(src, dst), grade=False)
+    areas = preview_areas(src, dst)
+    if drag is not None:
+        side = ("src", "dst").index(drag)
+        coarse = preview_areas(src, dst, PREVIEW_DRAG_TRIANGLES)
+        areas = tuple(coarse[i] if i == side else areas[i] for i in (0, 1))  # type: ignore[assignment]
+    return dataclasses.replace(options, max_area=areas, grade=False)

@@ -112,7 +112,14 @@ def rotated_start(src: Polygon, dst: Polygon) -> int:
         return q / math.sqrt(max((q**2).sum(axis=1).mean(), 1e-300))
 
     a, b = normal(src), normal(dst)
-    errors = np.array([((a - np.roll(b, -k, axis=0)) ** 2).sum(axis=1).mean() for k in range(src.n)])
+    # Error of shift k: mean over i of |a_i - b_(i+k)|^2, as (a - np.roll(b, -k)) gives it, for
+    # every k at once (a drag asks for it at every move), a block of shifts at a time.
+    n = src.n
+    errors = np.empty(n)
+    step = max(1, 65536 // n)
+    for k0 in range(0, n, step):
+        ks = np.arange(k0, min(n, k0 + step))
+        errors[ks] = ((a[None] - b[(np.arange(n)[None, :] + ks[:, None]) % n]) ** 2).sum(axis=2).mean(axis=1)
     best = int(errors.argmin())
     return best if best != 0 and errors[best] < 0.25 * errors[0] else 0
 
@@ -164,6 +171,7 @@ class EditSession:
         self.initial = {side: self._existing(path) for side, path in (("src", paths.src), ("dst", paths.dst))}
         # The polygons last checked, by side: in a drag one side stays the same and is not checked again.
         self._checked: dict[str, tuple[tuple, Polygon]] = {}
+        self._in_preview: dict[str, tuple[Polygon, Polygon]] = {}
 
     @staticmethod
     def _existing(path: str) -> list | None:
@@ -261,6 +269,19 @@ class EditSession:
         self._checked[side] = (key, polygon)
         return polygon
 
+    def _scaled(self, side: str, polygon: Polygon) -> Polygon:
+        """``polygon`` in preview pixels (image point p is preview point p / factor); the one made last
+        time for this side if it is the same polygon (in a drag, the side that does not move)."""
+        k = self.preview.factor
+        if k == 1:
+            return polygon
+        kept = self._in_preview.get(side)
+        if kept is not None and kept[0] is polygon:
+            return kept[1]
+        scaled = Polygon(polygon.points / k, name=polygon.name)
+        self._in_preview[side] = (polygon, scaled)
+        return scaled
+
     @staticmethod
     def warnings(src: Polygon, dst: Polygon) -> list[str]:
         """The live warnings: mirrored, rotated start."""
@@ -271,16 +292,20 @@ class EditSession:
 
         The polygons are scaled to the preview (image point p is preview
         point p / factor) and the map built there at the preview's density
-        (`warpcli.edit.preview.preview_areas`), for a region the preview's size.
+        (`warpcli.edit.preview.preview_areas`), for a region the preview's size;
+        the side named by ``doc["drag"]`` (being dragged) at the coarser drag
+        density (`warpcli.edit.preview.with_preview_density`).
         """
         import struct
 
         try:
             src, dst = self.polygons(doc)
             options = self.options_from(doc.get("options"))
-            k = self.preview.factor
-            psrc, pdst = (src, dst) if k == 1 else (Polygon(p.points / k, name=p.name) for p in (src, dst))
-            mapping = with_preview_density(options.map, psrc, pdst)
+            psrc, pdst = self._scaled("src", src), self._scaled("dst", dst)
+            drag = doc.get("drag")
+            if drag not in (None, "src", "dst"):
+                raise InputError(f"drag must be 'src', 'dst' or null, got {drag!r}")
+            mapping = with_preview_density(options.map, psrc, pdst, drag)
             pw, ph = self.preview.preview_size
             mesh = self.mapper.build(psrc, pdst, mapping, (0.0, 0.0, float(pw), float(ph)))
         except WarpError as err:

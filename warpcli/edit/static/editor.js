@@ -94,7 +94,7 @@ function onDown(side, event) {
   }
   if (i >= 0 && (editor.closed || side === "src")) {
     remember();
-    drag = { side, index: i };
+    drag = { side, index: i, moved: false };
     svg.setPointerCapture(event.pointerId);
   }
 }
@@ -103,10 +103,12 @@ function onMove(side, event) {
   if (!drag || drag.side !== side) return;
   const p = toImage(event.currentTarget, event);
   (side === "src" ? editor.src : editor.dst)[drag.index] = p;
+  drag.moved = true;
   changed(event.timeStamp);
 }
 
-function onUp() { drag = null; }
+// Released: the map at the full preview density (the drag's previews have the dragged side coarser).
+function onUp() { const was = drag; drag = null; if (was && was.moved) changed(); }
 
 function closePolygon() {
   if (editor.closed || editor.src.length < 3) return;
@@ -126,7 +128,7 @@ function changed(eventTime) {
   drawOverlays(); updateButtons();
   if (eventTime !== undefined) pendingEvents.push(eventTime);
   if (!editor.closed) { clearPreview(); return; }
-  wanted = { src: editor.src, dst: editor.dst, options: editor.options };
+  wanted = { src: editor.src, dst: editor.dst, options: editor.options, drag: drag && drag.moved ? drag.side : null };
   if (!inFlight) sendPreview();
 }
 

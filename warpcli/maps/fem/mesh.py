@@ -318,6 +318,8 @@ def _boundary_points(polygon: Polygon, max_area: float, grade: bool, quadratic: 
     reflex = np.zeros(n, dtype=bool)
     if grade:
         reflex[polygon.reflex_vertices()] = True
+    if not quadratic and not reflex.any():  # each edge gives its first vertex alone (`_edge_params`)
+        return p.copy(), np.arange(2, 2 + n, dtype=np.int32)
     pieces = []
     marks = []
     for i in range(n):
