@@ -28,8 +28,15 @@ one). Contenders:
   ``cv2.remap`` (bilinear) with a map given as an ``.npy`` file (warp's own inverse map at
   this size, float32), and writes it: what any warp of this image must pay.
 
+Then, in this process, **the editor's map rebuild** (``warp edit``'s preview, issue 22):
+`warpcli.edit.preview.PreviewMapper.build` at the preview density
+(`warpcli.edit.preview.with_preview_density`) for the same 12-vertex pair, per size: a
+full rebuild (both maps, a new mapper) and a drag (one target vertex moved: only the
+target's map is rebuilt), medians of ``--editor-repeat`` after one warm-up, for the
+methods of ``--editor-methods`` (FEM by default; issue 24's goal: at most 50 ms).
+
 Every peer and the floor read and write with OpenImageIO, the library ``warp`` uses, and
-write PNG with warp's settings (``warpcli.raster.imageio.PNG_COMPRESSION``, OpenImageIO's
+write PNG with warp's settings (``warpcli.raster.dtypes.PNG_COMPRESSION``, OpenImageIO's
 ``png:compressionLevel``, libpng's default adaptive filters), so the ratios compare the
 warps and not PNG encoders. ``--compression N`` runs every contender at level N instead.
 """
@@ -135,6 +142,8 @@ def parse_args(argv):
                    help="contender=MP: leave it out above that size (default: BEM, both TPS above 4 MP)")
     p.add_argument("--compression", type=int, default=None,
                    help="PNG compression level for every contender (default: warp's default)")
+    p.add_argument("--editor-methods", default="fem", help="methods of the editor rebuild table ('' for none)")
+    p.add_argument("--editor-repeat", type=int, default=9, help="editor rebuilds per measurement (medians)")
     p.add_argument("--keep", metavar="DIR", help="keep the inputs and outputs in DIR")
     p.add_argument("--out", metavar="FILE", help="also write the table as markdown to FILE")
     return p.parse_args(argv)
@@ -144,10 +153,10 @@ def main(argv=None) -> int:
     args = parse_args(sys.argv[1:] if argv is None else argv)
     startup.compile_bytecode()
     from warpcli.pipeline import warp_image
-    from warpcli.raster import imageio
+    from warpcli.raster import dtypes
 
     # Before issue 24 warp wrote OpenImageIO's default, zlib level 6.
-    level = getattr(imageio, "PNG_COMPRESSION", 6) if args.compression is None else args.compression
+    level = getattr(dtypes, "PNG_COMPRESSION", 6) if args.compression is None else args.compression
     sizes = [float(s) for s in args.sizes.split(",") if s.strip()]
     skip = {s.strip() for s in args.skip.split(",") if s.strip()}
     above = {}
@@ -206,6 +215,10 @@ def main(argv=None) -> int:
         rows.append((mp, w, h, res))
         print(table(rows, md=False), flush=True)
     text = "\n".join(head) + "\n\n" + table(rows, md=True) + "\n" + footer(rows) + "\n"
+    methods = [m.strip() for m in args.editor_methods.split(",") if m.strip()]
+    if methods:
+        progress("editor rebuilds, in-process")
+        text += "\n" + editor_table(sizes, methods, args.editor_repeat) + "\n"
     text += f"load at end {' '.join(f'{x:.2f}' for x in os.getloadavg())}\n"
     print("\n" + text)
     if args.out:
@@ -214,6 +227,44 @@ def main(argv=None) -> int:
     if tmp is not None:
         tmp.cleanup()
     return 0
+
+
+def editor_table(sizes, methods, repeat: int) -> str:
+    """``warp edit``'s map rebuild at preview density, in-process: full and drag, medians in ms."""
+    from warpcli.edit.preview import PreviewMapper, with_preview_density
+    from warpcli.options import MapOptions
+    from warpcli.polygon import Polygon
+
+    lines = [
+        f"Editor: map rebuild at preview density, in-process, median of {repeat} (min-max), ms; "
+        f"load {' '.join(f'{x:.2f}' for x in os.getloadavg())}",
+        "",
+        "| size | method | triangles (target) | full rebuild | drag (target only) |",
+        "|---|---|---:|---:|---:|",
+    ]
+    for mp in sizes:
+        w, h = bench_run.image_dims(mp)
+        pair = bench_run.make_pairs(w, h)[0]
+        src, dst = Polygon(pair.src), Polygon(pair.dst)
+        region = (0.0, 0.0, float(w), float(h))
+        for method in methods:
+            opts = with_preview_density(MapOptions(method=method), src, dst)
+            PreviewMapper().build(src, dst, opts, region)  # warm-up: kernels, caches
+            full, drag = [], []
+            for k in range(repeat):
+                moved = pair.dst.copy()
+                moved[len(moved) // 2] += (1.0 + 0.25 * k, 0.5)
+                mapper = PreviewMapper()
+                t0 = time.perf_counter()
+                mesh = mapper.build(src, dst, opts, region)
+                t1 = time.perf_counter()
+                mapper.build(src, Polygon(moved), opts, region)
+                t2 = time.perf_counter()
+                full.append(1e3 * (t1 - t0))
+                drag.append(1e3 * (t2 - t1))
+            cell = lambda xs: f"{statistics.median(xs):.1f} ({min(xs):.1f}-{max(xs):.1f})"  # noqa: E731
+            lines.append(f"| {mp:g} MP | {method} | {len(mesh.triangles):,} | {cell(full)} | {cell(drag)} |")
+    return "\n".join(lines) + "\n"
 
 
 def git_revision() -> str:

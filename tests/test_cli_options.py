@@ -24,6 +24,7 @@ WARP_OPTIONS = {
     "--max-area", "--antialias", "--outside", "--vacated", "--weights", "--report", "--grid", "--heatmap",
     "--heatmap-measure", "--save-map", "--save-forward-map", "--stmap-t", "--tiled", "--labels", "--verbose", "--quiet",
     "--version", "--frame",  # --frame: issue 23
+    "--compression",  # issue 24
 }  # fmt: skip
 
 

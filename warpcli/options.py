@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .errors import InputError
-from .raster.dtypes import DTYPES
+from .raster.dtypes import COMPRESSION_LEVELS, DTYPES, PNG_COMPRESSION  # noqa: F401  (re-exported)
 
 #: Methods that approximate the harmonic maps onto Theta; `warpcli.maps.registry.METHODS`
 #: says which module implements each (the same names, in the same order: tested).
@@ -185,6 +185,11 @@ class WarpOptions:
         With ``outside="input"``: the part of the source polygon the target
         no longer covers keeps the input's pixels, or is filled with the
         background.
+    compression : int or None
+        PNG outputs: the zlib level, 0 (stored: fastest, largest) to 9
+        (smallest, slowest); None: `warpcli.raster.dtypes.PNG_COMPRESSION`
+        (1). Other formats keep their own compression. The pixels are the
+        same at every level.
 
     Raises
     ------
@@ -205,6 +210,7 @@ class WarpOptions:
     dtype: str | None = None
     outside: str = "background"
     vacated: str = "keep"
+    compression: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.map, MapOptions):
@@ -214,6 +220,11 @@ class WarpOptions:
         _choice("vacated", self.vacated, VACATED)
         if self.dtype is not None:
             _choice("dtype", self.dtype, DTYPES)
+        if self.compression is not None and (
+            isinstance(self.compression, bool) or not isinstance(self.compression, int)
+            or self.compression not in COMPRESSION_LEVELS
+        ):  # fmt: skip
+            raise InputError(f"compression must be an integer from 0 to 9, got {self.compression!r}")
         bg = self.background
         values = tuple(bg) if isinstance(bg, (tuple, list)) else (bg,)
         try:

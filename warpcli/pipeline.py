@@ -38,6 +38,7 @@ from .raster.imageio import (
     convert_pixels,
     read_header,
     read_image,
+    with_compression,
     write_image,
 )
 from .report import build_report
@@ -270,11 +271,16 @@ def check_output(opts: WarpOptions, size: tuple[int, int], input_size: tuple[int
     background_values(opts.background, probe)
 
 
-def write_like(path: str | os.PathLike[str], image: RasterImage, pixels: NDArray, dtype: str | None = None) -> None:
+def write_like(
+    path: str | os.PathLike[str], image: RasterImage, pixels: NDArray, dtype: str | None = None,
+    compression: int | None = None,
+) -> None:  # fmt: skip
     """Write pixels made from ``image`` with its channel names, alpha, alpha convention
-    and metadata, converted to ``dtype`` if given."""
+    and metadata, converted to ``dtype`` if given, a PNG at zlib level ``compression``
+    if given (`warpcli.options.WarpOptions`)."""
     px = pixels if dtype is None else convert_pixels(pixels, dtype)
-    write_image(path, RasterImage(px, image.channel_names, image.alpha_channel, image.attributes, image.associated_alpha))
+    attrs = with_compression(image.attributes, compression)
+    write_image(path, RasterImage(px, image.channel_names, image.alpha_channel, attrs, image.associated_alpha))
 
 
 #: Log records held back by the thread building an `_EarlyMap` (and the threads it
@@ -501,9 +507,9 @@ def warp_file(
     with PendingOutputs() as pending:
         t0 = clock()
         stage("writing")
-        write_like(pending.path(output_path), image, result.pixels, opts.dtype)
+        write_like(pending.path(output_path), image, result.pixels, opts.dtype, opts.compression)
         for (_, label_out), label_image in zip(labels, label_images):
-            write_like(pending.path(label_out), label_image, warp_labels(label_image.pixels, result))
+            write_like(pending.path(label_out), label_image, warp_labels(label_image.pixels, result), None, opts.compression)
         result.timings["read"] = t_read
         result.timings["write"] = clock() - t0
         if grid_path is not None or heatmap_path is not None:
@@ -653,5 +659,5 @@ def apply_map_file(
     points = load_stmap(map_path, (image.width, image.height), t_up=t_up)
     plan = SamplingPlan.from_points(points, interp=opts.interp, background=opts.background)
     out = plan.render(image.pixels, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha)
-    write_like(output_path, image, out, opts.dtype)
+    write_like(output_path, image, out, opts.dtype, opts.compression)
     return out
