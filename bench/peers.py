@@ -24,6 +24,8 @@ one). Contenders:
 * ``OpenCV TPS``: ``cv2.createThinPlateSplineShapeTransformer()`` on the same vertices and
   its ``warpImage`` (bilinear): a thin-plate spline folds and does not take edges onto
   edges, so this is a speed reference, not an equivalent;
+* ``before fem`` (with ``--before DIR``): ``warp`` from another checkout (say the commit
+  before issue 24, exported with ``git archive``), its defaults, in the same rounds;
 * ``floor``: a process that imports numpy, OpenImageIO and cv2, reads the PNG, remaps it by
   ``cv2.remap`` (bilinear) with a map given as an ``.npy`` file (warp's own inverse map at
   this size, float32), and writes it: what any warp of this image must pay.
@@ -125,7 +127,7 @@ if o is None or not o.open(out_path, spec) or not o.write_image(np.ascontiguousa
 o.close()
 '''
 
-CONTENDERS = ("warp fem", "warp mfs", "warp bem", "skimage PAT", "skimage TPS", "OpenCV TPS", "floor")
+CONTENDERS = ("warp fem", "warp mfs", "warp bem", "skimage PAT", "skimage TPS", "OpenCV TPS", "floor", "before fem")
 PEER_KIND = {"skimage PAT": "pat", "skimage TPS": "tps", "OpenCV TPS": "cvtps", "floor": "floor"}
 
 
@@ -144,6 +146,8 @@ def parse_args(argv):
                    help="PNG compression level for every contender (default: warp's default)")
     p.add_argument("--editor-methods", default="fem", help="methods of the editor rebuild table ('' for none)")
     p.add_argument("--editor-repeat", type=int, default=9, help="editor rebuilds per measurement (medians)")
+    p.add_argument("--before", metavar="DIR", help="also run `warp` (FEM) from the checkout in DIR, with its own "
+                   "defaults, as 'before fem' in the same rounds")
     p.add_argument("--keep", metavar="DIR", help="keep the inputs and outputs in DIR")
     p.add_argument("--out", metavar="FILE", help="also write the table as markdown to FILE")
     return p.parse_args(argv)
@@ -168,6 +172,11 @@ def main(argv=None) -> int:
     os.makedirs(work, exist_ok=True)
     env = dict(os.environ, PYTHONPATH=REPO + os.pathsep + os.environ.get("PYTHONPATH", ""))
     runner = bench_run.Runner(work)
+    before_env = None
+    if args.before:
+        before = os.path.abspath(args.before)
+        before_env = dict(os.environ, PYTHONPATH=before + os.pathsep + os.environ.get("PYTHONPATH", ""))
+        subprocess.run([sys.executable, "-m", "compileall", "-q", os.path.join(before, "warpcli")], check=False)
     peer = os.path.join(work, "peer.py")
     with open(peer, "w") as fh:
         fh.write(PEER_SCRIPT)
@@ -193,10 +202,12 @@ def main(argv=None) -> int:
         np.save(base + "_map.npy", warp_image(img, pair.src, pair.dst).inverse_map.astype(np.float32))
         cmds = {}
         for name in CONTENDERS:
-            if name in skip or mp > above.get(name, float("inf")):
+            if name in skip or mp > above.get(name, float("inf")) or (name == "before fem" and not args.before):
                 continue
             out = f"{base}_{name.replace(' ', '_')}.png"
-            if name.startswith("warp"):
+            if name == "before fem":
+                cmd = [sys.executable, "-m", "warpcli", "-q", base + ".png", "--src", src, "--dst", dst, out]
+            elif name.startswith("warp"):
                 cmd = [sys.executable, "-m", "warpcli", "-q", base + ".png", "--src", src, "--dst", dst, out,
                        "--method", name.split()[1]]
                 if args.compression is not None:
@@ -208,7 +219,7 @@ def main(argv=None) -> int:
         for rnd in range(args.repeat + 1):
             for name, cmd in cmds.items():
                 progress(f"{mp:g} MP round {rnd}/{args.repeat}: {name}")
-                wall, rss = run_child(runner, cmd, env)
+                wall, rss = run_child(runner, cmd, env if name != "before fem" else before_env)
                 if rnd:  # round 0 warms the page cache and any kernel cache
                     res[name][0].append(wall)
                     res[name][1].append(rss)
