@@ -171,12 +171,21 @@ def main(argv=None) -> int:
     work = os.path.abspath(args.keep) if args.keep else tmp.name
     os.makedirs(work, exist_ok=True)
     env = dict(os.environ, PYTHONPATH=REPO + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    # Children run in the scratch directory: `python -m warpcli` puts its working
+    # directory first on sys.path, which would shadow PYTHONPATH's checkout.
+    os.chdir(work)
     runner = bench_run.Runner(work)
     before_env = None
     if args.before:
         before = os.path.abspath(args.before)
         before_env = dict(os.environ, PYTHONPATH=before + os.pathsep + os.environ.get("PYTHONPATH", ""))
         subprocess.run([sys.executable, "-m", "compileall", "-q", os.path.join(before, "warpcli")], check=False)
+    for where, e in ((REPO, env), (args.before, before_env)):
+        if e is not None:
+            found = subprocess.run([sys.executable, "-c", "import warpcli; print(warpcli.__file__)"], env=e,
+                                   capture_output=True, text=True).stdout.strip()
+            if not found.startswith(os.path.abspath(where) + os.sep):
+                sys.exit(f"peers: the children would import warpcli from {found}, not from {where}")
     peer = os.path.join(work, "peer.py")
     with open(peer, "w") as fh:
         fh.write(PEER_SCRIPT)

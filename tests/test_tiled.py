@@ -333,8 +333,8 @@ def test_strips_of_a_thin_image_compute_each_band_once_and_agree_with_the_whole(
 
 @pytest.mark.parametrize(
     "extra, strips",
-    [({}, True), ({"interp": "nearest"}, True), ({"interp": "cubic"}, False), ({"outside": "input"}, False),
-     ({"report_path": "r.json"}, False), ({"output": "o.jpg"}, False)],
+    [({}, True), ({"interp": "nearest"}, True), ({"method": "mfs"}, True), ({"interp": "cubic"}, False),
+     ({"outside": "input"}, False), ({"report_path": "r.json"}, False), ({"output": "o.jpg"}, False)],
 )  # fmt: skip
 def test_prefer_strips_takes_strips_only_where_they_write_the_same_bytes(tmp_path, monkeypatch, small_strips, extra, strips):
     # The warp command prefers strips for large outputs (issue 24: 0.45 GB instead
