@@ -25,6 +25,7 @@ WARP_OPTIONS = {
     "--heatmap-measure", "--save-map", "--save-forward-map", "--stmap-t", "--tiled", "--labels", "--verbose", "--quiet",
     "--version", "--frame",  # --frame: issue 23
     "--feather",  # issue 21
+    "--compression",  # issue 24
 }  # fmt: skip
 
 

@@ -360,7 +360,7 @@ def warp_one(
         if maps is not None:
             maps.save(frame, fmap, plan, (image.width, image.height))
         px = plan.render(image.pixels, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha)
-        write_like(out, image, px, opts.dtype)
+        write_like(out, image, px, opts.dtype, opts.compression)
         return BatchItem(inp, out)
     except WarpError as err:
         # Without its traceback: that holds this frame, and so the plans and
@@ -934,7 +934,7 @@ def apply_map_sequence(
                         del plans[next(iter(plans))]
                     plans[key] = plan
             px = plan.render(image.pixels, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha)
-            write_like(out, image, px, opts.dtype)
+            write_like(out, image, px, opts.dtype, opts.compression)
             return BatchItem(inp, out)
         except WarpError as err:
             return BatchItem(inp, out, err)

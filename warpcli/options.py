@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .errors import InputError
-from .raster.dtypes import DTYPES
+from .raster.dtypes import COMPRESSION_LEVELS, DTYPES, PNG_COMPRESSION  # noqa: F401  (re-exported)
 
 #: Methods that approximate the harmonic maps onto Theta; `warpcli.maps.registry.METHODS`
 #: says which module implements each (the same names, in the same order: tested).
@@ -193,6 +193,11 @@ class WarpOptions:
         ``smoothstep(d / feather)`` at distance ``d`` from the edge, see
         `warpcli.composite.feather_weights`), as GIMP and Photoshop feather a
         selection; 0: no blend (a hard edge, antialiased).
+    compression : int or None
+        PNG outputs: the zlib level, 0 (stored: fastest, largest) to 9
+        (smallest, slowest); None: `warpcli.raster.dtypes.PNG_COMPRESSION`
+        (1). Other formats keep their own compression. The pixels are the
+        same at every level.
 
     Raises
     ------
@@ -214,6 +219,7 @@ class WarpOptions:
     outside: str = "background"
     vacated: str = "keep"
     feather: float = 0.0
+    compression: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.map, MapOptions):
@@ -232,6 +238,11 @@ class WarpOptions:
         object.__setattr__(self, "feather", feather)
         if self.dtype is not None:
             _choice("dtype", self.dtype, DTYPES)
+        if self.compression is not None and (
+            isinstance(self.compression, bool) or not isinstance(self.compression, int)
+            or self.compression not in COMPRESSION_LEVELS
+        ):  # fmt: skip
+            raise InputError(f"compression must be an integer from 0 to 9, got {self.compression!r}")
         bg = self.background
         values = tuple(bg) if isinstance(bg, (tuple, list)) else (bg,)
         try:

@@ -48,7 +48,7 @@ from .maps.compose import BijectiveMap
 from .options import WarpOptions
 from .plan import SamplingPlan, check_paste, plan_for, warn_if_outside
 from .polygon import Polygon
-from .raster.imageio import ImageHeader, read_header, size_limit_lifted
+from .raster.imageio import ImageHeader, read_header, size_limit_lifted, with_compression
 from .raster.parts import TILE, PartReader, StripWriter, check_writable_in_parts, output_format
 
 log = logging.getLogger("warpcli")
@@ -118,6 +118,7 @@ def warp_file_tiled(
         timings.update(fmap.timings)
         timings["map"] = clock() - t0
     out_header = dataclasses.replace(header, dtype=np.dtype(DTYPES[opts.dtype])) if opts.dtype else header
+    out_header = dataclasses.replace(out_header, attributes=with_compression(out_header.attributes, opts.compression))
     sampler = _Sampler(fmap, header, opts)
     timings.update(compose=0.0, resample=0.0, write=0.0)
     stage("warping in strips")

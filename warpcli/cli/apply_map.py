@@ -6,14 +6,17 @@ import click
 
 from ..options import MAP_SCALES, STMAP_T, WarpOptions
 from .exits import EXIT_CODES
-from .options import CONTEXT, background_option, collected, dtype_option, interp_option, quiet_option
+from .options import CONTEXT, background_option, collected, compression_option, dtype_option, interp_option, quiet_option
 
 
 @click.command("apply-map", context_settings=CONTEXT, epilog=EXIT_CODES)
 @click.argument("map_path", metavar="MAP", type=click.Path())
 @click.argument("input_path", metavar="INPUT", type=click.Path())
 @click.argument("output_path", metavar="OUTPUT", type=click.Path())
-@collected("resampling", WarpOptions, interp_option, background_option("Value of pixels where the map is undefined."), dtype_option)
+@collected(
+    "resampling", WarpOptions, interp_option, background_option("Value of pixels where the map is undefined."), dtype_option,
+    compression_option,
+)  # fmt: skip
 @click.option(
     "--stmap-t",
     type=click.Choice(("auto", *STMAP_T)),

@@ -21,7 +21,9 @@ from typing import Any, Callable, NamedTuple
 import click
 
 from ..maps.registry import METHODS, THETAS
-from ..options import BOUNDARIES, CONDITIONS, DTYPES, ENERGIES, INTERPOLATIONS, MAX_SIDE, WEIGHTS, MapOptions, WarpOptions
+from ..options import (
+    BOUNDARIES, CONDITIONS, DTYPES, ENERGIES, INTERPOLATIONS, MAX_SIDE, PNG_COMPRESSION, WEIGHTS, MapOptions, WarpOptions,
+)  # fmt: skip
 
 #: Context settings of every command: -h as well as --help, and help up to 100 columns wide.
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -259,6 +261,17 @@ def dtype_option(f: Callable) -> Callable:
     )(f)
 
 
+def compression_option(f: Callable) -> Callable:
+    """--compression, the zlib level of PNG outputs."""
+    return click.option(
+        "--compression",
+        type=click.IntRange(0, 9),
+        metavar="0-9",
+        help="PNG outputs: zlib level, 0 (fastest to write, largest) to 9 (smallest, slowest); the pixels are "
+        f"the same at every level.  [default: {PNG_COMPRESSION}, as OpenCV]",
+    )(f)
+
+
 #: The options of how the image is resampled, handed to the command as
 #: ``resampling``, a `WarpOptions` whose map is the default one.
 resample_options = collected(
@@ -267,6 +280,7 @@ resample_options = collected(
     interp_option,
     click.option("--size", callback=parse_size, metavar="WxH", help="Output size in pixels.  [default: INPUT's size]"),
     dtype_option,
+    compression_option,
     background_option("Value of pixels outside DST: one for all channels or one per channel, 0..1 for integer images."),
     click.option(
         "--antialias/--no-antialias",

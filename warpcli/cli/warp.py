@@ -231,6 +231,7 @@ def _single(input_path, output_path, polygons, options, outputs, frame=None) -> 
             tiled=True if outputs.tiled else None,
             labels=outputs.labels,
             frame=frame,
+            prefer_strips=True,
         )
     if outputs.report_path == "-":
         click.echo(json.dumps(result.report, indent=2))

@@ -420,7 +420,7 @@ def command_args(options: WarpOptions, image: str, src: str, dst: str, output: s
     w, dw = options, WarpOptions()
     flags += [
         ("--interp", w.interp, dw.interp), ("--outside", w.outside, dw.outside), ("--vacated", w.vacated, dw.vacated),
-        ("--dtype", w.dtype, dw.dtype),
+        ("--dtype", w.dtype, dw.dtype), ("--compression", w.compression, dw.compression),
         ("--size", None if w.size is None else f"{w.size[0]}x{w.size[1]}", None),
     ]  # fmt: skip
     for flag, value, default in flags:

@@ -20,7 +20,7 @@ from ..files import check_regular_file, format_bytes
 from ..outputs import (
     RunInputs, atomic_path, check_output_path, check_room, copy_from_memory, final_path, memory_file, write_failure_message,
 )
-from .dtypes import DTYPES
+from .dtypes import DTYPES, PNG_COMPRESSION
 from .pixels import from_unit, premultiplied, to_unit
 
 #: numpy dtype -> OpenImageIO type name, for the pixel types warpcli reads and writes.
@@ -423,6 +423,22 @@ def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
         _log.debug("%s: %s", shown_name, problem)
 
 
+_PNG_LEVEL = "png:compressionLevel"
+
+
+def with_compression(attributes: tuple, level: int | None) -> tuple:
+    """``attributes`` asking a PNG writer for zlib ``level`` (0-9); None: unchanged (the default level).
+
+    Other formats ignore the attribute.
+
+    >>> with_compression((), 9)
+    (('png:compressionLevel', 'int', 9),)
+    """
+    if level is None:
+        return tuple(attributes)
+    return (*(a for a in attributes if a[0] != _PNG_LEVEL), (_PNG_LEVEL, "int", int(level)))
+
+
 def output_spec(oiio, fmt: str, size: tuple[int, int, int], type_name: str, channel_names, alpha_channel,
                 associated_alpha: bool, attributes):  # fmt: skip
     """The OpenImageIO spec of an output image, and the alpha to premultiply its pixels by.
@@ -445,7 +461,9 @@ def output_spec(oiio, fmt: str, size: tuple[int, int, int], type_name: str, chan
     associated_alpha : bool
         Whether the pixels' colour is premultiplied by alpha.
     attributes : tuple of (name, type name, value)
-        Metadata; what OpenImageIO cannot store is dropped.
+        Metadata; what OpenImageIO cannot store is dropped. A PNG is written
+        at zlib level `warpcli.raster.dtypes.PNG_COMPRESSION` unless it has a
+        ``png:compressionLevel`` (`with_compression`).
 
     Returns
     -------
@@ -470,6 +488,10 @@ def output_spec(oiio, fmt: str, size: tuple[int, int, int], type_name: str, chan
             spec.attribute(attr_name, oiio.TypeDesc(attr_type), value)
         except (TypeError, ValueError, RuntimeError):
             continue  # metadata OpenImageIO cannot round-trip is dropped, not fatal
+    if fmt == "png" and not any(attr[0] == _PNG_LEVEL for attr in attributes):
+        # OpenImageIO's default is zlib's 6: several times slower to write than 1
+        # for files only 12-15 % smaller (issue 24, bench/README.md).
+        spec.attribute(_PNG_LEVEL, PNG_COMPRESSION)
     if not any(attr[0] == "DateTime" for attr in attributes):
         # OpenImageIO's TIFF and OpenEXR writers stamp the time of writing
         # unless told a DateTime; an empty one writes none.
