@@ -10,8 +10,10 @@ source-side mean distortion on FEM meshes 8 times coarser than the default,
 with its exact gradient) and under the same guards (normalized turning
 angles and edges, `warpcli.maps.optimize.guards`):
 
-- ``joint L-BFGS-B``: `warpcli.maps.optimize.optimize` from the regular and
-  the cyclic Theta (the better kept), the guards as a penalty;
+- ``joint L-BFGS-B``: `warpcli.maps.optimize.joint`, as ``--theta
+  optimized`` runs it: a few L-BFGS-B iterations from the regular and from
+  the cyclic Theta, then the better one on to convergence; the guards as a
+  penalty;
 - ``SLSQP``: scipy's SLSQP over all 2n coordinates from the same two starts,
   with the exact gradient, convexity (every turn positive) and the guards as
   inequality constraints;
@@ -233,8 +235,7 @@ def main(argv=None):
             rows[label] = (pts, 0, 0.0, [])
 
         def joint():
-            runs = [opt.optimize(energy, p) for p in starts.values()]
-            return min(runs, key=lambda r: r.objective).points
+            return opt.joint(energy, starts)[0].points
 
         def best_of(fn):
             cands = [fn(energy, p) for p in starts.values()]

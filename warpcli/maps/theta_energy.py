@@ -126,6 +126,7 @@ class ThetaEnergy:
     source: HarmonicBasis
     target: HarmonicBasis
     kind: str = "conformal"
+    rule: NDArray[np.float64] = field(default_factory=lambda: RULE)
     evaluations: int = field(default=0, init=False)
 
     def __post_init__(self) -> None:
@@ -136,12 +137,14 @@ class ThetaEnergy:
         self._t0 = t0
         self._t1 = self.target.mesh.triangles.astype(np.int64)
         area = np.abs(triangle_areas(m0.vertices, m0.triangles))
-        self._sample_tri = np.repeat(np.arange(len(t0)), len(RULE))
-        self._weight = np.repeat(area / len(RULE), len(RULE))
+        rule = np.atleast_2d(self.rule)
+        self._sample_tri = np.repeat(np.arange(len(t0)), len(rule))
+        self._weight = np.repeat(area / len(rule), len(rule))
         self._weight = self._weight / self._weight.sum()
         # The samples' images are a fixed linear combination of the basis rows.
         self._corners = t0[self._sample_tri]
-        self._bary = np.tile(RULE, (len(t0), 1))
+        self._bary = np.tile(rule, (len(t0), 1))
+        self._last = np.zeros(len(self._sample_tri), dtype=np.int64)  # each sample's last triangle
         self._e0_inv = inv2(_edges(m0.vertices, t0))  # E0^-1 per source triangle
         self._e1 = _edges(self.target.mesh.vertices, self._t1)  # E1 per target triangle
 
@@ -164,7 +167,7 @@ class ThetaEnergy:
         q = g0 @ self._e0_inv  # J_phi0 per source triangle
         g1_inv = inv2(g1)
         p = self._e1 @ g1_inv  # J_phi1^-1 per target triangle
-        tri1, _ = TriangleLocator(v1, self._t1).locate(self._images(v0))
+        tri1 = self._locate(v1, self._images(v0))
         if (tri1 < 0).any() or not (np.isfinite(q).all() and np.isfinite(p).all()):
             return math.inf, None
         qs = q[self._sample_tri]
@@ -201,6 +204,24 @@ class ThetaEnergy:
         theta = np.asarray(theta, dtype=np.float64)
         v1 = self.target.values(theta)
         return TriangleLocator(v1, self._t1).locate(self._images(self.source.values(theta)))[0]
+
+    def _locate(self, v1: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.int64]:
+        """The triangle of phi1's image mesh holding each point: where it was last time if it
+        still is (Theta moves little between evaluations), else by bucket search."""
+        t = self._t1[self._last]
+        a, b, c = v1[t[:, 0]], v1[t[:, 1]], v1[t[:, 2]]
+        det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+        with np.errstate(all="ignore"):
+            l1 = ((y[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (y[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])) / det
+            l2 = ((b[:, 0] - a[:, 0]) * (y[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (y[:, 0] - a[:, 0])) / det
+        # Strictly inside (a margin): a point on an edge goes to the bucket search, whose ties are fixed.
+        still = (l1 > 1e-9) & (l2 > 1e-9) & (1.0 - l1 - l2 > 1e-9)
+        tri = self._last.copy()
+        moved = np.flatnonzero(~still)
+        if moved.size:
+            tri[moved] = TriangleLocator(v1, self._t1).locate(y[moved])[0]
+        self._last = np.where(tri >= 0, tri, self._last)
+        return tri
 
     def _images(self, v0: NDArray[np.float64]) -> NDArray[np.float64]:
         """The samples' images in Theta, from phi0's vertex images."""

@@ -22,23 +22,46 @@ def measure_source(f: Any) -> dict:
     ----------
     f : ComposedMap
         Anything with ``src.points`` (the source polygon's vertices) and
-        ``forward_mapped(points)`` (f and its Jacobians).
+        ``phi0``, ``phi1`` (``evaluate``, ``evaluate_grid`` and a coherent
+        ``inverse``, with Jacobians).
 
     Returns
     -------
     dict
-        `warpcli.report.metrics.summarize_forward` of the Jacobians of f on
-        `warpcli.report.metrics.source_grid`.
+        `warpcli.report.metrics.summarize_forward` of the Jacobians of f at
+        the points of `warpcli.report.metrics.source_grid`: at a 1-px grid,
+        phi0 by its pixel-grid fast path; then phi1^-1 walked in row order.
     """
+    import math
+
     import numpy as np
 
-    from .metrics import source_grid, summarize_forward
+    from .metrics import MAX_SOURCE_SAMPLES, source_grid, summarize_forward
 
-    points = source_grid(f.src.points)
-    jac = np.empty((len(points), 2, 2))
-    for s in range(0, len(points), SOURCE_BLOCK):
-        jac[s : s + SOURCE_BLOCK] = f.forward_mapped(points[s : s + SOURCE_BLOCK]).jacobian
-    return summarize_forward(jac)
+    phi0, phi1 = f.phi0, f.phi1
+    v = np.asarray(f.src.points, dtype=np.float64)
+    x0, y0 = v.min(axis=0)
+    x1, y1 = v.max(axis=0)
+    q = np.roll(v, -1, axis=0)
+    area = abs(0.5 * float((v[:, 0] * q[:, 1] - q[:, 0] * v[:, 1]).sum()))
+    parts = []
+    if area <= MAX_SOURCE_SAMPLES and x0 >= 0.0 and y0 >= 0.0:
+        # The pixel centres of a grid from the origin: phi0's fast path, band by band.
+        width, height = math.ceil(x1) + 1, math.ceil(y1) + 1
+        # In one pass when the grid is small (no per-band tables), else in bands of rows.
+        band = height if width * height <= 4 * MAX_SOURCE_SAMPLES else max(1, SOURCE_BLOCK // width)
+        for r0 in range(0 if band == height else int(y0), height, band):
+            rows = None if band == height else (r0, min(r0 + band, height))
+            g = phi0.evaluate_grid(width, height, rows, jacobian=True)
+            b = phi1.inverse(g.values, jacobian=True, coherent=True)
+            parts.append(b.jacobian @ g.jacobian)
+    else:
+        points = source_grid(v)
+        for s in range(0, len(points), SOURCE_BLOCK):
+            a = phi0.evaluate(points[s : s + SOURCE_BLOCK], jacobian=True)
+            b = phi1.inverse(a.points, jacobian=True, coherent=True)
+            parts.append(b.jacobian @ a.jacobian)
+    return summarize_forward(np.concatenate(parts) if parts else np.empty((0, 2, 2)))
 
 
 class Measurable(Protocol):
