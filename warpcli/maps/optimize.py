@@ -71,7 +71,7 @@ SCOUT = 8
 #: ... for at most this many.
 MAX_ITERATIONS = 60
 #: Stop when an iteration lowers the objective by less than this (relative).
-TOLERANCE = 1e-5
+TOLERANCE = 1e-4
 #: Step of the central differences of the (cheap, smooth) parameterization.
 PARAM_STEP = 1e-6
 
@@ -322,13 +322,13 @@ class ConvexShape:
         def total(c):
             return span * _sigmoid(z2 + c).sum(axis=1, keepdims=True)
 
-        for _ in range(40):
+        for _ in range(24):
             mid = 0.5 * (lo + hi)
             low = total(mid) < target
             lo = np.where(low, mid, lo)
             hi = np.where(low, hi, mid)
         c = 0.5 * (lo + hi)
-        for _ in range(4):
+        for _ in range(5):
             sg = _sigmoid(z2 + c)
             c = c - (span * sg.sum(axis=1, keepdims=True) - target) / (span * (sg * (1.0 - sg)).sum(axis=1, keepdims=True))
         out = self.floor + span * _sigmoid(z2 + c)

@@ -32,13 +32,15 @@ from numpy.typing import NDArray
 from ..boundary import to_theta_parameter
 from ..polygon import Polygon
 from .base import inv2
-from .fem.locate import TriangleLocator
+from .fem.locate import TriangleLocator, triangle_neighbours
 from .fem.mesh import TriMesh, mesh_polygon, triangle_areas
 from .fem.solve import DirichletSolver
 
 #: Energies: the area-weighted mean over the source of a distortion measure,
 #: or a smooth stand-in for its maximum (the mean of its POWER-th power, to the 1 / POWER).
 ENERGIES = ("conformal", "isometric", "max-conformal", "max-isometric")
+#: Steps of the walk from each sample's previous triangle before a bucket search.
+WALK_STEPS = 8
 #: The power of the smooth maximum.
 POWER = 8.0
 #: Barycentric coordinates of the samples in each source triangle (the
@@ -145,6 +147,7 @@ class ThetaEnergy:
         self._corners = t0[self._sample_tri]
         self._bary = np.tile(rule, (len(t0), 1))
         self._last = np.zeros(len(self._sample_tri), dtype=np.int64)  # each sample's last triangle
+        self._neighbours = triangle_neighbours(self._t1)
         self._e0_inv = inv2(_edges(m0.vertices, t0))  # E0^-1 per source triangle
         self._e1 = _edges(self.target.mesh.vertices, self._t1)  # E1 per target triangle
 
@@ -206,20 +209,33 @@ class ThetaEnergy:
         return TriangleLocator(v1, self._t1).locate(self._images(self.source.values(theta)))[0]
 
     def _locate(self, v1: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.int64]:
-        """The triangle of phi1's image mesh holding each point: where it was last time if it
-        still is (Theta moves little between evaluations), else by bucket search."""
-        t = self._t1[self._last]
-        a, b, c = v1[t[:, 0]], v1[t[:, 1]], v1[t[:, 2]]
-        det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-        with np.errstate(all="ignore"):
-            l1 = ((y[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (y[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])) / det
-            l2 = ((b[:, 0] - a[:, 0]) * (y[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (y[:, 0] - a[:, 0])) / det
-        # Strictly inside (a margin): a point on an edge goes to the bucket search, whose ties are fixed.
-        still = (l1 > 1e-9) & (l2 > 1e-9) & (1.0 - l1 - l2 > 1e-9)
+        """The triangle of phi1's image mesh holding each point: a walk from where it was last
+        time (Theta moves little between evaluations), a bucket search for the few it misses."""
         tri = self._last.copy()
-        moved = np.flatnonzero(~still)
-        if moved.size:
-            tri[moved] = TriangleLocator(v1, self._t1).locate(y[moved])[0]
+        todo = np.arange(len(y))
+        for _ in range(WALK_STEPS):
+            t = self._t1[tri[todo]]
+            a, b, c = v1[t[:, 0]], v1[t[:, 1]], v1[t[:, 2]]
+            p = y[todo]
+            det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+            with np.errstate(all="ignore"):
+                l1 = ((p[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (p[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])) / det
+                l2 = ((b[:, 0] - a[:, 0]) * (p[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (p[:, 0] - a[:, 0])) / det
+            bary = np.stack([1.0 - l1 - l2, l1, l2], axis=1)
+            # Strictly inside (a margin): a point on an edge goes on to the bucket search, whose ties are fixed.
+            inside = (bary > 1e-9).all(axis=1)
+            todo = todo[~inside]
+            if not todo.size:
+                break
+            worst = np.argmin(bary[~inside], axis=1)  # across the edge opposite the most negative corner
+            step = self._neighbours[tri[todo], worst]
+            onward = step >= 0
+            tri[todo[onward]] = step[onward]
+            todo = np.concatenate([todo[onward], todo[~onward]])
+            if not onward.all():
+                break
+        if todo.size:
+            tri[todo] = TriangleLocator(v1, self._t1).locate(y[todo])[0]
         self._last = np.where(tri >= 0, tri, self._last)
         return tri
 
