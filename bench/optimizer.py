@@ -22,7 +22,7 @@ angles and edges, `warpcli.maps.optimize.guards`):
   convex and the energy falls; 8 sweeps at most), on this energy;
 - ``regular`` and ``cyclic``: no optimization.
 
-Columns: the coarse energy, the energy of the same Theta on the full-density
+Columns: the coarse energy, the energy of the same Theta on the finer
 FEM maps (`warpcli.maps.optimize.measure`), the energy evaluations (each
 gives value and gradient, except for the vertex-by-vertex method's, which
 are values only), after how many of its own evaluations the joint optimizer
