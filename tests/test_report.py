@@ -158,3 +158,40 @@ def test_figures_scale_with_the_picture():
     fig = grid_figure(img, inv, sq, sq)
     # Grid lines two pixels wide: rows 75 and 76 are light, 77 is not (step 150).
     assert fig[75, 10, 0] > 150 and fig[76, 10, 0] > 150 and fig[77, 10, 0] == 0
+
+
+def test_a_parallelogram_pair_reports_the_affine_maps_exact_distortion():
+    """Both polygons affine images of one square: each harmonic map is affine (FEM reproduces
+    linear functions), so f is the affine map between them, and every source point says so."""
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    a0, a1 = np.array([[90.0, 20.0], [10.0, 60.0]]), np.array([[40.0, -30.0], [25.0, 100.0]])
+    src, dst = square @ a0.T + [10.0, 20.0], square @ a1.T + [40.0, 10.0]
+    a = a1 @ np.linalg.inv(a0)
+    s = np.linalg.svd(a, compute_uv=False)
+    rep = build_report(_warp(src, dst, size=(140, 140)))
+    for key in ("mean", "max"):
+        assert rep["conformal"][key] == pytest.approx(s[0] / s[1] + s[1] / s[0], rel=1e-9)
+        assert rep["isometric"][key] == pytest.approx(max(s[0], 1 / s[1]), rel=1e-9)
+    assert rep["min_jacobian_det"] == pytest.approx(np.linalg.det(a), rel=1e-9)
+
+
+def test_the_report_measures_over_the_source_as_differences_of_f_do():
+    """An independent measurement: central differences of f's points on a 1-px source grid (not
+    its Jacobians), plain means over the grid; on a map that squeezes parts of the source."""
+    from warpcli.grid import inside_polygon
+
+    src = Polygon(l_shape(size=100))
+    dst = Polygon(star(3, 64, 64, 18, 60, 0.2))
+    res = _warp(src, dst)
+    f = res.map
+    x, y = np.meshgrid(np.arange(8.5, 109.0), np.arange(8.5, 109.0))
+    p = np.stack([x, y], axis=-1)
+    h = 0.25
+    dfx = (f.forward((p + [h, 0]).reshape(-1, 2)) - f.forward((p - [h, 0]).reshape(-1, 2))) / (2 * h)
+    dfy = (f.forward((p + [0, h]).reshape(-1, 2)) - f.forward((p - [0, h]).reshape(-1, 2))) / (2 * h)
+    j = np.stack([dfx, dfy], axis=-1)  # columns: d/dx, d/dy
+    inside = inside_polygon(p.reshape(-1, 2), src.points) & np.isfinite(j).all(axis=(1, 2))
+    s1, s2 = singular_values(j[inside])
+    rep = build_report(res)
+    assert rep["conformal"]["mean"] == pytest.approx(float(np.mean(s1 / s2 + s2 / s1)), rel=0.02)
+    assert rep["isometric"]["mean"] == pytest.approx(float(np.mean(np.maximum(s1, 1 / s2))), rel=0.02)

@@ -35,8 +35,8 @@ VACATED = ("keep", "background")
 MAP_SCALES = ("refuse", "stretch")
 #: Boundary conditions: Dirichlet everywhere, or the experimental mixed conditions of §5.2.
 CONDITIONS = ("dirichlet", "mixed")
-#: Energies the Theta optimization can lower.
-ENERGIES = ("conformal", "isometric")
+#: Energies the Theta optimization can lower: area-weighted means over the source, or smooth maxima.
+ENERGIES = ("conformal", "isometric", "max-conformal", "max-isometric")
 #: Boundary behaviours: parameter t of a polygon edge goes to t, or t^2, of Theta's edge.
 BOUNDARIES = ("linear", "quadratic")
 
@@ -83,10 +83,11 @@ class MapOptions:
         The boundary behaviour of each side (§5.2): the point at parameter t
         of an edge goes to parameter t (linear) or t^2 (quadratic) of Theta's
         edge. The paper makes the target quadratic.
-    energy : {"conformal", "isometric"}
-        What ``theta="optimized"`` lowers: the area-weighted mean distortion.
+    energy : {"conformal", "isometric", "max-conformal", "max-isometric"}
+        What ``theta="optimized"`` lowers: the area-weighted mean distortion
+        over the source, or (``max-``) a smooth stand-in for its maximum.
     theta_start : {"regular", "cyclic"}
-        Where the optimization starts.
+        The optimization starts from both; this one is reported as ``before``.
     nodes : int or None
         BEM and MFS: the number m of boundary nodes (BEM) or sites (MFS),
         at least the vertex count and within memory

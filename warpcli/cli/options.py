@@ -206,8 +206,8 @@ map_options = collected(
     ),
     click.option("--src-boundary", type=click.Choice(BOUNDARIES), default="linear", show_default=True, help="Boundary behaviour of SRC."),
     click.option("--dst-boundary", type=click.Choice(BOUNDARIES), default="linear", show_default=True, help="Boundary behaviour of DST (--boundary sets it)."),
-    click.option("--energy", type=click.Choice(ENERGIES), default="conformal", show_default=True, help="What --theta optimized lowers: the area-weighted mean distortion."),
-    click.option("--theta-start", type=click.Choice(("regular", "cyclic")), default="regular", show_default=True, help="Where --theta optimized starts."),
+    click.option("--energy", type=click.Choice(ENERGIES), default="conformal", show_default=True, help="What --theta optimized lowers: the mean distortion over the source, or (max-) a smooth stand-in for its maximum (the mean of its 8th power, to the 1/8)."),
+    click.option("--theta-start", type=click.Choice(("regular", "cyclic")), default="regular", show_default=True, help="--theta optimized starts from both; this one is the report's 'before'."),
     click.option("--nodes", type=click.IntRange(3, 100_000), help="BEM/MFS: boundary nodes (BEM) or sites (MFS), m, from n (the vertices) to what memory allows.  [default: max(256, 8 n), at most 2048]"),
     click.option(
         "--conditions",

@@ -46,5 +46,5 @@ METHODS = {
 THETAS = {
     "regular": Entry("warpcli.maps.theta:regular", "the regular n-gon"),
     "cyclic": Entry("warpcli.maps.theta:cyclic", "inscribed in a circle, edges as long as the mean of the polygons' edges"),
-    "optimized": Entry("warpcli.maps.optimize:optimized", "moved vertex by vertex to lower the distortion (--energy)"),
+    "optimized": Entry("warpcli.maps.optimize:optimized", "all vertices moved jointly to lower the distortion (--energy), the best of regular, cyclic and that kept"),
 }
