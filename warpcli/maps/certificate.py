@@ -23,6 +23,23 @@ s (reach r = s sqrt 2):
   four, down to cells of half-side `band_floor`; the samples of those are
   counted as they are.
 
+Around a vertex where the boundary data themselves make the exact map's
+det J tend to 0 (`degenerate_vertices`: a boundary behaviour with no slope
+there, such as t^2; mixed conditions at a corner that is not a right
+angle), the closed form's sign near the vertex is its approximation error,
+not a fold of the exact map, so a ball may be left out there:
+
+- the ball is the smallest around the vertex holding every cell that
+  fails or is not proved at the smallest size, and only cells lying wholly
+  within `vertex_ball` (5 % of the size) can be held; every cell reaching
+  beyond is certified as anywhere else, so the ball's boundary arc is
+  certified;
+- it is left out only if its radius, or the diameter of its image (in the
+  polygon's units), is within the band (`BAND`, 1 px): the image is bounded
+  by the maximum principle (`_ball_image`), so whatever the closed form
+  does inside, it does within a sub-pixel region of the source or of the
+  target; otherwise the cells it holds count as failures.
+
 Failures are counted (`Certificate.flipped`: at least one for a map that
 is not certified; cells are not split further once one sample failed);
 every sample is counted in `Certificate.checked`. Points within `ON_BOUNDARY` of the polygon's size of
@@ -41,7 +58,10 @@ from numpy.typing import NDArray
 from ..boundary import nearest_edge, on_boundary
 from ..grid import inside_polygon
 
-__all__ = ["BAND", "BAND_RELATIVE", "GRID_CELLS", "MARGIN", "OUTSIDE", "Cover", "band_floor", "certify_cells", "cover"]
+__all__ = [
+    "BAND", "BAND_RELATIVE", "GRID_CELLS", "MARGIN", "OUTSIDE", "CellCertificate", "Cover", "band_floor", "certify_cells",
+    "cover", "degenerate_vertices", "vertex_ball",
+]  # fmt: skip
 
 #: Cells of the uniform grid over the polygon's interior (its step: sqrt(area / GRID_CELLS)).
 GRID_CELLS = 40_000
@@ -56,6 +76,12 @@ BAND = 1.0
 BAND_RELATIVE = 4e-3
 #: Along edges, cells are no longer than this fraction of the polygon's size.
 ALONG = 5e-4
+#: The largest ball (relative to the polygon's size) that may be left out around a vertex whose
+#: boundary data force det J -> 0 there (`degenerate_vertices`); it is left out only if its radius,
+#: or the diameter of its image (in the polygon's units), is within the band (`BAND`).
+VERTEX_BALL = 0.05
+#: Points sampled on the boundary of a left-out ball to bound the diameter of its image.
+BALL_SAMPLES = 96
 #: Rounds of splitting at most (each halves the cells).
 MAX_ROUNDS = 24
 #: Samples at most in one certificate; beyond, unproved cells count as their samples.
@@ -75,6 +101,21 @@ def band_floor(size: float) -> float:
     float
     """
     return min(0.01, 1e-5 * size)
+
+
+def vertex_ball(size: float) -> float:
+    """The largest ball that may be left out around a degenerate vertex: `VERTEX_BALL` of the polygon's size.
+
+    Parameters
+    ----------
+    size : float
+        The longer side of the polygon's bounding box.
+
+    Returns
+    -------
+    float
+    """
+    return VERTEX_BALL * size
 
 
 @dataclass(frozen=True)
@@ -158,7 +199,29 @@ def cover(vertices: NDArray[np.float64], near: float) -> Cover:
     return Cover(c, h)
 
 
-def certify_cells(solution, vertices, theta, sign: float, near: float) -> tuple[int, int]:
+@dataclass(frozen=True)
+class CellCertificate:
+    """What `certify_cells` found.
+
+    Attributes
+    ----------
+    failed : int
+        Samples where det J <= 0, is not finite, or the value leaves Theta
+        (outside the excluded balls).
+    checked : int
+        Samples evaluated.
+    excluded : tuple of (int, float)
+        ``(vertex, radius)`` of each ball left out around a vertex whose
+        boundary data force det J to 0 (see `certify_cells`'s ``balls``):
+        the smallest radius outside which every cell was proved.
+    """
+
+    failed: int
+    checked: int
+    excluded: tuple[tuple[int, float], ...] = ()
+
+
+def certify_cells(solution, vertices, theta, sign: float, near: float, balls=None) -> CellCertificate:
     """Check a smooth map cell by cell (see the module's docstring).
 
     Parameters
@@ -174,13 +237,20 @@ def certify_cells(solution, vertices, theta, sign: float, near: float) -> tuple[
         it should (Theta's orientation times the polygon's).
     near : float
         No samples this close to the boundary.
+    balls : (n,) array_like of float, optional
+        Per vertex, the largest radius of a ball that may be left out (0:
+        none). Only for vertices where the boundary data themselves make
+        the exact map's det J tend to 0 (`degenerate_vertices`): there the
+        closed form's sign is its approximation error. A cell lying wholly
+        inside such a ball that is not proved (or whose sample fails) is not
+        a failure and is not split; the ball actually left out is the
+        smallest around the vertex containing all such cells, reported in
+        `CellCertificate.excluded`. Every cell reaching beyond the cap is
+        certified as everywhere else.
 
     Returns
     -------
-    failed : int
-        Samples where det J <= 0, is not finite, or the value leaves Theta.
-    checked : int
-        Samples evaluated.
+    CellCertificate
     """
     v = np.asarray(vertices, dtype=np.float64)
     size = float(np.ptp(v, axis=0).max())
@@ -188,6 +258,10 @@ def certify_cells(solution, vertices, theta, sign: float, near: float) -> tuple[
     band = min(BAND, BAND_RELATIVE * size)
     cells = cover(v, near)
     centres, half = cells.centres, cells.half
+    caps = np.zeros(len(v)) if balls is None else np.asarray(balls, dtype=np.float64)
+    ball_at = np.flatnonzero(caps > 0)
+    radius = np.zeros(len(v))  # the balls actually left out
+    held = np.zeros(len(v), dtype=np.int64)  # and the samples they hold
     w = theta.points
     d = np.roll(w, -1, axis=0) - w
     nd = d / np.hypot(d[:, 0], d[:, 1])[:, None]
@@ -221,9 +295,25 @@ def certify_cells(solution, vertices, theta, sign: float, near: float) -> tuple[
             with np.errstate(divide="ignore", invalid="ignore"):
                 out[k] = ~(delta + beyond[k] / sigma <= band)
         bad = ~(det > 0) | out
+        reach = half * math.sqrt(2.0)
+        unproved = bad | ~(det > MARGIN * np.hypot(grad[:, 0], grad[:, 1]) * reach)
+        if ball_at.size:
+            # A cell wholly inside a vertex's ball whose sample fails, or that
+            # is not proved at the smallest size, is left out with the ball
+            # (its radius grows to cover the cell); larger unproved cells
+            # there are split as anywhere else: the ball shrinks to what the
+            # bound cannot prove.
+            stuck = bad | (unproved & ~(half > floor))
+            for i in ball_at:  # loop over the (few) degenerate vertices
+                far = np.hypot(centres[:, 0] - v[i, 0], centres[:, 1] - v[i, 1]) + reach
+                mine = stuck & (far <= caps[i])
+                if mine.any():
+                    radius[i] = max(radius[i], float(far[mine].max()))
+                    held[i] += int(mine.sum())
+                    bad &= ~mine
+                    unproved &= ~mine
         failed += int(bad.sum())
-        reach = np.hypot(grad[:, 0], grad[:, 1]) * half * math.sqrt(2.0)
-        split = np.flatnonzero(~bad & ~(det > MARGIN * reach) & (half > floor))
+        split = np.flatnonzero(unproved & ~bad & (half > floor))
         # a failure decides the verdict: splitting further would only count more
         if failed or not split.size or checked + 4 * split.size > MAX_SAMPLES:
             break
@@ -231,7 +321,126 @@ def certify_cells(solution, vertices, theta, sign: float, near: float) -> tuple[
         corners = np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]])
         kids = (centres[split, None, :] + corners[None] * q[:, None, None]).reshape(-1, 2)
         centres, half = _keep(kids, np.repeat(q, 4), v, near)
-    return failed, checked
+    excluded = []
+    tsize = float(np.ptp(w, axis=0).max())
+    for i in np.flatnonzero(radius > 0):  # loop over the balls left out (a few vertices)
+        image = _ball_image(solution, v, i, radius[i], floor, near) * size / tsize
+        checked += BALL_SAMPLES
+        if min(radius[i], image) <= band:
+            excluded.append((int(i), float(radius[i])))
+        else:  # too large to leave out: what it holds fails
+            failed += int(held[i])
+    return CellCertificate(failed, checked, tuple(excluded))
+
+
+def _ball_image(solution, v: NDArray[np.float64], i: int, r: float, floor: float, near: float) -> float:
+    """An upper bound of the diameter of phi(P n B(v_i, r)), from phi on the ball's boundary.
+
+    Each component of the closed form is harmonic in the polygon, so by
+    the maximum principle (applied to every linear functional of phi) the
+    image of P n B lies in the convex hull of the image of its boundary:
+    the arc of radius r inside the polygon and the two edge segments from
+    v_i (taken `floor` inside them, where the closed form is sampled
+    anyway). The diameter of the samples' values plus the largest |J| times
+    half their spacing bounds that of the hull (to first order in the
+    spacing).
+    """
+    n = len(v)
+    e_out = v[(i + 1) % n] - v[i]
+    e_in = v[(i - 1) % n] - v[i]
+    u_out, u_in = e_out / np.hypot(*e_out), e_in / np.hypot(*e_in)
+    area2 = float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
+    sgn = math.copysign(1.0, area2)
+    n_out = sgn * np.array([-u_out[1], u_out[0]])  # inward normals
+    n_in = -sgn * np.array([-u_in[1], u_in[0]])
+    a0 = math.atan2(u_out[1], u_out[0])
+    wedge = math.atan2(u_out[0] * u_in[1] - u_out[1] * u_in[0], float(u_out @ u_in)) * sgn % (2 * math.pi)
+    k = BALL_SAMPLES // 2
+    ang = a0 + sgn * np.linspace(0.0, wedge, k)
+    ring = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    s = np.linspace(0.0, r, BALL_SAMPLES // 4 + 1)
+    sides = np.concatenate([v[i] + s[:, None] * u_out + floor * n_out, v[i] + s[:, None] * u_in + floor * n_in])
+    # the arc of radius r, the two sides `floor` inside the edges, and the
+    # arc of radius `floor` that closes them around a reflex corner (points
+    # beyond the region only enlarge the hull)
+    pts = np.concatenate([v[i] + r * ring, sides, v[i] + min(floor, r) * ring])
+    pts, _ = _keep(pts, np.zeros(len(pts)), v, near)
+    if not len(pts):
+        return 0.0
+    val, j = solution.value_and_jacobian(pts)
+    if not (np.isfinite(val).all() and np.isfinite(j).all()):
+        return math.inf
+    diam = float(np.max(np.hypot(*(val[:, None, :] - val[None, :, :]).transpose(2, 0, 1))))
+    spacing = max(r * wedge / (k - 1), r / (BALL_SAMPLES // 4))
+    top = float(np.max(np.sqrt((j**2).sum(axis=(1, 2)))))  # Frobenius >= spectral norm
+    return diam + top * spacing
+
+
+def degenerate_vertices(vertices, theta_points, boundary_to_theta, mixed: bool = False) -> NDArray[np.bool_]:
+    """The vertices where the boundary data alone make the exact map's det J tend to 0.
+
+    Near a vertex v the exact harmonic map is, to leading order, the affine
+    map taking the two edges' directions to the one-sided derivatives of
+    the boundary data along them, plus singular terms r^(pi/alpha) of the
+    corner's angle alpha. Its det J tends to 0 at v when:
+
+    - a one-sided derivative of the data vanishes: the data leave the
+      vertex slower than linearly along an incident edge (the quadratic
+      behaviour t^2 at an edge's start, a boundary map that stalls there),
+      or the edge's image is a point (a zero-length edge of Theta). Then
+      the affine part has rank 1 or less, and every other term is o(r^0)
+      in the gradient at a convex corner, o(1) in det J;
+    - mixed conditions (each component prescribed on one incident edge and
+      free on the other) at a corner of angle alpha < pi / 2: each
+      component behaves as r^(pi / (2 alpha)), an exponent above 1, so
+      both gradients tend to 0.
+
+    The test of the first kind is numerical: the data's secant slope over
+    1e-6 of each incident edge, against the edge's mean slope (|image| /
+    |edge|, times the ratio of the polygons' sizes where Theta's edge is a
+    point), below 1e-3: 1 for linear data, 1e-6 for t^2.
+
+    Parameters
+    ----------
+    vertices : (n, 2) ndarray of float
+        The polygon.
+    theta_points : (n, 2) ndarray of float
+        Theta.
+    boundary_to_theta : callable
+        ``(edge, t) -> (k, 2)`` points of Theta: the map's boundary data.
+    mixed : bool
+        Mixed conditions (§5.2): at every vertex one component is free on
+        one incident edge and prescribed on the other.
+
+    Returns
+    -------
+    (n,) ndarray of bool
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    w = np.asarray(theta_points, dtype=np.float64)
+    n = len(v)
+    idx = np.arange(n)
+    prev = (idx - 1) % n
+    length = np.hypot(*(np.roll(v, -1, axis=0) - v).T)
+    image = np.hypot(*(np.roll(w, -1, axis=0) - w).T)
+    # the mean slope of the data along each edge; a point-like image of Theta
+    # is measured against the polygons' sizes instead (its slope is ~0)
+    mean = np.maximum(image, 1e-9 * float(np.ptp(w, axis=0).max())) / length
+    scale = float(np.ptp(w, axis=0).max()) / float(np.ptp(v, axis=0).max())
+    h = 1e-6
+    out = np.hypot(*(boundary_to_theta(idx, np.full(n, h)) - boundary_to_theta(idx, np.zeros(n))).T) / (h * length)
+    back = np.hypot(*(boundary_to_theta(prev, np.ones(n)) - boundary_to_theta(prev, np.full(n, 1 - h))).T) / (
+        h * length[prev]
+    )
+    slow = (out < 1e-3 * np.minimum(mean, scale)) | (back < 1e-3 * np.minimum(mean[prev], scale))
+    if mixed:
+        e = np.roll(v, -1, axis=0) - v
+        a, b = e, -e[prev]  # from the vertex along the outgoing and the incoming edge
+        area2 = float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
+        turn = np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], (a * b).sum(axis=1)) * math.copysign(1.0, area2)
+        angle = np.mod(turn, 2 * np.pi)  # the interior angle at each vertex
+        slow |= np.abs(angle - np.pi / 2) > 1e-9
+    return slow
 
 
 def _smallest_singular_value(j: NDArray[np.float64]) -> NDArray[np.float64]:

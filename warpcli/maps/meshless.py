@@ -38,7 +38,7 @@ from ..files import format_bytes
 from ..grid import inside_polygon
 from ..polygon import Polygon
 from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, slide, sliding_tables
-from .certificate import certify_cells
+from .certificate import CellCertificate, certify_cells, degenerate_vertices, vertex_ball
 from .theta import Theta
 
 #: Points closer than this (times the polygon's size) to its boundary take the exact boundary data.
@@ -201,11 +201,18 @@ class SmoothMap(ThetaMap):
 
     @cached_property
     def _certificate(self) -> Certificate:
-        """`warpcli.maps.certificate.certify_cells`: computed once (the build, the check and the report ask)."""
+        cells = self.cell_certificate
+        return Certificate(cells.failed, cells.checked, "samples")
+
+    @cached_property
+    def cell_certificate(self) -> CellCertificate:
+        """`warpcli.maps.certificate.certify_cells`, computed once (the build, the check and the report
+        ask), with balls of at most `vertex_ball` left out around the `degenerate_vertices`."""
         sign = self.theta.orientation * np.sign(self.polygon.signed_area)
         near = ON_BOUNDARY * self._size
-        failed, checked = certify_cells(self.solution, self.polygon.points, self.theta, sign, near)
-        return Certificate(failed, checked, "samples")
+        slow = degenerate_vertices(self.polygon.points, self.theta.points, self.boundary_to_theta, self.conditions == "mixed")
+        balls = np.where(slow, vertex_ball(self._size), 0.0)
+        return certify_cells(self.solution, self.polygon.points, self.theta, sign, near, balls)
 
     def describe(self) -> dict:
         return {"nodes": {"m": int(self.solution.m)}}
