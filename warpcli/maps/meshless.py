@@ -14,7 +14,9 @@ analytic derivatives; this module makes them `ThetaMap`s:
   (`newton.invert`); points of Theta's boundary go through the exact
   inverse boundary map;
 - certify: `warpcli.maps.certificate`, det J and the values cell by cell,
-  refined along every edge and in every corner (a smooth map has no
+  refined along every edge and in every corner, with a sub-band ball left
+  out only at vertices where this map's boundary data (its behaviour,
+  its conditions) force det J -> 0 (a smooth map has no
   triangles to check; Radó-Kneser-Choquet holds for the exact map, and the
   approximations converge to it as m grows).
 """
