@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 import pytest
-from helpers import l_shape, regular, star
+from helpers import regular, star
 from nasty import SHAPES, c_shape, dense_check, dense_samples, ring_gap
 
 from warpcli import MapOptions, Polygon, build_map, warp_image
@@ -121,12 +121,8 @@ def _ball_image_px(phi, i: int, r: float) -> float:
         (DART, SQUARE, MapOptions(method="mfs", conditions="mixed"), 0),  # r^4.5 at the tip: a 2 px ball, a tiny image
         (DART, SQUARE, MapOptions(method="bem", conditions="mixed"), 0),
         (star(), regular(12, r=55.0, phase=0.2), MapOptions(method="bem", dst_boundary="quadratic"), 1),
-        pytest.param(
-            l_shape(), regular(6, r=55.0, phase=0.2), MapOptions(method="bem", dst_boundary="quadratic"), 1,
-            marks=pytest.mark.heavy,
-        ),
     ],
-    ids=["mixed-dart-mfs", "mixed-dart-bem", "quadratic-star-bem", "quadratic-L-bem"],
+    ids=["mixed-dart-mfs", "mixed-dart-bem", "quadratic-12-gon-bem"],
 )
 def test_left_out_balls_are_sub_band_and_the_rest_is_clean(src, dst, opts, which):
     """The cases the first cell certificate refused: accepted now, each ball within the band in

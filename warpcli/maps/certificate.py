@@ -29,11 +29,10 @@ there, such as t^2; mixed conditions at a corner that is not a right
 angle), the closed form's sign near the vertex is its approximation error,
 not a fold of the exact map, so a ball may be left out there:
 
-- the ball is the smallest around the vertex holding every cell that
-  fails or is not proved at the smallest size, and only cells lying wholly
-  within `vertex_ball` (5 % of the size) can be held; every cell reaching
-  beyond is certified as anywhere else, so the ball's boundary arc is
-  certified;
+- the ball is the smallest around the vertex holding every cell whose
+  sample fails, and only cells lying wholly within `vertex_ball` (5 % of
+  the size) can be held; every cell reaching beyond is certified as
+  anywhere else, so the ball's boundary arc is certified;
 - it is left out only if its radius, or the diameter of its image (in the
   polygon's units), is within the band (`BAND`, 1 px): the image is bounded
   by the maximum principle (`_ball_image`), so whatever the closed form
@@ -242,8 +241,8 @@ def certify_cells(solution, vertices, theta, sign: float, near: float, balls=Non
         none). Only for vertices where the boundary data themselves make
         the exact map's det J tend to 0 (`degenerate_vertices`): there the
         closed form's sign is its approximation error. A cell lying wholly
-        inside such a ball that is not proved (or whose sample fails) is not
-        a failure and is not split; the ball actually left out is the
+        inside such a ball whose sample fails is held by the ball, not
+        counted (yet) as a failure; the ball actually left out is the
         smallest around the vertex containing all such cells, reported in
         `CellCertificate.excluded`. Every cell reaching beyond the cap is
         certified as everywhere else.
@@ -298,12 +297,12 @@ def certify_cells(solution, vertices, theta, sign: float, near: float, balls=Non
         reach = half * math.sqrt(2.0)
         unproved = bad | ~(det > MARGIN * np.hypot(grad[:, 0], grad[:, 1]) * reach)
         if ball_at.size:
-            # A cell wholly inside a vertex's ball whose sample fails, or that
-            # is not proved at the smallest size, is left out with the ball
-            # (its radius grows to cover the cell); larger unproved cells
-            # there are split as anywhere else: the ball shrinks to what the
-            # bound cannot prove.
-            stuck = bad | (unproved & ~(half > floor))
+            # A cell wholly inside a vertex's ball whose sample fails is left
+            # out with the ball (its radius grows to cover the cell); cells
+            # there that are not proved are split as anywhere else (and
+            # count as their samples at the smallest size): the ball shrinks
+            # to where the samples themselves fail.
+            stuck = bad
             for i in ball_at:  # loop over the (few) degenerate vertices
                 far = np.hypot(centres[:, 0] - v[i, 0], centres[:, 1] - v[i, 1]) + reach
                 mine = stuck & (far <= caps[i])
