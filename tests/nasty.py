@@ -181,18 +181,19 @@ def dense_check(phi, samples: np.ndarray | None = None) -> dict:
     for i in range(len(w)):  # convex Theta: outside iff beyond some edge
         cross = (d[i, 0] * (val[:, 1] - w[i, 1]) - d[i, 1] * (val[:, 0] - w[i, 0])) / np.hypot(*d[i])
         outside |= cross * phi.theta.orientation < -1e-9 * tscale
-    # how far outside: the largest distance beyond an edge line, turned into
-    # polygon units by the smallest singular value, plus the distance to the
-    # boundary: how far inside the polygon the boundary seems to move
-    beyond = np.zeros(len(p))
-    for i in range(len(w)):
-        cross = (d[i, 0] * (val[:, 1] - w[i, 1]) - d[i, 1] * (val[:, 0] - w[i, 0])) / np.hypot(*d[i])
-        beyond = np.maximum(beyond, -cross * phi.theta.orientation)
     k_out = np.flatnonzero(outside)
     deep = 0
     if k_out.size:
-        sigma = np.linalg.svd(j[k_out], compute_uv=False)[:, -1]
-        shift = nearest_edge(p[k_out], v)[2] + beyond[k_out] / sigma
+        # how far the point must move for its value to come back onto each
+        # crossed edge line: the excursion over the gradient of n . phi
+        shift = np.zeros(k_out.size)
+        for i in range(len(w)):
+            n = np.array([d[i, 1], -d[i, 0]]) / np.hypot(*d[i]) * phi.theta.orientation
+            e = ((val[k_out] - w[i]) @ n)
+            g = np.hypot(*(j[k_out, 0, :] * n[0] + j[k_out, 1, :] * n[1]).T)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                shift = np.where(e > 1e-9 * tscale, np.fmax(shift, e / g), shift)
+        shift = nearest_edge(p[k_out], v)[2] + shift
         deep = int((~(shift <= min(1.0, 4e-3 * size))).sum())
     k = int(np.nanargmin(np.where(np.isfinite(det), det, -np.inf)))
     return {

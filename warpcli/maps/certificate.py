@@ -283,16 +283,28 @@ def certify_cells(solution, vertices, theta, sign: float, near: float, balls=Non
             beyond = np.maximum(beyond, -cross * theta.orientation)
         out = beyond > slack
         if out.any():
-            # Outside Theta by e at distance delta from the boundary: the
-            # boundary seen through phi moves inward by about delta + e /
-            # sigma_min(J). Within `BAND` that is the closed form's boundary
-            # error (the warp clamps onto Theta's edge, a sub-pixel shift);
-            # deeper, the map leaves Theta where the exact one cannot.
+            # Outside Theta by e_i beyond edge line i at distance delta from
+            # the boundary: the point x0 would have to move by e_i / |J^T n_i|
+            # (n_i the edge's outward normal; the level set of the harmonic
+            # n_i . phi, to first order) for its value to be back on that
+            # line, so the boundary seen through phi moves inward by about
+            # delta + max_i e_i / |J^T n_i|. Within `BAND` that is the closed
+            # form's boundary error (the warp clamps onto Theta's edge, a
+            # sub-pixel shift); deeper, the map leaves Theta where the exact
+            # one cannot. (sigma_min(J) <= |J^T n_i| would overstate it
+            # where J is nearly singular, as at degenerate vertices, where
+            # the value moves along the edge, not across it.)
             k = np.flatnonzero(out)
-            sigma = _smallest_singular_value(j[k])
+            shift = np.zeros(k.size)
+            for i in range(len(w)):  # loop over Theta's edges
+                cross = nd[i, 0] * (val[k, 1] - w[i, 1]) - nd[i, 1] * (val[k, 0] - w[i, 0])
+                e = -cross * theta.orientation
+                normal = np.array([nd[i, 1], -nd[i, 0]]) * theta.orientation  # outward
+                across = np.hypot(*(np.einsum("kab,a->kb", j[k], normal)).T)  # |J^T n_i|
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    shift = np.where(e > slack, np.fmax(shift, np.where(across > 0, e / across, np.inf)), shift)
             delta = nearest_edge(centres[k], v)[2]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                out[k] = ~(delta + beyond[k] / sigma <= band)
+            out[k] = ~(delta + shift <= band)
         bad = ~(det > 0) | out
         reach = half * math.sqrt(2.0)
         unproved = bad | ~(det > MARGIN * np.hypot(grad[:, 0], grad[:, 1]) * reach)
@@ -440,12 +452,3 @@ def degenerate_vertices(vertices, theta_points, boundary_to_theta, mixed: bool =
         angle = np.mod(turn, 2 * np.pi)  # the interior angle at each vertex
         slow |= np.abs(angle - np.pi / 2) > 1e-9
     return slow
-
-
-def _smallest_singular_value(j: NDArray[np.float64]) -> NDArray[np.float64]:
-    """sigma_min of stacked 2x2 matrices: |det| / sigma_max, sigma_max = (sqrt(s + 2|det|) + sqrt(s - 2|det|)) / 2."""
-    a, b, c, d = j[:, 0, 0], j[:, 0, 1], j[:, 1, 0], j[:, 1, 1]
-    s = a * a + b * b + c * c + d * d
-    det = np.abs(a * d - b * c)
-    top = 0.5 * (np.sqrt(s + 2 * det) + np.sqrt(np.maximum(s - 2 * det, 0.0)))
-    return det / top
