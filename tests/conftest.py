@@ -27,3 +27,21 @@ settings.register_profile("warpcli", derandomize=True, deadline=None, max_exampl
 # Longer local fuzzing: WARPCLI_FUZZ=long python -m pytest tests/test_fuzz.py (random, many examples).
 settings.register_profile("long", derandomize=False, deadline=None, max_examples=2000)
 settings.load_profile("long" if os.environ.get("WARPCLI_FUZZ") == "long" else "warpcli")
+
+
+# Heavy tests (dense checks at full density, default-m fits of many-gons): not in the default
+# run's time budget. WARPCLI_HEAVY=1 python -m pytest ... runs them too.
+HEAVY = os.environ.get("WARPCLI_HEAVY") == "1"
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "heavy: a long test, run only with WARPCLI_HEAVY=1")
+
+
+def pytest_collection_modifyitems(config, items):
+    if HEAVY:
+        return
+    skip = pytest.mark.skip(reason="heavy: WARPCLI_HEAVY=1 runs it")
+    for item in items:
+        if "heavy" in item.keywords:
+            item.add_marker(skip)

@@ -564,6 +564,23 @@ class ClosedForm:
         val, jac, _ = self._eval(points, True, True, False)
         return val, jac
 
+    def value_jacobian_hessian(
+        self, points: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Value, Jacobian and Hessian in one pass (what the certificate needs).
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+
+        Returns
+        -------
+        value : (K, 2) ndarray of float
+        jacobian : (K, 2, 2) ndarray of float
+        hessian : (K, 2, 2, 2) ndarray of float
+        """
+        return self._eval(points, True, True, True)
+
     def hessian(self, points: ArrayLike) -> NDArray[np.float64]:
         """Second derivatives of the map at points inside the polygon.
 

@@ -13,7 +13,10 @@ analytic derivatives; this module makes them `ThetaMap`s:
   ||x - phi(y)||^2 with the analytic Jacobian, constrained to the polygon
   (`newton.invert`); points of Theta's boundary go through the exact
   inverse boundary map;
-- certify: the sign of det J at a dense grid of samples (a smooth map has no
+- certify: `warpcli.maps.certificate`, det J and the values cell by cell,
+  refined along every edge and in every corner, with a sub-band ball left
+  out only at vertices where this map's boundary data (its behaviour,
+  its conditions) force det J -> 0 (a smooth map has no
   triangles to check; Radó-Kneser-Choquet holds for the exact map, and the
   approximations converge to it as m grows).
 """
@@ -37,12 +40,11 @@ from ..files import format_bytes
 from ..grid import inside_polygon
 from ..polygon import Polygon
 from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, slide, sliding_tables
+from .certificate import CellCertificate, certify_cells, degenerate_vertices, vertex_ball
 from .theta import Theta
 
 #: Points closer than this (times the polygon's size) to its boundary take the exact boundary data.
 ON_BOUNDARY = 1e-9
-#: Samples of det J for the certificate.
-CERTIFY_SAMPLES = 40_000
 #: Triangles of the first-guess triangulation (§3.2).
 GUESS_TRIANGLES = 4000
 #: Residual (relative to Theta) within which Newton accepts a point it cannot improve further.
@@ -197,19 +199,22 @@ class SmoothMap(ThetaMap):
         return mesh, self.evaluate(mesh.vertices).points
 
     def certify(self) -> Certificate:
-        xmin, ymin, xmax, ymax = self.polygon.bounds
-        step = math.sqrt(abs(self.polygon.signed_area) / CERTIFY_SAMPLES)
-        xs = np.arange(xmin + step / 2, xmax, step)
-        ys = np.arange(ymin + step / 2, ymax, step)
-        pts = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-        pts = pts[inside_polygon(pts, self.polygon.points)]
-        # a sample on an edge (to rounding) has no closed form there (BEM's is singular)
-        near, _, _ = on_boundary(pts, self.polygon.points, ON_BOUNDARY * self._size)
-        pts = np.delete(pts, near, axis=0)
-        j = self.solution.jacobian(pts)
-        det = j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0]
-        bad = ~(det * self.theta.orientation * np.sign(self.polygon.signed_area) > 0)
-        return Certificate(int(bad.sum()), len(pts), "samples")
+        return self._certificate
+
+    @cached_property
+    def _certificate(self) -> Certificate:
+        cells = self.cell_certificate
+        return Certificate(cells.failed, cells.checked, "samples")
+
+    @cached_property
+    def cell_certificate(self) -> CellCertificate:
+        """`warpcli.maps.certificate.certify_cells`, computed once (the build, the check and the report
+        ask), with balls of at most `vertex_ball` left out around the `degenerate_vertices`."""
+        sign = self.theta.orientation * np.sign(self.polygon.signed_area)
+        near = ON_BOUNDARY * self._size
+        slow = degenerate_vertices(self.polygon.points, self.theta.points, self.boundary_to_theta, self.conditions == "mixed")
+        balls = np.where(slow, vertex_ball(self._size), 0.0)
+        return certify_cells(self.solution, self.polygon.points, self.theta, sign, near, balls)
 
     def describe(self) -> dict:
         return {"nodes": {"m": int(self.solution.m)}}

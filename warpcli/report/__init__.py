@@ -90,6 +90,56 @@ class Measurable(Protocol):
     timings: dict[str, float]
 
 
+#: Pixel centres this close to the target's boundary (times its size) take the exact boundary map, without a Jacobian.
+ON_BOUNDARY = 1e-9
+
+
+def unknown_pixels(result: Measurable) -> int:
+    """Output pixels strictly inside the target whose pull-back or its Jacobian is NaN.
+
+    A bijection has a source point and a Jacobian at every such pixel. A
+    smooth map whose value leaves Theta is clamped onto Theta's boundary
+    there, and an inverse that does not converge gives NaN: those pixels
+    used to be skipped by the metrics, they are counted here. Pixel
+    centres on the boundary (to `ON_BOUNDARY`) have no Jacobian by design.
+
+    Parameters
+    ----------
+    result : Measurable
+        A warp that kept its Jacobians.
+
+    Returns
+    -------
+    int
+    """
+    import numpy as np
+
+    from ..boundary import on_boundary
+    from ..grid import inside_polygon
+
+    pull = result.pull
+    dst = result.map.dst.points
+    size = float(np.ptp(dst, axis=0).max())
+    h, w = pull.points.shape[:2]
+    r0, c0 = pull.origin
+    xs = c0 + np.arange(w) + 0.5
+    count = 0
+    band = max(1, (1 << 18) // max(w, 1))
+    for s in range(0, h, band):  # bands of rows: bounded memory
+        ys = r0 + np.arange(s, min(s + band, h)) + 0.5
+        centres = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+        pts = pull.points[s : s + band].reshape(-1, 2)
+        jac = pull.jacobian[s : s + band].reshape(-1, 4)
+        lost = ~(np.isfinite(pts).all(axis=1) & np.isfinite(jac).all(axis=1))
+        idx = np.flatnonzero(lost)
+        if not idx.size:
+            continue
+        idx = idx[inside_polygon(centres[idx], dst)]
+        near = on_boundary(centres[idx], dst, ON_BOUNDARY * size)[0]
+        count += int(idx.size - near.size)
+    return count
+
+
 def build_report(result: Measurable) -> dict:
     """The map's certificates, Jacobian and distortion (the paper's Table 2) as a JSON-able dict.
 
@@ -114,9 +164,11 @@ def build_report(result: Measurable) -> dict:
     dict
         ``vertices``; what the method adds (FEM: ``source_mesh`` and
         ``target_mesh`` with their vertex and triangle counts);
-        ``flipped_triangles`` (elements where either map flips: 0 for a
-        bijection); ``min_jacobian_det``; ``conformal`` and ``isometric``
-        (``mean`` and ``max``); ``timings`` (seconds per stage).
+        ``flipped_triangles`` (elements where either map flips, plus the
+        output pixels inside the target whose pull-back or Jacobian is
+        unknown, see `unknown_pixels`: 0 for a bijection);
+        ``min_jacobian_det``; ``conformal`` and ``isometric`` (``mean`` and
+        ``max``); ``timings`` (seconds per stage).
 
     Raises
     ------
@@ -142,7 +194,7 @@ def build_report(result: Measurable) -> dict:
         "vertices": f.src.n,
         **theta,
         **f.describe(),
-        "flipped_triangles": f.flipped_triangles(),
+        "flipped_triangles": f.flipped_triangles() + unknown_pixels(result),
         "min_jacobian_det": summary["min_jacobian_det"],
         "conformal": summary["conformal"],
         "isometric": summary["isometric"],
