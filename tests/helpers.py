@@ -169,3 +169,27 @@ def run_cli(args):
     with contextlib.redirect_stderr(err):
         code = main([str(a) for a in args])
     return code, err.getvalue()
+
+
+_MAPS: dict = {}
+
+
+def built_map(src, dst, options=None):
+    """``BijectiveMap.between(Polygon(src), Polygon(dst), options)``, built once per test process.
+
+    Many contract tests ask for the same pair with the same options (a pair's
+    map, its identity, its symmetry); a map is a value that tests only
+    evaluate, so each worker builds each one once. Keyed on the exact
+    coordinates (bytes) and the options (a frozen dataclass); the 64 most
+    recent are kept.
+    """
+    from warpcli import BijectiveMap, MapOptions, Polygon
+
+    src, dst = np.ascontiguousarray(src, dtype=float), np.ascontiguousarray(dst, dtype=float)
+    options = options or MapOptions()
+    key = (src.shape, src.tobytes(), dst.shape, dst.tobytes(), options)
+    if key not in _MAPS:
+        if len(_MAPS) >= 64:
+            _MAPS.pop(next(iter(_MAPS)))
+        _MAPS[key] = BijectiveMap.between(Polygon(src), Polygon(dst), options)
+    return _MAPS[key]

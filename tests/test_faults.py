@@ -248,7 +248,7 @@ STRIP_SCRIPT = textwrap.dedent(
     import OpenImageIO as oiio
     from warpcli.pipeline import warp_file
     d, limit, oiio_mb, formats = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4].split(",")
-    w, h = 800, 600
+    w, h = (int(v) for v in sys.argv[5].split("x"))
     inp = write_png(f"{d}/in.png", (np.random.default_rng(1).random((h, w, 3)) * 255).astype(np.uint8))
     frame = write_polygon(f"{d}/f.json", [[0, 0], [w, 0], [w, h], [0, h]])
     if oiio_mb:
@@ -267,9 +267,9 @@ STRIP_SCRIPT = textwrap.dedent(
 )
 
 
-def _strips(tmp_path, limit, oiio_mb, formats):
+def _strips(tmp_path, limit, oiio_mb, formats, size="800x600"):
     done = subprocess.run(
-        [sys.executable, "-c", STRIP_SCRIPT, str(tmp_path), str(limit), str(oiio_mb), ",".join(formats)],
+        [sys.executable, "-c", STRIP_SCRIPT, str(tmp_path), str(limit), str(oiio_mb), ",".join(formats), size],
         capture_output=True, text=True, cwd=REPO, timeout=600,
     )  # fmt: skip
     assert done.returncode == 0 and done.stderr == "", done.stderr
@@ -277,7 +277,10 @@ def _strips(tmp_path, limit, oiio_mb, formats):
 
 
 def test_strips_under_a_file_size_limit_fail_in_every_format_and_leave_nothing(tmp_path):
-    results = _strips(tmp_path, 100_000, 0, STRIP_FORMATS)  # every output is far more than 100 kB
+    # 400 x 300 noise: every output is far more than 100 kB (at least 120,000 bytes of 8-bit
+    # indices for GIF, 360,000 for the others; noise does not compress) and the first strip
+    # alone (256 rows) is past the limit, as at any larger size: the size changes nothing here.
+    results = _strips(tmp_path, 100_000, 0, STRIP_FORMATS, "400x300")
     assert [r[0] for r in results[:-1]] == STRIP_FORMATS
     for ext, kind, msg in results[:-1]:
         assert kind == "ImageIOError", (ext, kind, msg)

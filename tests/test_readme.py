@@ -53,10 +53,30 @@ def test_the_readme_stays_short_and_links_into_the_docs():
     assert "<!-- quickstart-command -->" in text and "<!-- test-command -->" in text
 
 
-def test_readme_and_docs_commands_run_in_order(tmp_path):
+def test_readme_and_docs_commands_run_in_order(tmp_path, monkeypatch):
+    """Each command as written: the first ``warp`` line by the shell and the installed ``warp``
+    executable (the console script, its exit path included), the other ``warp`` lines through
+    the same command-line code in this process (`warpcli.cli.main`, what the executable calls:
+    the same parsing, defaults and exit status, without an interpreter start for each), the
+    other lines (``mkdir``, ``python sample_images/...``) by the shell."""
+    import contextlib
+    import io
+    import shlex
+
+    from warpcli.cli import main
+
     os.symlink(os.path.join(ROOT, "sample_images"), tmp_path / "sample_images")
     env = dict(os.environ, PATH=os.path.dirname(sys.executable) + os.pathsep + os.environ.get("PATH", ""))
+    monkeypatch.chdir(tmp_path)
+    first = True
     for page, command in COMMANDS:  # later ones may use earlier outputs (apply-map on a saved map)
+        if command.startswith("warp ") and not first:
+            err = io.StringIO()
+            with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+                code = main(shlex.split(command, comments=True)[1:])
+            assert code == 0, f"{page}: {command}\n{err.getvalue()}"
+            continue
+        first = first and not command.startswith("warp ")
         done = subprocess.run(command, shell=True, cwd=tmp_path, env=env, capture_output=True, text=True)
         assert done.returncode == 0, f"{page}: {command}\n{done.stderr}"
 
