@@ -321,7 +321,7 @@ def read_cages(path: str | os.PathLike[str], label: str | None = None) -> tuple[
         for k, item in enumerate(items):
             where = f"{name}: cage {k}"
             mesh = partition_of(item, where)
-            cages.append(mesh if mesh is not None else Polygon(points_of(item, where), name=where))
+            cages.append(mesh if mesh is not None else Polygon(points_of(item, where, None), name=where))
         return tuple(cages)
     count = _polygon_count(doc) if label is None else 1
     if count <= 1:
