@@ -215,7 +215,7 @@ def within_seams(values: ArrayLike, jacobian: ArrayLike | None, pair: WithinPair
         The output image.
     jacobian : (H, W, 2, 2) array_like of float or None
         The inverse map's Jacobian at every output pixel (NaN outside the
-        outline), or None.
+        outline: taken there as the identity, the input's own), or None.
     pair : WithinPair
 
     Returns
@@ -251,8 +251,9 @@ def within_seams(values: ArrayLike, jacobian: ArrayLike | None, pair: WithinPair
     out = {}
     fields = {"values": v}
     if jacobian is not None:
-        jac = np.asarray(jacobian, dtype=np.float64)
-        fields["jacobian"] = jac.reshape(h, w, -1)
+        jac = np.asarray(jacobian, dtype=np.float64).reshape(h, w, 4)
+        # Outside the outline the output is the input: the map's Jacobian there is the identity.
+        fields["jacobian"] = np.where(np.isfinite(jac), jac, np.array([1.0, 0.0, 0.0, 1.0]))
     for field, data in fields.items():
         diffs = ((data[:, 1:] - data[:, :-1], 0, box[:, 1:] & box[:, :-1]), (data[1:] - data[:-1], 1, box[1:] & box[:-1]))
         doc: dict[str, float | int] = {}
