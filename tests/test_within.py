@@ -175,8 +175,10 @@ def test_two_cages_in_one_outline_report_seams_and_maps(eyes):
     tmp, image, src, dst = eyes
     out = tmp / "out.png"
     code, err = run_cli([image, "--src", src, "--dst", dst, out, "--within", "image", "--max-area", "24",
-                         "--report", tmp / "r.json", "--save-map", tmp / "m.exr", "--no-antialias"])  # fmt: skip
+                         "--report", tmp / "r.json", "--save-map", tmp / "m.exr", "--no-antialias",
+                         "--grid", tmp / "g.png", "--heatmap", tmp / "h.png"])  # fmt: skip
     assert code == 0, err
+    assert (tmp / "g.png").stat().st_size > 0 and (tmp / "h.png").stat().st_size > 0
     report = json.loads((tmp / "r.json").read_text())
     assert report["certified"] is True
     within = report["within"]
@@ -249,6 +251,7 @@ def test_what_within_cannot_take_is_refused_in_one_line(eyes):
         (["--dst", dst, "--within", small], "vertex"),
         (["--dst", dst, "--within", "image", "--save-theta", tmp / "t.json"], "Theta"),
         (["--dst", one, "--within", "image"], "cage"),
+        (["--dst", dst, "--within", "image", "--labels", image, tmp / "l.png"], "not with --within"),
     ]
     for extra, words in cases:
         out = tmp / "never.png"

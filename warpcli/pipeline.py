@@ -475,7 +475,8 @@ def warp_file(
     inputs = tuple(p for p in (input_path, src_path, dst_path, opts.map.theta_file) if p is not None)
     labels = [(label_in, label_out) for label_in, label_out in labels]
     if labels and opts.outside == "input":
-        raise InputError(f"{os.fspath(labels[0][0])}: labels are warped onto the background, not with --outside input")
+        given = "--within" if opts.within is not None else "--outside input"
+        raise InputError(f"{os.fspath(labels[0][0])}: labels are warped onto the background, not with {given}")
     inputs = (*inputs, *(label_in for label_in, _ in labels))
     extra = [p for p in (grid_path, heatmap_path, save_map, save_forward_map) if p is not None]
     extra += [label_out for _, label_out in labels]
@@ -562,7 +563,9 @@ def warp_file(
             t0 = clock()
             stage("drawing figures")
             if grid_path is not None:
-                fig = figures.grid_figure(image.pixels, result.inverse_map, src, dst, alpha_channel=image.alpha_channel)
+                # Within an outline the whole picture is one map (the identity outside the outline): draw it all.
+                points = result.plan.whole_points() if pair is not None else result.inverse_map
+                fig = figures.grid_figure(image.pixels, points, src, dst, alpha_channel=image.alpha_channel)
                 write_image(pending.path(grid_path), figures.picture(fig))
             if heatmap_path is not None:
                 values = result.measure(heatmap_measure)
