@@ -278,3 +278,17 @@ def test_several_cages_read_from_each_form(tmp_path):
     (mesh,) = read_cages(tmp_path / "mesh.geojson")
     assert isinstance(mesh, Partition) and mesh.n_faces == 3
     assert len(read_cages(write_polygon(tmp_path / "one.json", a))) == 1
+
+
+@pytest.mark.parametrize("method", ["bem", "mfs"])
+def test_every_method_within_an_outline(method):
+    rng = np.random.default_rng(2)
+    image = _image(rng)
+    cage = [[16, 16], [30, 16], [30, 30], [16, 30]]
+    moved = [[16, 16], [33, 14], [30, 30], [16, 30]]
+    result = warp_image(image, cage, moved, within="6", method=method)
+    assert result.map.certified
+    inside = inside_outline(result.within.outline, SIZE, SIZE)
+    assert np.array_equal(result.pixels[~inside], image[~inside])
+    jac = result.jacobian[inside]
+    assert (jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0] > 0).all()
