@@ -203,7 +203,7 @@ def within_figure() -> dict:
         }  # fmt: skip
         crop = np.clip(np.asarray(pixels, dtype=float), 0, 255).astype(np.uint8)[40:427, 170:470]
         lines = [label, f"folds {folds}" + (f", ghost {vacated} px" if vacated else ""),
-                 f"seam: jump {seam.across_mean:.1f} across the cage, {elsewhere_mean:.1f} elsewhere"]  # fmt: skip
+                 f"seam: jump {seam.across_mean:.1f} across, {elsewhere_mean:.1f} elsewhere"]  # fmt: skip
         panels.append(_captioned(crop, lines))
     figure = panels[0]
     for panel in panels[1:]:
