@@ -135,6 +135,101 @@ def map_pictures() -> None:
                   "--heatmap", os.path.join(HERE, f"{name}_heatmap.png"))  # fmt: skip
 
 
+#: The rocket's cage (scikit-image's ``rocket``, 640x427): a hexagon round its upper body, the
+#: bottom edge fixed, the top edge moved 34 px to the right and the middle vertices 12 px: a bend.
+ROCKET_CAGE = [[296, 300], [296, 205], [300, 112], [346, 112], [350, 205], [350, 300]]
+ROCKET_BENT = [[296, 300], [308, 205], [334, 112], [380, 112], [362, 205], [350, 300]]
+
+
+def within_figure() -> dict:
+    """rocket_within.png: the rocket bent three ways, side by side, each captioned with its folds and seam.
+
+    1. a single-cage retouch (``--outside input``): the cage pasted over the photograph;
+    2. the same cage ``--within image``: the ring between the cage and the image's border mapped too;
+    3. scikit-image's ThinPlateSplineTransform through the cage's vertices, with the image's corners
+       and edge midpoints pinned.
+
+    Folds: output pixels where the inverse map's Jacobian has det <= 0 (warpcli's from its
+    Jacobians, the spline's by central differences on the pixel grid). Seam: the mean jump of
+    neighbouring pixel values (0..255, largest over the channels) across the target cage's edges,
+    against the mean jump elsewhere (`warpcli.report.seam.seam_jump`), and the largest jump across
+    over the 99th percentile of the jumps elsewhere. Ghost: pixels of the source cage the target no longer covers, which keep the old
+    picture beside the moved one. The numbers are written to rocket_within.json.
+    """
+    import skimage.data
+    from skimage.transform import ThinPlateSplineTransform, warp
+
+    from warpcli import warp_image
+    from warpcli.grid import inside_polygon, pixel_centres
+    from warpcli.report.figures import side_by_side
+    from warpcli.report.seam import seam_jump
+
+    rocket = skimage.data.rocket()
+    h, w = rocket.shape[:2]
+    src, dst = np.array(ROCKET_CAGE, dtype=float), np.array(ROCKET_BENT, dtype=float)
+    write_json("rocket_cage.json", ROCKET_CAGE, "hexagon round the rocket's upper body in scikit-image's rocket (640x427)")
+    write_json("rocket_cage_bent.json", ROCKET_BENT, "the same hexagon, its top edge moved 34 px right: the rocket bends")
+
+    def det(jac: np.ndarray) -> np.ndarray:
+        return jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
+
+    centres = pixel_centres(w, h)
+    ghost = int((inside_polygon(centres, src) & ~inside_polygon(centres, dst)).sum())
+    panels, numbers = [], {}
+    retouch = warp_image(rocket, src, dst, outside="input")
+    within = warp_image(rocket, src, dst, within="image")
+    # The spline maps output points to input points (the inverse map, as warp() wants it), in
+    # warpcli's coordinates (pixel centres at +0.5); pinned: the corners and edge midpoints.
+    pins = np.array([[x, y] for x in (0, w / 2, w) for y in (0, h / 2, h) if (x, y) != (w / 2, h / 2)])
+    tps = ThinPlateSplineTransform.from_estimate(np.concatenate([dst, pins]), np.concatenate([src, pins]))
+    inverse = tps(centres).reshape(h, w, 2)
+    spline = warp(rocket, lambda rc: tps(rc + 0.5) - 0.5, order=1, mode="edge", preserve_range=True)
+    jx_col, jx_row = np.gradient(inverse[..., 0], axis=1), np.gradient(inverse[..., 0], axis=0)
+    jy_col, jy_row = np.gradient(inverse[..., 1], axis=1), np.gradient(inverse[..., 1], axis=0)
+    tps_det = jx_col * jy_row - jx_row * jy_col
+    cases = (
+        ("single-cage retouch", retouch.pixels, int(np.sum(det(retouch.jacobian) <= 0)), ghost),
+        ("--within image", within.pixels, int(np.sum(det(within.jacobian) <= 0)), 0),
+        ("thin-plate spline, corners pinned", spline, int(np.sum(tps_det <= 0)), 0),
+    )
+    for label, pixels, folds, vacated in cases:
+        seam = seam_jump(np.asarray(pixels, dtype=float), dst)
+        ratio = seam.across_max / seam.elsewhere_p99
+        elsewhere_mean = float(seam.elsewhere.mean())
+        numbers[label] = {
+            "folds": folds, "ghost_pixels": vacated, "seam_across_max": round(seam.across_max, 2),
+            "seam_across_mean": round(seam.across_mean, 2), "elsewhere_p99": round(seam.elsewhere_p99, 2),
+            "elsewhere_mean": round(elsewhere_mean, 2), "seam_max_over_p99": round(ratio, 2),
+        }  # fmt: skip
+        crop = np.clip(np.asarray(pixels, dtype=float), 0, 255).astype(np.uint8)[40:427, 170:470]
+        lines = [label, f"folds {folds}" + (f", ghost {vacated} px" if vacated else ""),
+                 f"seam: jump {seam.across_mean:.1f} across, {elsewhere_mean:.1f} elsewhere"]  # fmt: skip
+        panels.append(_captioned(crop, lines))
+    figure = panels[0]
+    for panel in panels[1:]:
+        figure = side_by_side(figure, panel)
+    write_png("rocket_within.png", figure)
+    with open(os.path.join(HERE, "rocket_within.json"), "w") as fh:
+        json.dump(numbers, fh, indent=1)
+        fh.write("\n")
+    return numbers
+
+
+def _captioned(rgb: np.ndarray, lines: list) -> np.ndarray:
+    """The picture with lines of text below it (OpenImageIO's text)."""
+    import OpenImageIO as oiio
+
+    h, w = rgb.shape[:2]
+    size = 15
+    out = np.full((h + 8 + (size + 4) * len(lines), w, 3), 255, dtype=np.uint8)
+    out[:h] = rgb
+    buf = oiio.ImageBuf(oiio.ImageSpec(w, out.shape[0], 3, "uint8"))
+    buf.set_pixels(oiio.ROI(), out)
+    for k, line in enumerate(lines):
+        oiio.ImageBufAlgo.render_text(buf, 4, h + 4 + (size + 4) * (k + 1) - 4, line, size, "DroidSans", (0.0, 0.0, 0.0))
+    return np.asarray(buf.get_pixels(oiio.UINT8))
+
+
 def _resize(px: np.ndarray, scale: float) -> np.ndarray:
     h, w = px.shape[:2]
     r = np.minimum((np.arange(round(h * scale)) / scale).astype(int), h - 1)
@@ -173,6 +268,7 @@ def main() -> None:
     readme_figure()
     retouch_figure()
     map_pictures()
+    within_figure()
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ WARP_OPTIONS = {
     "--max-area", "--antialias", "--outside", "--vacated", "--weights", "--report", "--grid", "--heatmap",
     "--heatmap-measure", "--save-map", "--save-forward-map", "--stmap-t", "--tiled", "--labels", "--verbose", "--quiet",
     "--version", "--frame",  # --frame: issue 23
-    "--feather",  # issue 21
+    "--feather", "--within",  # issue 21
     "--compression",  # issue 24
 }  # fmt: skip
 

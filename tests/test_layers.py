@@ -58,7 +58,7 @@ LAYERS = [
     ("report", {"report": ("report",)}),
     # Where each output pixel comes from (the sampling plan, the paste of a retouch), what a
     # sequence's frames and keyframes are, a map as scikit-image's transforms are called, annotations through it.
-    ("sampling", {"sampling": ("plan", "composite", "sequence", "keyframes", "transform", "annotations")}),
+    ("sampling", {"sampling": ("plan", "composite", "sequence", "keyframes", "transform", "annotations", "within")}),
     # What runs a warp from files: 2D runs beside 3D, neither knowing the other (see NEVER).
     ("runs", {
         "runs": ("tiled", "pipeline", "batch", "distributed", "points", "surface"),

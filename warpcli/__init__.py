@@ -65,6 +65,9 @@ _EXPORTS = {
     "transfer_texture": "surface",
     "parse_frames": "sequence",
     "write_image": "raster.imageio",
+    "WithinPair": "within",
+    "read_cages": "within",
+    "within_pair": "within",
 }
 
 __all__ = sorted([*_EXPORTS, "__version__"])
@@ -100,6 +103,7 @@ if TYPE_CHECKING:
     from .raster.stmap import load_stmap, save_stmap
     from .report import build_report
     from .surface import MeshError, UVMesh, read_mesh, transfer_attributes, transfer_file, transfer_texture
+    from .within import WithinPair, read_cages, within_pair
 
 
 def __getattr__(name: str):

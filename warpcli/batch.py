@@ -32,7 +32,7 @@ from .pipeline import read_header_or_none, write_like
 from .plan import SamplingPlan, background_values, check_paste, plan_for
 from .polygon import Polygon
 from .polygon.partition import Partition, check_shapes, read_shape
-from .raster.imageio import check_image_output, read_image
+from .raster.imageio import check_image_output, read_header, read_image
 from .tiled import in_parts, warp_file_tiled
 
 __all__ = [
@@ -153,16 +153,20 @@ def warp_batch(
     """
     opts = resolve_options(options, changes)
     tasks, src, dst = prepare_batch(
-        input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=opts.map.theta_file
+        input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=opts.map.theta_file,
+        within=opts.within,
     )
     plans = PlanCache(map_between(src, dst, opts.map), opts)
     return _each(lambda task: warp_one(task[0], task[1], plans), tasks, jobs, on_item)
 
 
-def prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=None):
+def prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=None, within=None):
     """A batch's checks before any work: the (input, output) pairs, and the two polygons.
 
     ``theta_file`` is the Theta file the map reads, if any (an input too).
+    ``within``: the polygons are the cages of a retouch within that outline
+    (`warpcli.within.within_pair`), made at the first input's size (an
+    outline of ``"image"`` is the first input's rectangle for every input).
 
     Raises
     ------
@@ -182,8 +186,15 @@ def prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, 
             raise InputError(f"{out}: both {seen[key]} and {os.fspath(inp)} would be written there")
         seen[key] = os.fspath(inp)
         check_image_output(out, inputs=inputs)
-    src = read_shape(src_path, src_label)
-    dst = read_shape(dst_path, dst_label)
+    if within is not None and input_paths:
+        from .within import read_cages, within_pair
+
+        size = read_header(input_paths[0]).displayed_size
+        pair = within_pair(read_cages(src_path, src_label), read_cages(dst_path, dst_label), within, size)
+        src, dst = pair.src, pair.dst
+    else:
+        src = read_shape(src_path, src_label)
+        dst = read_shape(dst_path, dst_label)
     check_shapes(src, dst)
     return [(os.fspath(inp), out) for inp, out in zip(input_paths, outputs)], src, dst
 
@@ -602,6 +613,8 @@ def warp_sequence(
         if f not in pairs and f not in missing:
             pairs[f] = (src_keys.at(f), dst_keys.at(f))
             check_shapes(*pairs[f])
+    if opts.within is not None:
+        pairs = _within_pairs(pairs, ins, missing, opts.within)
     # Runs of frames with the same pair share one map (a missing frame breaks
     # no run); the frames of a run go to the threads.
     runs: list[tuple[tuple[bytes, bytes] | None, list[tuple[str, str, int]]]] = []
@@ -631,6 +644,29 @@ def warp_sequence(
         size = len(tasks) if maps is not None else max(1, math.ceil(len(ins) / width))
         units += [tasks[k : k + size] for k in range(0, len(tasks), size)]
     return _in_processes(units, pairs, opts, maps, width, on_item, missing)
+
+
+def _within_pairs(pairs: dict, ins: list[tuple[int, str]], missing: dict, within: str) -> dict:
+    """Each frame's cages within the outline (`warpcli.within.within_pair`), at the first frame's image size.
+
+    Frames with the same cages share one cage mesh; a frame whose cages
+    cannot be cut fails the sequence before any work, as a bad polygon does.
+    """
+    from .within import within_pair
+
+    first = next((inp for f, inp in ins if f not in missing), None)
+    if first is None:
+        return pairs
+    size = read_header(first).displayed_size
+    made: dict[tuple[bytes, bytes], tuple] = {}
+    out = {}
+    for f, (src, dst) in pairs.items():
+        key = (src.points.tobytes(), dst.points.tobytes())
+        if key not in made:
+            pair = within_pair(src, dst, within, size)
+            made[key] = (pair.src, pair.dst)
+        out[f] = made[key]
+    return out
 
 
 def _warn_about_outputs(patterns, frames) -> None:

@@ -187,7 +187,8 @@ def warp_batch_dask(
     timeout = connect_timeout()
     opts = resolve_options(options, changes)
     tasks, src, dst = prepare_batch(
-        input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=opts.map.theta_file
+        input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=opts.map.theta_file,
+        within=opts.within,
     )
     # One sampling plan per output size, made here and shipped; an input whose
     # header cannot be read fails in its task, with the message a local run gives.

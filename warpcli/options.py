@@ -199,6 +199,13 @@ class WarpOptions:
         (smallest, slowest); None: `warpcli.raster.dtypes.PNG_COMPRESSION`
         (1). Other formats keep their own compression. The pixels are the
         same at every level.
+    within : str or None
+        A retouch within a fixed outline (`warpcli.within`): ``"image"``, a
+        margin in pixels round the cages, or a polygon file. The cages move,
+        the outline stays, the ring between them is mapped too (nothing
+        vacated, no seam); outside the outline the output is the input's own
+        pixels, so ``within`` implies ``outside="input"`` and the input's
+        size, and takes no ``vacated="background"`` or ``feather``.
 
     Raises
     ------
@@ -221,10 +228,21 @@ class WarpOptions:
     vacated: str = "keep"
     feather: float = 0.0
     compression: int | None = None
+    within: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.map, MapOptions):
             raise InputError(f"map must be MapOptions, got {type(self.map).__name__}")
+        if self.within is not None:
+            if not isinstance(self.within, str) or not self.within.strip():
+                raise InputError(f"within must be 'image', a margin in pixels or a polygon file, got {self.within!r}")
+            if self.size is not None:
+                raise InputError("--within keeps the input's size: it takes no --size")
+            if self.vacated != "keep":
+                raise InputError("--within leaves nothing vacated: it takes no --vacated background")
+            if self.feather:
+                raise InputError("--within is seamless without a blend: it takes no --feather")
+            object.__setattr__(self, "outside", "input")  # the outline's outside is the input's own
         _choice("interpolation", self.interp, INTERPOLATIONS)
         _choice("outside", self.outside, OUTSIDE)
         _choice("vacated", self.vacated, VACATED)

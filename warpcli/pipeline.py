@@ -46,6 +46,7 @@ from .raster.imageio import (
 from .report import build_report
 from .report.metrics import Distortion, distortion
 from .tiled import TiledResult, check_plausible, in_parts, warp_file_tiled
+from .within import WithinPair, read_cages, within_pair, within_seams
 
 __all__ = [
     "WarpResult", "apply_map_file", "build_report", "check_output", "read_header_or_none", "warp_file", "warp_image",
@@ -75,6 +76,9 @@ class WarpResult:
     plan : SamplingPlan or None
         The sampling plan the pixels were rendered with: render it again on
         another image of the input's size and type for the same warp.
+    within : WithinPair or None
+        With ``within``: the cage mesh of the cages and the ring
+        (`warpcli.within.within_pair`) the map was built between.
     """
 
     pixels: NDArray
@@ -83,6 +87,7 @@ class WarpResult:
     timings: dict[str, float] = field(default_factory=dict)
     report: dict | None = None
     plan: SamplingPlan | None = field(default=None, repr=False)
+    within: WithinPair | None = field(default=None, repr=False)
 
     @cached_property
     def inverse_map(self) -> NDArray[np.float64]:
@@ -154,7 +159,8 @@ def warp_image(
     src, dst : Polygon, Partition or (n, 2) array_like of float
         Corresponding polygons: ``src`` in the input image's coordinates, ``dst``
         in the output's (x right, y down, pixel centres at +0.5); or two cage
-        meshes with the same faces (`warpcli.maps.cage`).
+        meshes with the same faces (`warpcli.maps.cage`). With ``within``,
+        also a list of such cages on each side (several cages in one outline).
     options : WarpOptions or None
         Map, resampling and output options; the defaults otherwise.
     alpha_channel : int or None
@@ -206,8 +212,12 @@ def _warp(
     warp_map: BijectiveMap | None,
     progress: Callable[[str], None] | None,
     early: _EarlyMap | None = None,
+    pair: WithinPair | None = None,
 ) -> WarpResult:
-    """`warp_image`, taking the map from ``early`` when it was built for this image's size."""
+    """`warp_image`, taking the map from ``early`` when it was built for this image's size.
+
+    ``pair``: the cage mesh of ``within`` already made from ``src`` and ``dst`` (then they are its sides).
+    """
     img = np.asarray(image)
     if img.ndim == 2:
         img = img[:, :, None]
@@ -215,6 +225,9 @@ def _warp(
         raise InputError(f"image must be a non-empty (H, W) or (H, W, C) array, got shape {img.shape}")
     if img.dtype.kind not in "uif":
         raise InputError(f"image must hold numbers, got dtype {img.dtype}")
+    if opts.within is not None and pair is None:
+        pair = within_pair(_cages_of(src, "src"), _cages_of(dst, "dst"), opts.within, (img.shape[1], img.shape[0]))
+        src, dst = pair.src, pair.dst
     src = src if isinstance(src, (Polygon, Partition)) else Polygon(src, name="src")
     dst = dst if isinstance(dst, (Polygon, Partition)) else Polygon(dst, name="dst")
     check_shapes(src, dst)
@@ -242,7 +255,17 @@ def _warp(
     out = plan.render(img, alpha_channel=alpha_channel, associated_alpha=associated_alpha)
     timings["compose"] = t1 - t0
     timings["resample"] = clock() - t1
-    return WarpResult(out, fmap, plan.pull, timings, plan=plan)
+    return WarpResult(out, fmap, plan.pull, timings, plan=plan, within=pair)
+
+
+def _cages_of(shapes: Any, name: str) -> list[Polygon | Partition]:
+    """The cages of ``within``: one polygon or mesh, or a list of them (a polygon as an (n, 2) array too)."""
+    if isinstance(shapes, (Polygon, Partition)):
+        return [shapes]
+    items = shapes if isinstance(shapes, (list, tuple)) and shapes and not np.isscalar(shapes[0]) else [shapes]
+    if items and all(not isinstance(x, (Polygon, Partition)) for x in items) and np.asarray(items[0]).ndim == 1:
+        items = [shapes]  # one polygon given as a list of points
+    return [x if isinstance(x, (Polygon, Partition)) else Polygon(x, name=f"{name} cage {k}") for k, x in enumerate(items)]
 
 
 def _shape_of(fmap: Any, side: str) -> Polygon | Partition:
@@ -466,7 +489,8 @@ def warp_file(
     inputs = tuple(p for p in (input_path, src_path, dst_path, opts.map.theta_file) if p is not None)
     labels = [(label_in, label_out) for label_in, label_out in labels]
     if labels and opts.outside == "input":
-        raise InputError(f"{os.fspath(labels[0][0])}: labels are warped onto the background, not with --outside input")
+        given = "--within" if opts.within is not None else "--outside input"
+        raise InputError(f"{os.fspath(labels[0][0])}: labels are warped onto the background, not with {given}")
     inputs = (*inputs, *(label_in for label_in, _ in labels))
     extra = [p for p in (grid_path, heatmap_path, save_map, save_forward_map) if p is not None]
     extra += [label_out for _, label_out in labels]
@@ -486,8 +510,21 @@ def warp_file(
     ]
     if len(set(outputs)) != len(outputs):
         raise InputError(f"{os.fspath(output_path)}: the same path is given for two outputs")
-    src = read_shape_at(src_path, src_label, frame)
-    dst = read_shape_at(dst_path, dst_label, frame)
+    pair = None
+    if opts.within is not None:
+        if save_theta is not None:
+            raise InputError(f"{os.fspath(save_theta)}: --save-theta writes one Theta, but --within maps several faces")
+        if frame is None:
+            src_cages, dst_cages = read_cages(src_path, src_label), read_cages(dst_path, dst_label)
+        else:
+            src_cages, dst_cages = [read_shape_at(src_path, src_label, frame)], [read_shape_at(dst_path, dst_label, frame)]
+        header = read_header(input_path)  # the outline needs the image's size before the map
+        pair = within_pair(src_cages, dst_cages, opts.within, header.displayed_size)
+        src, dst = pair.src, pair.dst
+    else:
+        src = read_shape_at(src_path, src_label, frame)
+        dst = read_shape_at(dst_path, dst_label, frame)
+        header = None
     check_shapes(src, dst)
     if isinstance(src, Partition) and save_theta is not None:
         raise InputError(f"{os.fspath(save_theta)}: --save-theta writes one Theta, but a cage mesh has one per face")
@@ -501,7 +538,7 @@ def warp_file(
         )
     elif isinstance(src, Polygon):
         _warn_if_relabelled(src, dst)
-    header = read_header_or_none(input_path)
+    header = header or read_header_or_none(input_path)
     if tiled is None and prefer_strips and _strips_pay(header, opts, output_path, extra, report_path):
         check_plausible(input_path, header)  # decoded strip by strip: no header declaring a bomb
         tiled = True
@@ -527,7 +564,7 @@ def warp_file(
         background_values(opts.background, image.pixels)
     except InputError as err:
         raise naming(err, os.fspath(input_path)) from err
-    result = _warp(image.pixels, src, dst, opts, image.alpha_channel, image.associated_alpha, None, progress, early)
+    result = _warp(image.pixels, src, dst, opts, image.alpha_channel, image.associated_alpha, None, progress, early, pair)
     # Every output is written under a pending name and renamed into place
     # only when all are written: a run's outputs succeed or fail together.
     with PendingOutputs() as pending:
@@ -544,7 +581,9 @@ def warp_file(
             t0 = clock()
             stage("drawing figures")
             if grid_path is not None:
-                fig = figures.grid_figure(image.pixels, result.inverse_map, src, dst, alpha_channel=image.alpha_channel)
+                # Within an outline the whole picture is one map (the identity outside the outline): draw it all.
+                points = result.plan.whole_points() if pair is not None else result.inverse_map
+                fig = figures.grid_figure(image.pixels, points, src, dst, alpha_channel=image.alpha_channel)
                 write_image(pending.path(grid_path), figures.picture(fig))
             if heatmap_path is not None:
                 values = result.measure(heatmap_measure)
@@ -574,10 +613,32 @@ def warp_file(
         if report_path is not None:
             stage("measuring distortion")
             doc = build_report(result)
+            if pair is not None:
+                doc["within"] = _within_summary(result)
             if os.fspath(report_path) != "-":
                 _write_json(pending.path(report_path), doc)
             result = dataclasses.replace(result, report=doc)
     return result
+
+
+def _within_summary(result: WarpResult) -> dict:
+    """The report's ``"within"`` section: the outline, which faces are the cages' and which the ring's, the seams.
+
+    The seams (`warpcli.within.within_seams`): the jumps of neighbouring
+    output values, and of the inverse map's Jacobian, across the cages'
+    edges, the ring's cuts and the outline, against those elsewhere.
+    """
+    pair = result.within
+    if pair is None:
+        raise InputError("the warp was not made within an outline")
+    jac = result.jacobian
+    return {
+        "outline": pair.outline.tolist(),
+        "cage_faces": list(range(pair.cage_faces)),
+        "ring_faces": list(range(pair.cage_faces, pair.src.n_faces)),
+        "cuts": len(pair.cuts),
+        "seams": within_seams(result.pixels.astype(np.float64), jac, pair),
+    }
 
 
 def _read_labels(path: str | os.PathLike[str], image: RasterImage) -> RasterImage:

@@ -130,6 +130,7 @@ class SamplingPlan:
         jacobian: bool = False,
         rows: tuple[int, int] | None = None,
         feather: float = 0.0,
+        edge: bool = True,
     ) -> SamplingPlan:
         """The plan of a map for a ``width`` x ``height`` output.
 
@@ -156,6 +157,11 @@ class SamplingPlan:
             those of the whole plan's rows, bit for bit.
         feather : float
             See `SamplingPlan.feather`.
+        edge : bool
+            Antialias the target's edge (with ``antialias``). False where the
+            map is the identity on that edge (a retouch within a fixed
+            outline): the warp meets the input there without a step, and a
+            pixel whose centre lies outside keeps the input's value exactly.
 
         Returns
         -------
@@ -164,7 +170,7 @@ class SamplingPlan:
         footprints = bool(antialias) and interp != "nearest"
         pull = fmap.pull_back(width, height, jacobian=jacobian or footprints, rows=rows)
         coverage = None
-        if footprints:
+        if footprints and edge:
             coverage = _coverage(fmap, np.isfinite(pull.points[..., 0]), pull.origin)
         src = getattr(fmap, "src", None)
         return cls(
@@ -443,4 +449,5 @@ def plan_for(
     return SamplingPlan.from_map(
         fmap, width, height, interp=opts.interp, antialias=opts.antialias, background=opts.background,
         outside=opts.outside, vacated=opts.vacated, jacobian=jacobian, rows=rows, feather=opts.feather,
+        edge=opts.within is None,
     )  # fmt: skip

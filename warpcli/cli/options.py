@@ -274,9 +274,18 @@ def compression_option(f: Callable) -> Callable:
 
 #: The options of how the image is resampled, handed to the command as
 #: ``resampling``, a `WarpOptions` whose map is the default one.
+def _resampling(**values: Any) -> WarpOptions:
+    """`WarpOptions` from the options' values; ``--within`` with ``--outside background`` given is refused."""
+    if values.get("within") is not None and values.get("outside") == "background":
+        source = click.get_current_context().get_parameter_source("outside")
+        if source is not None and source.name == "COMMANDLINE":
+            raise click.UsageError("--within keeps the input outside the outline: it takes no --outside background")
+    return WarpOptions(**values)
+
+
 resample_options = collected(
     "resampling",
-    WarpOptions,
+    _resampling,
     interp_option,
     click.option("--size", callback=parse_size, metavar="WxH", help="Output size in pixels.  [default: INPUT's size]"),
     dtype_option,
@@ -310,6 +319,14 @@ resample_options = collected(
         metavar="PX",
         help="With --outside input: blend the warp into the input over a band PX pixels wide inside DST's edge "
         "(smoothstep of the distance), a cosmetic blend; --within is the seamless choice.",
+    ),
+    click.option(
+        "--within",
+        metavar="image|MARGIN|FILE.json",
+        help="A retouch within a fixed outline: the whole image, the cages' box grown by MARGIN pixels, or a "
+        "polygon file. The outline stays, SRC's cages move onto DST's and the ring between is mapped too: no "
+        "seam, nothing vacated; the input is kept outside the outline (--outside input implied). SRC and DST may "
+        "hold several cages (labelme/GeoJSON polygons that do not share edges, or {\"cages\": [...]}).",
     ),
 )  # fmt: skip
 

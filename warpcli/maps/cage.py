@@ -334,6 +334,7 @@ def _gather(
     points = np.full((h, w, 2), np.nan)
     jac = np.full((h, w, 2, 2), np.nan) if jacobian else None
     owned = np.zeros((h, w), dtype=bool)
+    pulls = []
     for k, fmap in enumerate(maps):
         pb = fmap.pull_back(width, height, jacobian=jacobian, rows=rows)
         ph, pw = pb.points.shape[:2]
@@ -341,7 +342,10 @@ def _gather(
             continue
         a, b = pb.origin[0] - r0, pb.origin[1] - c0
         sub = (slice(a, a + ph), slice(b, b + pw))
+        pulls.append((k, pb, sub))
         finite = np.isfinite(pb.points[..., 0])
+        if jac is not None:  # a meshless face map has a value on its edge but no Jacobian there
+            finite &= np.isfinite(pb.jacobian[..., 0, 0])
         mine = finite & (labels[sub] == k)
         # A face's own pixels are its; a pixel its face leaves without a value
         # (on the edge, outside by the method's count) takes the first other's.
@@ -350,7 +354,34 @@ def _gather(
         if jac is not None:
             jac[sub][take] = pb.jacobian[take]
         owned[sub] |= mine
+    if jac is not None:
+        # A centre exactly on an edge where no face's method gives a Jacobian (BEM and MFS have
+        # none on their boundary): its own face's value, and the Jacobian a hair inside the face
+        # (the face map is smooth up to its edge; the nearest of a few nudges that has one: the
+        # Jacobian changes by about 1e-4 over 0.01 px).
+        for k, pb, sub in pulls:
+            take = np.isfinite(pb.points[..., 0]) & ~np.isfinite(points[sub][..., 0]) & (labels[sub] == k)
+            if not take.any():
+                continue
+            points[sub][take] = pb.points[take]
+            rr, cc = np.nonzero(take)
+            centres = np.stack([cc + pb.origin[1] + 0.5, rr + pb.origin[0] + 0.5], axis=1)
+            found = np.full((len(centres), 2, 2), np.nan)
+            for d in _NUDGES:
+                todo = ~np.isfinite(found[:, 0, 0])
+                if not todo.any():
+                    break
+                found[todo] = maps[k].inverse_mapped(centres[todo] + d).jacobian
+            jac[sub][take] = found
     return CagePullBack(points, jac, (r0, c0), (width, height), labels)
+
+
+#: Offsets (px) at which the Jacobian of a pixel centre on a face's edge is taken, nearest first
+#: (the meshless methods give none within about 1e-4 px of their boundary).
+_NUDGES = np.concatenate([
+    np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [-1, 1], [1, -1], [-1, -1]], dtype=np.float64) * scale
+    for scale in (1e-6, 1e-3, 1e-2)
+])  # fmt: skip
 
 
 def build_cage_map(
