@@ -20,7 +20,8 @@ from ..polygon import Polygon, check_pair
 from ..mapping import Certificate, ComposedMap
 from .base import ThetaMap
 from .registry import METHODS, THETAS
-from .theta import SMOOTH_MAX_ASPECT, Theta, aspect_ratio, from_file
+from .straight import fold_message as straight_fold_message
+from .theta import SMOOTH_MAX_ASPECT, TargetTheta, Theta, aspect_ratio, from_file
 
 #: The compiled helpers of the composition (`warpcli.maps._kernels`), loaded without numba.
 _compiled = Kernels("warpcli.maps._kernels")
@@ -176,6 +177,19 @@ class BijectiveMap(ComposedMap):
             f"the maps flip {source.flipped} {source.kind} of {self.src.name} and {target.flipped} {target.kind} of "
             f"{self.dst.name}; the warp would fold the image over itself"
         )
+
+    def check_bijective(self) -> None:
+        """Raise `FoldOverError` unless both maps are certified one-to-one.
+
+        With ``--theta none`` (Theta the target itself, `warpcli.maps.straight`)
+        a fold is no failure of the method but of the choice: the straight map
+        does not exist for this pair, which is bad input (`InputError`, one line).
+        """
+        if isinstance(self.theta, TargetTheta):
+            source = self.phi0.certify()
+            if not source.ok:
+                raise InputError(straight_fold_message(self.src, self.dst, source.flipped))
+        super().check_bijective()
 
     def flipped_triangles(self) -> int:
         """Elements (triangles, or samples) where either map flips: 0 for a bijection."""
