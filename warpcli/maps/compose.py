@@ -456,6 +456,22 @@ def build_map(
     opts = options or MapOptions()
     check_pair(src, dst)
     theta = theta_for(src, dst, opts)
+    result = _build_onto(src, dst, theta, opts, regions)
+    fallback = theta.notes.get("fallback") if isinstance(theta, TargetTheta) else None
+    if fallback is not None and not result.phi0.certify().ok:
+        # The optimizer kept the straight map, certified at the run's density
+        # without a region; meshed graded from a region it folds: the best
+        # convex Theta instead (`warpcli.maps.optimize`).
+        notes = {k: v for k, v in theta.notes.items() if not k.startswith("fallback")}
+        notes.update(kept=theta.notes.get("fallback_name"), after=theta.notes.get("fallback_after"), none=None)
+        result = _build_onto(src, dst, Theta(np.asarray(fallback), name=theta.name, notes=notes), opts, regions)
+    if opts.check:
+        result.check_bijective()
+    return result
+
+
+def _build_onto(src: Polygon, dst: Polygon, theta: Theta, opts: MapOptions, regions) -> BijectiveMap:
+    """`build_map` for a chosen Theta, uncertified."""
     method = METHODS[opts.method].load()
 
     def built(polygon: Polygon, role: str, region: Region | None, side: str, pending: Any = None) -> ThetaMap:
@@ -488,6 +504,4 @@ def build_map(
     for phi in (phi0, phi1):
         for stage, seconds in phi.timings.items():
             result.timings[stage] = result.timings.get(stage, 0.0) + seconds
-    if opts.check:
-        result.check_bijective()
     return result
