@@ -13,7 +13,7 @@ from warpcli import MapOptions, Polygon, build_report, warp_image
 from warpcli.errors import InputError
 from warpcli.maps.compose import BijectiveMap
 
-from helpers import comb, l_shape, read_pixels, regular, run_cli, star, write_png, write_polygon
+from helpers import comb, l_shape, read_pixels, run_cli, star, write_png, write_polygon
 
 #: Coarse meshes: these tests are about the construction, not the accuracy.
 AREA = 24.0
@@ -151,3 +151,18 @@ def test_optimized_keeps_the_straight_map_where_it_is_best_and_drops_it_where_it
     res = warp_image(img, src, dst, map=MapOptions(theta="optimized", max_area=AREA))
     notes = build_report(res)["theta"]
     assert notes["none"] is None and notes["kept"] != "none" and res.map.flipped_triangles() == 0
+
+
+def test_a_kept_straight_map_that_folds_on_the_run_s_mesh_falls_back_to_the_convex_theta(monkeypatch):
+    """The optimizer certifies the straight map at the run's density without a region; should the
+    run's mesh differ (graded from a far smaller image) and fold it, `build_map` takes the best
+    convex candidate the optimizer kept beside it."""
+    from warpcli.maps import compose
+    from warpcli.maps.theta import TargetTheta, regular_polygon
+
+    src, dst = Polygon(star(5, r_in=50.0)), Polygon(star(5, r_in=12.0))  # the straight map folds here
+    notes = {"kept": "none", "fallback": regular_polygon(10).tolist(), "fallback_name": "regular", "fallback_after": 3.0}
+    monkeypatch.setattr(compose, "theta_for", lambda s, d, o: TargetTheta(d.points, name="optimized", notes=notes))
+    f = compose.build_map(src, dst, MapOptions(theta="optimized", max_area=AREA))
+    assert not isinstance(f.theta, TargetTheta) and f.theta.same_as(compose.Theta(regular_polygon(10)))
+    assert f.theta.notes["kept"] == "regular" and f.flipped_triangles() == 0
