@@ -23,12 +23,12 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, HERE)
 
-from warpcli import MapOptions, build_report, warp_image  # noqa: E402
-from warpcli.errors import InputError  # noqa: E402
-from warpcli.maps.registry import THETAS  # noqa: E402
+import optimizer
+import theta_table
 
-import optimizer  # noqa: E402
-import theta_table  # noqa: E402
+from warpcli import MapOptions, build_report, warp_image
+from warpcli.errors import InputError
+from warpcli.maps.registry import THETAS
 
 
 def pairs():

@@ -6,14 +6,13 @@ import json
 
 import numpy as np
 import pytest
+from helpers import comb, l_shape, read_pixels, run_cli, star, write_png, write_polygon
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from warpcli import MapOptions, Polygon, build_report, warp_image
 from warpcli.errors import InputError
 from warpcli.maps.compose import BijectiveMap
-
-from helpers import comb, l_shape, read_pixels, run_cli, star, write_png, write_polygon
 
 #: Coarse meshes: these tests are about the construction, not the accuracy.
 AREA = 24.0
