@@ -18,7 +18,7 @@ from .raster.dtypes import COMPRESSION_LEVELS, DTYPES, PNG_COMPRESSION  # noqa: 
 #: says which module implements each (the same names, in the same order: tested).
 METHODS = ("fem", "bem", "mfs")
 #: Named strategies that choose Theta; `warpcli.maps.registry.THETAS` implements them.
-THETAS = ("regular", "cyclic", "optimized")
+THETAS = ("regular", "cyclic", "optimized", "none")
 #: Resampling filters (see `warpcli.raster.resample.resample`).
 INTERPOLATIONS = ("nearest", "linear", "cubic")
 #: Edge weights of the FEM Laplacian.
@@ -68,7 +68,9 @@ class MapOptions:
     theta : str
         Name of the strategy that chooses the convex intermediate polygon Theta,
         one of `THETAS` (``"regular"``, ``"cyclic"``, ``"optimized"``),
-        or a JSON file holding one (n ``[x, y]`` vertices, strictly convex).
+        or a JSON file holding one (n ``[x, y]`` vertices, strictly convex);
+        ``"none"`` (FEM only): no Theta, the plain harmonic map straight onto
+        the target, refused where it folds (`warpcli.maps.straight`).
     max_area : float, (float, float) or None
         FEM: largest triangle area in square pixels, for both meshes or
         (source, target); None: automatic (`warpcli.maps.fem.mesh.auto_max_area`).

@@ -528,6 +528,8 @@ def warp_file(
     check_shapes(src, dst)
     if isinstance(src, Partition) and save_theta is not None:
         raise InputError(f"{os.fspath(save_theta)}: --save-theta writes one Theta, but a cage mesh has one per face")
+    if opts.map.theta == "none" and save_theta is not None:
+        raise InputError(f"{os.fspath(save_theta)}: --save-theta writes Theta, but --theta none has none (f goes straight onto the target)")
     # Before the route is chosen: a warp in strips warns alike.
     if not ((src.signed_area > 0) == (dst.signed_area > 0)):
         log.warning(
@@ -608,8 +610,7 @@ def warp_file(
                 save_stmap(pending.path(save_forward_map), fwd, (out_w, out_h), kind="forward", t_up=stmap_t_up)
             result.timings["maps"] = clock() - t0
         if save_theta is not None:
-            theta = result.map.theta
-            _write_json(pending.path(save_theta), {"theta": theta.name, "points": theta.points.tolist()})
+            _write_theta(pending.path(save_theta), result.map.theta)
         if report_path is not None:
             stage("measuring distortion")
             doc = build_report(result)
@@ -692,9 +693,21 @@ def _warp_file_tiled(input_path, output_path, src, dst, opts, progress, refused:
     with PendingOutputs() as pending:
         result = warp_file_tiled(input_path, pending.path(output_path), src, dst, opts, progress=progress, header=header)
         if save_theta is not None:
-            theta = result.map.theta
-            _write_json(pending.path(save_theta), {"theta": theta.name, "points": theta.points.tolist()})
+            _write_theta(pending.path(save_theta), result.map.theta)
     return result
+
+
+def _write_theta(path: str, theta) -> None:
+    """``--save-theta``: Theta as JSON (a file ``--theta`` reads back); refused when the optimizer kept
+    the straight map, which has no Theta to save."""
+    from .maps.theta import TargetTheta
+
+    if isinstance(theta, TargetTheta):
+        raise InputError(
+            f"{path}: --theta optimized kept no Theta but the map straight onto the target (--theta none), "
+            "so there is no Theta to save"
+        )
+    _write_json(path, {"theta": theta.name, "points": theta.points.tolist()})
 
 
 def _write_json(path: str, doc: dict) -> None:

@@ -20,7 +20,8 @@ from ..polygon import Polygon, check_pair
 from ..mapping import Certificate, ComposedMap
 from .base import ThetaMap
 from .registry import METHODS, THETAS
-from .theta import SMOOTH_MAX_ASPECT, Theta, aspect_ratio, from_file
+from .straight import fold_message as straight_fold_message
+from .theta import SMOOTH_MAX_ASPECT, TargetTheta, Theta, aspect_ratio, from_file
 
 #: The compiled helpers of the composition (`warpcli.maps._kernels`), loaded without numba.
 _compiled = Kernels("warpcli.maps._kernels")
@@ -176,6 +177,19 @@ class BijectiveMap(ComposedMap):
             f"the maps flip {source.flipped} {source.kind} of {self.src.name} and {target.flipped} {target.kind} of "
             f"{self.dst.name}; the warp would fold the image over itself"
         )
+
+    def check_bijective(self) -> None:
+        """Raise `FoldOverError` unless both maps are certified one-to-one.
+
+        With ``--theta none`` (Theta the target itself, `warpcli.maps.straight`)
+        a fold is no failure of the method but of the choice: the straight map
+        does not exist for this pair, which is bad input (`InputError`, one line).
+        """
+        if isinstance(self.theta, TargetTheta):
+            source = self.phi0.certify()
+            if not source.ok:
+                raise InputError(straight_fold_message(self.src, self.dst, source.flipped))
+        super().check_bijective()
 
     def flipped_triangles(self) -> int:
         """Elements (triangles, or samples) where either map flips: 0 for a bijection."""
@@ -442,6 +456,22 @@ def build_map(
     opts = options or MapOptions()
     check_pair(src, dst)
     theta = theta_for(src, dst, opts)
+    result = _build_onto(src, dst, theta, opts, regions)
+    fallback = theta.notes.get("fallback") if isinstance(theta, TargetTheta) else None
+    if fallback is not None and not result.phi0.certify().ok:
+        # The optimizer kept the straight map, certified at the run's density
+        # without a region; meshed graded from a region it folds: the best
+        # convex Theta instead (`warpcli.maps.optimize`).
+        notes = {k: v for k, v in theta.notes.items() if not k.startswith("fallback")}
+        notes.update(kept=theta.notes.get("fallback_name"), after=theta.notes.get("fallback_after"), none=None)
+        result = _build_onto(src, dst, Theta(np.asarray(fallback), name=theta.name, notes=notes), opts, regions)
+    if opts.check:
+        result.check_bijective()
+    return result
+
+
+def _build_onto(src: Polygon, dst: Polygon, theta: Theta, opts: MapOptions, regions) -> BijectiveMap:
+    """`build_map` for a chosen Theta, uncertified."""
     method = METHODS[opts.method].load()
 
     def built(polygon: Polygon, role: str, region: Region | None, side: str, pending: Any = None) -> ThetaMap:
@@ -474,6 +504,4 @@ def build_map(
     for phi in (phi0, phi1):
         for stage, seconds in phi.timings.items():
             result.timings[stage] = result.timings.get(stage, 0.0) + seconds
-    if opts.check:
-        result.check_bijective()
     return result

@@ -45,7 +45,7 @@ from ..errors import InputError
 from ..polygon import Polygon
 from .fem.mesh import auto_max_area, mesh_polygon
 from .fem.solve import DirichletSolver
-from .theta import Theta, cyclic, regular
+from .theta import TargetTheta, Theta, cyclic, regular
 from .theta_energy import HarmonicBasis, ThetaEnergy
 
 log = logging.getLogger("warpcli")
@@ -108,18 +108,30 @@ def optimized(src: Polygon, dst: Polygon, options) -> Theta:
     run, best_start = joint(energy, {k: v.points for k, v in starts.items()})
     t1 = clock()
     candidates = {**{k: v.points for k, v in starts.items()}, "optimized": run.points}
-    full = measure(src, dst, options, candidates)
-    kept = min(("optimized", "regular", "cyclic"), key=lambda k: full[k])  # ties: the optimized one
+    full = measure(src, dst, options, candidates, straight=True)
+    order = ("optimized", "regular", "cyclic", "none")  # ties: the first (the optimized one)
+    kept = min((k for k in order if k in full), key=lambda k: full[k])
+    if kept == "none" and not straight_certified(src, dst, options):
+        # Certified on the measure's maps but not on the run's (a finer mesh): dropped.
+        full["none"] = None
+        kept = min(order[:3], key=lambda k: full[k])
     log.info(
-        "optimizing Theta: %s energy %.5g (regular) %.5g (cyclic) %.5g (optimized from %s); kept %s",
-        options.energy, full["regular"], full["cyclic"], full["optimized"], best_start, kept,
+        "optimizing Theta: %s energy %.5g (regular) %.5g (cyclic) %.5g (optimized from %s) %s (none); kept %s",
+        options.energy, full["regular"], full["cyclic"], full["optimized"], best_start,
+        f"{full['none']:.5g}" if full.get("none") is not None else "dropped", kept,
     )  # fmt: skip
     notes = {
         "energy": options.energy, "start": options.theta_start,
         "before": full[options.theta_start], "after": full[kept], "kept": kept, "optimized_from": best_start,
-        "coarse_before": run.before, "coarse_after": run.energy,
+        "coarse_before": run.before, "coarse_after": run.energy, "none": full.get("none"),
         "evaluations": energy.evaluations, "seconds": {"optimize": t1 - t0, "measure": clock() - t1},
     }  # fmt: skip
+    if kept == "none":
+        # The straight map, certified on the maps the run builds (see `straight_certified`);
+        # the best convex Theta is kept beside it for a run whose mesh differs and folds.
+        convex = min(("optimized", "regular", "cyclic"), key=lambda k: full[k])
+        notes.update(fallback=candidates[convex].tolist(), fallback_name=convex, fallback_after=full[convex])
+        return TargetTheta(dst.points, name="optimized", notes=notes)
     return Theta(candidates[kept], name="optimized", notes=notes)
 
 
@@ -170,10 +182,14 @@ class _Solved:
         return self._solver.solve(theta, self._boundary)
 
 
-def measure(src: Polygon, dst: Polygon, options, thetas: dict) -> dict:
+def measure(src: Polygon, dst: Polygon, options, thetas: dict, *, straight: bool = False) -> dict:
     """The energy of each Theta on the finer FEM maps of the keep-the-best step.
 
-    One mesh and factorization per polygon, one solve per Theta.
+    One mesh and factorization per polygon, one solve per Theta. With
+    ``straight`` (FEM only), also ``"none"``: the plain harmonic map straight
+    onto the target (`warpcli.maps.straight`) on the same source mesh, the
+    target's map the identity, measured alike; left out where it folds
+    (`optimized` also certifies it on the run's maps before keeping it).
     """
     areas = options.areas() if options.method == "fem" else (None, None)
     sides = [
@@ -182,7 +198,57 @@ def measure(src: Polygon, dst: Polygon, options, thetas: dict) -> dict:
     ]
     # One sample per triangle (its centroid): the full meshes are fine enough.
     energy = ThetaEnergy(sides[0], sides[1], options.energy, rule=CENTROID)  # type: ignore[arg-type]
-    return {name: energy(np.asarray(points), gradient=False)[0] for name, points in thetas.items()}
+    out = {name: energy(np.asarray(points), gradient=False)[0] for name, points in thetas.items()}
+    if straight and options.method == "fem" and options.conditions == "dirichlet":
+        value = _straight_energy(src, dst, options, sides[0])
+        if value is not None:
+            out["none"] = value
+    return out
+
+
+class _Fixed:
+    """A basis-like object whose map is the same whatever Theta: the straight map's two sides."""
+
+    def __init__(self, mesh, values: NDArray[np.float64]) -> None:
+        self.mesh = mesh
+        self._values = values
+        self.n = 0
+
+    def values(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self._values
+
+
+def _straight_energy(src: Polygon, dst: Polygon, options, source: _Solved) -> float | None:
+    """The energy of the straight map on the keep-the-best step's source mesh, or None where it
+    folds there or a boundary behaviour rules it out."""
+    from .fem.solve import flipped_exactly
+    from .straight import straight_boundary
+
+    try:
+        boundary = straight_boundary(options)
+    except InputError:
+        return None
+    values = source._solver.solve(dst.points, boundary)
+    if flipped_exactly(source.mesh, values, dst.points).any():
+        return None
+    # The target's map is the identity: its mesh is the target itself, meshed once (coarse: it only
+    # locates the samples, and J = I on every triangle).
+    target_mesh = mesh_polygon(dst, max(auto_max_area(dst), abs(dst.signed_area) / COARSE_TRIANGLES), grade=False)
+    energy = ThetaEnergy(_Fixed(source.mesh, values), _Fixed(target_mesh, target_mesh.vertices),  # type: ignore[arg-type]
+                         options.energy, rule=CENTROID)  # fmt: skip
+    value = energy(np.zeros((0, 2)), gradient=False)[0]
+    return value if math.isfinite(value) else None
+
+
+def straight_certified(src: Polygon, dst: Polygon, options) -> bool:
+    """Whether the straight map the run would build (FEM at the run's density, no region) flips no triangle."""
+    import dataclasses
+
+    from . import fem
+    from .theta import TargetTheta
+
+    phi = fem.build(src, TargetTheta(dst.points, name="none"), dataclasses.replace(options, check=False), "source")
+    return not phi.flipped().any()
 
 
 class Run:

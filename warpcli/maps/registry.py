@@ -42,9 +42,11 @@ METHODS = {
 }
 
 #: Strategies that choose the convex intermediate polygon Theta (§2, §5.1).
-#: Each target is a function ``(src, dst, options) -> Theta``.
+#: Each target is a function ``(src, dst, options) -> Theta``; ``none`` returns the
+#: target itself (`warpcli.maps.theta.TargetTheta`), which FEM maps straight onto.
 THETAS = {
     "regular": Entry("warpcli.maps.theta:regular", "the regular n-gon"),
     "cyclic": Entry("warpcli.maps.theta:cyclic", "inscribed in a circle, edges as long as the mean of the polygons' edges"),
     "optimized": Entry("warpcli.maps.optimize:optimized", "all vertices moved jointly to lower the distortion (--energy), the best of regular, cyclic and that kept"),
+    "none": Entry("warpcli.maps.straight:none", "no Theta: the plain harmonic map straight onto DST (FEM only; piecewise linear, not symmetric; refused where it folds)"),
 }

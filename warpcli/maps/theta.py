@@ -111,6 +111,50 @@ class Theta:
         return self.points.shape == other.points.shape and bool(np.array_equal(self.points, other.points))
 
 
+@dataclass(frozen=True, eq=False)
+class TargetTheta(Theta):
+    """The target polygon itself in Theta's place (``--theta none``): no intermediate polygon.
+
+    The source's harmonic map then goes straight onto the target, and the
+    target's map is the identity (`warpcli.maps.straight`). The target is
+    not convex in general, so nothing guarantees that the straight map is
+    one-to-one: it is certified after it is built (every image triangle
+    oriented like the target, exactly) and refused where it folds.
+
+    Parameters
+    ----------
+    points : (n, 2) array_like of float
+        The target polygon's vertices (validated as a simple polygon already).
+    name : str
+    notes : dict
+
+    Raises
+    ------
+    InputError
+        If there are fewer than 3 vertices or a coordinate is not finite.
+    """
+
+    def __post_init__(self) -> None:
+        pts = np.array(self.points, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3:
+            raise InputError(f"{self.name}: the target needs at least 3 [x, y] vertices, got shape {pts.shape}")
+        if not np.isfinite(pts).all():
+            raise InputError(f"{self.name}: the target has a non-finite coordinate")
+        pts.setflags(write=False)
+        object.__setattr__(self, "points", pts)
+
+    def clamp(self, points: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Move points outside the (not necessarily convex) polygon onto its nearest boundary point, in place."""
+        from ..boundary import edge_points, nearest_edge
+        from ..grid import inside_polygon
+
+        outside = ~inside_polygon(points, self.points)
+        if outside.any():
+            edge, t, _ = nearest_edge(points[outside], self.points)
+            points[outside] = edge_points(self.points, edge, t)
+        return outside
+
+
 def _not_strictly_convex(pts: NDArray[np.float64]) -> int | None:
     """The first vertex where the polygon turns the wrong way or not at all, or None."""
     a = pts - np.roll(pts, 1, axis=0)

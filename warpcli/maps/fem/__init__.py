@@ -25,12 +25,13 @@ from ...errors import MeshingError
 from ...options import MapOptions
 from ...polygon import Polygon
 from ..base import Certificate, GridSample, Mapped, ThetaMap, as_points, inv2
-from ..theta import Theta
+from ..straight import IdentityMap, straight_boundary
+from ..theta import TargetTheta, Theta
 from ...simplicial import PiecewiseLinear
 from . import sparse, topology
 from .locate import TriangleLocator, affine_coefficients, triangle_neighbours
 from .mesh import TriMesh, auto_max_area, mesh_polygon
-from .solve import DirichletSolver, flipped_triangles, solve_dirichlet
+from .solve import DirichletSolver, flipped_exactly, flipped_triangles, solve_dirichlet
 
 log = logging.getLogger("warpcli")
 
@@ -110,6 +111,11 @@ class FEMMap(ThetaMap):
     @cached_property
     def _flipped(self) -> NDArray[np.bool_]:
         # Asked for by the repair and again by the certificate: computed once.
+        if isinstance(self.theta, TargetTheta):
+            # Straight onto a non-convex target: no theorem behind the map, so
+            # every orientation is decided exactly (the degree argument then
+            # needs no tolerance, docs/proving.md).
+            return flipped_exactly(self.mesh, self.values, self.theta.points)
         return flipped_triangles(self.mesh, self.values, self.theta.points)
 
     def precompute(self, side: str) -> None:
@@ -357,6 +363,14 @@ def build(
     clock = time.perf_counter
     t0 = clock()
     boundary = options.src_boundary if role == "source" else options.dst_boundary
+    straight = isinstance(theta, TargetTheta)
+    if straight:
+        # --theta none: the target goes onto itself (the identity, exact and
+        # free); the source straight onto the target with the boundary
+        # correspondence the two behaviours compose to.
+        if role == "target":
+            return IdentityMap(polygon, theta)
+        boundary = straight_boundary(options)
     mesh = mesh_polygon(
         polygon, auto_max_area(polygon, region) if area is None else area, region=region, boundary=boundary,
         grade=options.grade,
@@ -373,7 +387,10 @@ def build(
         polygon, theta, mesh, values, options.weights, timings={"mesh": t1 - t0, "solve": clock() - t1},
         boundary=boundary, solver=solver, conditions=options.conditions,
     )  # fmt: skip
-    if options.check:
+    if options.check and not straight:
+        # No repair for the straight map: mean-value weights onto a non-convex
+        # target are not one-to-one either, and it is the harmonic map that is
+        # offered; the certificate refuses it (`warpcli.maps.compose.BijectiveMap`).
         phi = repaired(phi)
     return phi
 

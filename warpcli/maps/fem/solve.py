@@ -9,6 +9,7 @@ from ...boundary import edge_points, to_theta_parameter
 from ...errors import InputError
 from ...options import WEIGHTS
 from ...polygon import signed_area
+from ...polygon.predicates import orient_sign
 from . import sparse
 from .mesh import TriMesh, triangle_areas
 from .sparse import cotan_terms
@@ -26,6 +27,20 @@ def flipped_triangles(
     """
     img = triangle_areas(values, mesh.triangles)
     return img * np.sign(signed_area(theta)) <= 0
+
+
+def flipped_exactly(
+    mesh: TriMesh, values: NDArray[np.float64], target: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """`flipped_triangles` with exact orientation tests (`warpcli.polygon.predicates.orient_sign`).
+
+    A triangle counts as flipped unless the exact orientation of its image
+    (as doubles) is strictly that of ``target``: degenerate images are flipped.
+    """
+    t = mesh.triangles
+    a, b, c = values[t[:, 0]], values[t[:, 1]], values[t[:, 2]]
+    sign = orient_sign(a[:, 0], a[:, 1], b[:, 0], b[:, 1], c[:, 0], c[:, 1])
+    return sign * np.sign(signed_area(target)) <= 0
 
 
 def cotan_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.integer]):
