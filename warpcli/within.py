@@ -33,9 +33,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import PolygonError
-from .files import read_small_file
 from .polygon import Polygon
-from .polygon.formats import MAX_FILE_BYTES, parse_json, points_of
+from .polygon.formats import points_of, read_document
 from .polygon.outline import cut_ring, outline_polygon
 from .polygon.partition import WELD_TOLERANCE, Partition, partition_of, welded
 from .report.seam import crossing_pairs
@@ -308,12 +307,7 @@ def read_cages(path: str | os.PathLike[str], label: str | None = None) -> tuple[
     PolygonError
         One line naming the file and the problem.
     """
-    name = os.fspath(path)
-    raw = read_small_file(name, "polygon file", PolygonError, max_bytes=MAX_FILE_BYTES)
-    try:
-        doc = parse_json(raw.decode("utf-8-sig"), name)
-    except UnicodeDecodeError as err:
-        raise PolygonError(f"{name}: not a JSON text file (invalid UTF-8 at byte {err.start})") from err
+    name, doc = read_document(path)
     if isinstance(doc, dict) and "cages" in doc:
         items = doc["cages"]
         if not isinstance(items, list) or not items:

@@ -10,7 +10,7 @@ from ..files import read_small_file
 from .messages import LongInteger, one_line, short_value
 from .shape import Polygon
 
-__all__ = ["MAX_FILE_BYTES", "parse_int", "parse_json", "points_of", "read_polygon"]
+__all__ = ["MAX_FILE_BYTES", "parse_int", "parse_json", "points_of", "read_document", "read_polygon"]
 
 #: Largest polygon file read, in bytes. A million vertices with full-precision
 #: coordinates take 41 MB as a plain JSON array (55 MB indented), and a mesh
@@ -58,6 +58,18 @@ def read_polygon(path: str | os.PathLike[str], label: str | None = None) -> Poly
         not JSON of one of these shapes, or the polygon is invalid. The
         message is one line and starts with the file's name.
     """
+    name, doc = read_document(path)
+    try:
+        points = points_of(doc, name, label)
+        return Polygon(points, name=name)
+    except RecursionError as err:  # comparing or printing arrays nested ~1000 deep
+        raise PolygonError(f"{name}: invalid polygon file: arrays nested too deeply") from err
+
+
+def read_document(path: str | os.PathLike[str]) -> tuple[str, object]:
+    """A polygon file's name and its parsed JSON: a regular file of at most
+    `MAX_FILE_BYTES`, UTF-8 (a byte order mark allowed), every failure a
+    one-line `PolygonError` naming the file."""
     name = os.fspath(path)
     raw = read_small_file(name, "polygon file", PolygonError, max_bytes=MAX_FILE_BYTES)
     try:
@@ -65,12 +77,7 @@ def read_polygon(path: str | os.PathLike[str], label: str | None = None) -> Poly
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as err:
         raise PolygonError(f"{name}: not a JSON text file (invalid UTF-8 at byte {err.start})") from err
-    doc = parse_json(text, name)
-    try:
-        points = points_of(doc, name, label)
-        return Polygon(points, name=name)
-    except RecursionError as err:  # comparing or printing arrays nested ~1000 deep
-        raise PolygonError(f"{name}: invalid polygon file: arrays nested too deeply") from err
+    return name, parse_json(text, name)
 
 
 def parse_json(text: str, name: str) -> object:

@@ -30,8 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import PolygonError
-from ..files import read_small_file
-from .formats import MAX_FILE_BYTES, parse_json, points_of
+from .formats import points_of, read_document
 from .messages import LongInteger, format_point, short_value
 from .shape import COORD_LIMIT, Polygon, check_pair
 
@@ -571,13 +570,7 @@ def read_shape(path: str | os.PathLike[str], label: str | None = None) -> Polygo
     PolygonError
         As `warpcli.polygon.read_polygon`, and for an invalid cage mesh.
     """
-    name = os.fspath(path)
-    raw = read_small_file(name, "polygon file", PolygonError, max_bytes=MAX_FILE_BYTES)
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as err:
-        raise PolygonError(f"{name}: not a JSON text file (invalid UTF-8 at byte {err.start})") from err
-    doc = parse_json(text, name)
+    name, doc = read_document(path)
     try:
         found = partition_of(doc, name, label)
         return found if found is not None else Polygon(points_of(doc, name, label), name=name)
