@@ -262,7 +262,7 @@ class EditSession:
         """
         if value is None or value == self.options.within:
             return value  # type: ignore[return-value]
-        if not isinstance(value, str) or len(value) > 32:
+        if not isinstance(value, str) or len(value) > 255:
             raise InputError("within must be null, 'image' or a margin in pixels")
         text = value.strip()
         if text == "image":
@@ -420,13 +420,13 @@ class EditSession:
         if os.path.abspath(src_path) == os.path.abspath(dst_path):
             raise InputError(f"{src_path}: the same file is given for both polygons")
         src, dst = self.polygons(doc, src_path, dst_path)
+        options = self.options_from(doc.get("options"))  # bad options write nothing
         for path in (src_path, dst_path):
             check_output_path(path, inputs=(self.paths.image,))
         for path, polygon in ((src_path, src), (dst_path, dst)):
             text = json.dumps({"points": polygon.points.tolist()}, indent=1) + "\n"
             with atomic_path(path) as tmp:
                 write_checked(tmp, text.encode(), path)
-        options = self.options_from(doc.get("options"))
         output = self.paths.chosen(doc.get("output_name"), self.paths.output, _image_extensions(self.paths))
         return {"saved": [src_path, dst_path], "warnings": self.warnings(src, dst),
                 "command": self.command(options, src_path, dst_path, output)}  # fmt: skip
