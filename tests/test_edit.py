@@ -547,12 +547,15 @@ def within_session(tmp_path_factory):
     return EditSession(EditPaths.defaults(image))
 
 
-@pytest.mark.parametrize("within, seed, method", [("image", 0, "fem"), ("12", 1, "fem"), ("image", 2, "fem")])
-def test_within_preview_is_the_within_warp_at_preview_density(within_session, within, seed, method):
-    """The preview with within is warp_image(..., within=...)'s cage map at the density the header names, value for value."""
+@pytest.mark.parametrize("within, seed, method, factor", [("image", 0, "fem", 1), ("12", 1, "fem", 1), ("image", 2, "fem", 2)])
+def test_within_preview_is_the_within_warp_at_preview_density(within_session, within, seed, method, factor):
+    """The preview with within is warp_image(..., within=...)'s cage map at the density the header names (in the
+    image's pixels), value for value, shown shrunk by the preview's factor."""
     from warpcli.pipeline import warp_image
 
     session = within_session
+    session.preview = preview_image(read_image(session.paths.image), side=128 // factor)
+    assert session.preview.factor == factor
     dst = _within_target(seed)
     header, xyuv = _decoded(session.preview_map({"src": WITHIN_CAGE.tolist(), "dst": dst.tolist(),
                                                  "options": {"within": within, "method": method}}))  # fmt: skip
@@ -563,9 +566,10 @@ def test_within_preview_is_the_within_warp_at_preview_density(within_session, wi
                      method=method, max_area=tuple(header["max_area"]), grade=False)  # fmt: skip
     cage = ref.map
     assert len(cage.face_maps) > 1  # the cage and the ring's faces
-    positions, tex = xyuv[:, :2].astype(float), xyuv[:, 2:].astype(float)
+    positions, tex = xyuv[:, :2].astype(float) * factor, xyuv[:, 2:].astype(float) * factor
     if method == "fem":  # the same meshes, vertex for vertex, and the same harmonic values
-        np.testing.assert_array_equal(xyuv[:, :2], np.concatenate([m.phi1.mesh.vertices for m in cage.face_maps]).astype(np.float32))
+        want = np.concatenate([m.phi1.mesh.vertices for m in cage.face_maps])
+        np.testing.assert_array_equal(xyuv[:, :2], (want / factor).astype(np.float32))
     # The preview's texture coordinates are f^-1 of its vertices, f the within warp's map.
     want = cage.inverse(positions)
     found = np.isfinite(want).all(axis=1)
@@ -574,7 +578,7 @@ def test_within_preview_is_the_within_warp_at_preview_density(within_session, wi
     # The mesh covers the whole outline (the cage and the ring): its area is the outline's.
     tris = np.frombuffer(session.preview_map({"src": WITHIN_CAGE.tolist(), "dst": dst.tolist(),
                          "options": {"within": within, "method": method}}), "<u4")[-3 * header["triangles"]:].reshape(-1, 3)  # fmt: skip
-    a, b, c = (positions[tris[:, i]] for i in range(3))
+    a, b, c = (positions.astype(np.float32)[tris[:, i]].astype(float) for i in range(3))
     area = 0.5 * np.abs((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]).sum()
     x0, y0 = ref.within.outline.min(axis=0)
     x1, y1 = ref.within.outline.max(axis=0)

@@ -219,8 +219,16 @@ class PreviewMapper:
         )  # fmt: skip
 
 
-    def build_cage(self, src: Partition, dst: Partition, options: MapOptions, region: tuple[float, float, float, float]) -> PreviewMesh:
+    def build_cage(
+        self, src: Partition, dst: Partition, options: MapOptions, region: tuple[float, float, float, float], factor: int = 1
+    ) -> PreviewMesh:
         """The map between two cage meshes (`warpcli.maps.cage.build_cage_map`) at ``options``' density, and its mesh of the target.
+
+        The meshes, ``options``' density and ``region`` are in the image's
+        pixels; the mesh returned is in the preview's (divided by ``factor``).
+        The map is the one made in the image's pixels (the export's cage mesh
+        itself), which the preview's own scaled copy would only repeat at the
+        cost of validating two more meshes.
 
         The whole cage map is built at every call: the ring of ``--within``
         (`warpcli.within.within_pair`) is cut anew on both sides whenever
@@ -239,14 +247,15 @@ class PreviewMapper:
             if options.check:
                 fmap.check_bijective()
             parts, offset = [], 0
-            faces = dst.face_polygons()
-            for k, face_map in enumerate(fmap.face_maps):
-                positions, triangles, tex = _target_mesh(face_map.phi0, face_map.phi1, faces[k], options.areas()[1], region)
+            for face_map in fmap.face_maps:
+                positions, triangles, tex = _target_mesh(face_map.phi0, face_map.phi1, face_map.dst, options.areas()[1], region)
                 parts.append((positions, np.asarray(triangles) + offset, tex))
                 offset += len(positions)
             positions = np.concatenate([p[0] for p in parts])
             triangles = np.concatenate([p[1] for p in parts])
             tex = np.concatenate([p[2] for p in parts])
+            if factor != 1:
+                positions, tex = positions / factor, tex / factor
         return PreviewMesh(
             positions.astype(np.float32), tex.astype(np.float32), np.asarray(triangles, np.uint32), fmap,
             options.areas(), ("source", "target"), time.perf_counter() - t0,

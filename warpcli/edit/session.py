@@ -16,7 +16,6 @@ from ..maps.registry import METHODS, THETAS
 from ..options import BOUNDARIES, INTERPOLATIONS, OUTSIDE, MapOptions, WarpOptions
 from ..outputs import atomic_path, check_output_path, write_checked
 from ..polygon import Polygon, check_pair
-from ..polygon.partition import Partition
 from ..raster.imageio import check_image_output, read_image
 from ..within import within_pair
 from .preview import PreviewImage, PreviewMapper, encode_png, preview_image, with_preview_density
@@ -180,7 +179,7 @@ class EditSession:
         """The polygon in ``path`` if the file exists (the CLI's errors if it is bad), else None."""
         if not os.path.exists(path):
             return None
-        from ..polygon.partition import read_shape
+        from ..polygon.partition import Partition, read_shape
 
         shape = read_shape(path)
         if isinstance(shape, Partition):
@@ -319,21 +318,6 @@ class EditSession:
         self._in_preview[side] = (polygon, scaled)
         return scaled
 
-    def within_meshes(self, src: Polygon, dst: Polygon, within: str) -> tuple[Partition, Partition]:
-        """The cage mesh of ``--within`` (`warpcli.within.within_pair` at the image's size) in preview pixels.
-
-        Raises
-        ------
-        PolygonError
-            As `within_pair`: the ring cannot be cut (a vertex moved outside
-            the outline, ...).
-        """
-        pair = within_pair(src, dst, within, self.image_size)
-        k = self.preview.factor
-        if k == 1:
-            return pair.src, pair.dst
-        return tuple(Partition(m.vertices / k, m.faces, m.name) for m in (pair.src, pair.dst))  # type: ignore[return-value]
-
     @staticmethod
     def warnings(src: Polygon, dst: Polygon) -> list[str]:
         """The live warnings: mirrored, rotated start."""
@@ -363,10 +347,12 @@ class EditSession:
                 mapping = with_preview_density(options.map, psrc, pdst, drag)
                 mesh = self.mapper.build(psrc, pdst, mapping, region)
             else:
-                # The export's cage mesh (made at the image's size, as `warp --within` makes it), shrunk to the preview.
-                msrc, mdst = self.within_meshes(src, dst, options.within)
-                mapping = with_preview_density(options.map, msrc.outline, mdst.outline, drag)
-                mesh = self.mapper.build_cage(msrc, mdst, mapping, region)
+                # The export's cage mesh (`warp --within`'s, in the image's pixels), mapped at the preview's
+                # density (in the image's pixels: times factor^2) and shown shrunk to the preview.
+                pair = within_pair(src, dst, options.within, self.image_size)
+                k = self.preview.factor
+                mapping = with_preview_density(options.map, pair.src.outline, pair.dst.outline, drag)
+                mesh = self.mapper.build_cage(pair.src, pair.dst, mapping, (0.0, 0.0, pw * k, ph * k), k)
         except WarpError as err:
             text = json.dumps({"ok": False, "error": str(err), "command": None}).encode()
             text += b" " * (-len(text) % 4)
