@@ -3,6 +3,7 @@
 
     python bench/edit_latency.py                       # 1 and 12 MP, star12 and wavy48: ~2 minutes
     python bench/edit_latency.py --sizes 1 --moves 60 --out bench/results/edit.md
+    python bench/edit_latency.py --sizes 1 --within none,image,20   # also within an outline (warp edit --within)
 
 For each image size and polygon pair (`bench/run.py`'s images and pairs: a 12-vertex star and
 a 48-vertex wavy shape), ``warp edit IMAGE --src A --dst B --no-browser`` runs as its own
@@ -42,10 +43,11 @@ CHROMIUM_ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader", "--ig
 TARGETS = {1.0: 100.0, 12.0: 250.0}
 
 
-def start_editor(image: str, src: str, dst: str) -> tuple[subprocess.Popen, str]:
+def start_editor(image: str, src: str, dst: str, within: str = "none") -> tuple[subprocess.Popen, str]:
     env = dict(os.environ, PYTHONPATH=os.path.dirname(HERE) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    extra = [] if within == "none" else ["--within", within]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "warpcli", "edit", image, "--src", src, "--dst", dst, "--no-browser"],
+        [sys.executable, "-m", "warpcli", "edit", image, "--src", src, "--dst", dst, "--no-browser", *extra],
         stderr=subprocess.PIPE, text=True, env=env,
     )  # fmt: skip
     line = proc.stderr.readline()
@@ -97,6 +99,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sizes", default="1,12", help="megapixels [1,12]")
     ap.add_argument("--pairs", default="star12,wavy48")
     ap.add_argument("--moves", type=int, default=40, help="pointer moves per drag [40]")
+    ap.add_argument("--within", default="none", help="comma-separated: none, image, a margin [none]")
     ap.add_argument("--interval", type=float, default=16.0, help="ms between moves [16]")
     ap.add_argument("--out", help="also write the table (markdown) there")
     args = ap.parse_args(argv)
@@ -120,14 +123,15 @@ def main(argv=None) -> int:
                 src, dst = (os.path.join(tmp, f"{pair.name}{mp:g}{s}.json") for s in ("a", "b"))
                 bench_run.write_polygon(src, pair.src)
                 bench_run.write_polygon(dst, pair.dst)
-                print(f"edit_latency: {mp:g} MP ({w}x{h}), {pair.name}...", file=sys.stderr, flush=True)
-                proc, url = start_editor(image, src, dst)
-                try:
-                    r = measure(browser, url, pair.dst[0], args.moves, args.interval, 0.03 * min(w, h))
-                finally:
-                    proc.terminate()
-                    proc.wait()
-                rows.append((mp, w, h, pair.name, r))
+                for within in args.within.split(","):
+                    print(f"edit_latency: {mp:g} MP ({w}x{h}), {pair.name}, within {within}...", file=sys.stderr, flush=True)
+                    proc, url = start_editor(image, src, dst, within)
+                    try:
+                        r = measure(browser, url, pair.dst[0], args.moves, args.interval, 0.03 * min(w, h))
+                    finally:
+                        proc.terminate()
+                        proc.wait()
+                    rows.append((mp, w, h, f"{pair.name}, within {within}" if within != "none" else pair.name, r))
         browser.close()
     lines = [
         f"warp edit drag-to-redraw latency ({platform.node()}, {os.cpu_count()} CPUs, load average "

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from edit_helpers import served, smooth_image, snapshot_dir, write_smooth_image
 from helpers import l_shape, regular, star
-from hypothesis import given
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from warpcli.edit.preview import PreviewMapper, encode_png, preview_areas, preview_image
@@ -528,3 +528,169 @@ def test_preview_density_coarsens_the_grading_not_the_map():
     assert np.percentile(np.hypot(*(a[ok] - b[ok]).T), 95) < 0.1
     with pytest.raises(ValueError, match="grade must be True or False"):
         MapOptions(grade="no")
+
+
+# --- within a fixed outline (--within) --------------------------------------------------------------------
+
+WITHIN_CAGE = np.array([[40.0, 30.0], [80.0, 30.0], [88.0, 50.0], [80.0, 66.0], [40.0, 66.0], [32.0, 48.0]])
+
+
+def _within_target(seed: int) -> np.ndarray:
+    """The cage with its vertices moved a few pixels at random (generated cases)."""
+    return WITHIN_CAGE + np.random.default_rng(seed).uniform(-6, 6, WITHIN_CAGE.shape).round(2)
+
+
+@pytest.fixture(scope="module")
+def within_session(tmp_path_factory):
+    image = str(tmp_path_factory.mktemp("within") / "picture.png")
+    write_smooth_image(image, 128, 96)
+    return EditSession(EditPaths.defaults(image))
+
+
+@pytest.mark.parametrize("within, seed, method, factor", [("image", 0, "fem", 1), ("12", 1, "fem", 1), ("image", 2, "fem", 2)])
+def test_within_preview_is_the_within_warp_at_preview_density(within_session, within, seed, method, factor):
+    """The preview with within is warp_image(..., within=...)'s cage map at the density the header names (in the
+    image's pixels), value for value, shown shrunk by the preview's factor."""
+    from warpcli.pipeline import warp_image
+
+    session = within_session
+    session.preview = preview_image(read_image(session.paths.image), side=128 // factor)
+    assert session.preview.factor == factor
+    dst = _within_target(seed)
+    header, xyuv = _decoded(session.preview_map({"src": WITHIN_CAGE.tolist(), "dst": dst.tolist(),
+                                                 "options": {"within": within, "method": method}}))  # fmt: skip
+    assert header["ok"], header
+    assert header["command"].endswith(f"--within {within}") and "--outside" not in header["command"]
+    pixels = read_image(session.paths.image).pixels
+    ref = warp_image(pixels, WITHIN_CAGE, dst, WarpOptions(within=within, antialias=False),
+                     method=method, max_area=tuple(header["max_area"]), grade=False)  # fmt: skip
+    cage = ref.map
+    assert len(cage.face_maps) > 1  # the cage and the ring's faces
+    positions, tex = xyuv[:, :2].astype(float) * factor, xyuv[:, 2:].astype(float) * factor
+    if method == "fem":  # the same meshes, vertex for vertex, and the same harmonic values
+        want = np.concatenate([m.phi1.mesh.vertices for m in cage.face_maps])
+        np.testing.assert_array_equal(xyuv[:, :2], (want / factor).astype(np.float32))
+    # The preview's texture coordinates are f^-1 of its vertices, f the within warp's map.
+    want = cage.inverse(positions)
+    found = np.isfinite(want).all(axis=1)
+    assert found.mean() > 0.95
+    np.testing.assert_allclose(tex[found], want[found], atol=5e-3 if method == "bem" else 1e-3)
+    # The mesh covers the whole outline (the cage and the ring): its area is the outline's.
+    tris = np.frombuffer(session.preview_map({"src": WITHIN_CAGE.tolist(), "dst": dst.tolist(),
+                         "options": {"within": within, "method": method}}), "<u4")[-3 * header["triangles"]:].reshape(-1, 3)  # fmt: skip
+    a, b, c = (positions.astype(np.float32)[tris[:, i]].astype(float) for i in range(3))
+    area = 0.5 * np.abs((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]).sum()
+    x0, y0 = ref.within.outline.min(axis=0)
+    x1, y1 = ref.within.outline.max(axis=0)
+    assert area == pytest.approx((x1 - x0) * (y1 - y0), rel=1e-6)
+
+
+@pytest.mark.parametrize("within", ["image", "8"])
+def test_within_export_is_the_command_byte_for_byte(tmp_path, within):
+    """Export with within writes what the page's command line writes (``warp ... --within``), byte for byte."""
+    import shlex
+
+    from warpcli.cli import main
+
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 128, 96)
+    session = EditSession(EditPaths.defaults(image))
+    result = session.export({"src": WITHIN_CAGE.tolist(), "dst": _within_target(3).tolist(),
+                             "options": {"within": within, "interp": "cubic"}})  # fmt: skip
+    args = shlex.split(result["command"])
+    assert args[-2:] == ["--within", within] and "--interp" in args
+    again = str(tmp_path / "again.png")
+    args[args.index(result["output"])] = again
+    assert main(args[1:]) == 0
+    with open(result["output"], "rb") as a, open(again, "rb") as b:
+        assert a.read() == b.read()
+    # Outside the outline, the input's own pixels.
+    if within != "image":
+        out, src = read_image(result["output"]).pixels, read_image(image).pixels
+        assert (out[:, :10] == src[:, :10]).all()
+
+
+@given(vertex=st.integers(0, 5), dx=st.floats(-200, 200), dy=st.floats(-200, 200), within=st.sampled_from(["image", "5"]))
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+def test_within_ring_errors_are_one_line_the_clis(within_session, vertex, dx, dy, within):
+    """A vertex moved anywhere: a preview or the CLI's one-line message (within_pair's), never a server error."""
+    from warpcli.errors import WarpError
+    from warpcli.within import within_pair
+
+    session = within_session
+    dst = WITHIN_CAGE.copy()
+    dst[vertex] += [dx, dy]
+    header, _ = _decoded(session.preview_map({"src": WITHIN_CAGE.tolist(), "dst": dst.tolist(), "options": {"within": within}}))
+    try:
+        src_p, dst_p = Polygon(WITHIN_CAGE, name=session.paths.src), Polygon(dst, name=session.paths.dst)
+        from warpcli.polygon import check_pair
+
+        check_pair(src_p, dst_p)
+        within_pair(src_p, dst_p, within, session.image_size)
+    except WarpError as err:
+        assert header == {"ok": False, "error": str(err), "command": None}
+        assert "\n" not in header["error"]
+        return
+    assert header["ok"] or ("\n" not in header["error"] and header["error"])  # a map that folds: its message
+
+
+@pytest.mark.parametrize(
+    "value",
+    ["/etc/passwd", "../a.json", "a.json", "0", "-5", "nan", "inf", "", " ", "1e400", 5, ["image"], {"x": 1}, "9" * 300],
+)
+def test_within_from_the_page_is_image_or_a_margin_and_never_a_file(server, tmp_path, value):
+    before = snapshot_dir(str(tmp_path))
+    _opened.clear()
+    _watching.set()
+    try:
+        for path in ("/api/preview", "/api/save", "/api/export"):
+            status, body = json_post(server, path, {"src": SQUARE, "dst": MOVED, "options": {"within": value}})
+            assert status == 200
+            if path == "/api/preview":
+                n = int.from_bytes(body[:4], "little")
+                body = body[4 : 4 + n]
+            result = json.loads(body)
+            assert not result["ok"] and "within" in result["error"] and "\n" not in result["error"]
+    finally:
+        _watching.clear()
+    assert _opened == [], _opened
+    assert snapshot_dir(str(tmp_path)) == before
+
+
+def test_within_file_of_the_command_line_and_the_cli_checks(tmp_path, capsys):
+    """``warp edit --within FILE``: the page may choose it back (and none); bad values are one line and exit 2."""
+    from warpcli.cli import main
+
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 128, 96)
+    outline = tmp_path / "outline.json"
+    outline.write_text(json.dumps([[20, 16], [110, 16], [110, 84], [20, 84]]))
+    session = EditSession(EditPaths.defaults(image), WarpOptions(within=str(outline)))
+    assert session.state()["options"]["within"] == str(outline)
+    doc = {"src": WITHIN_CAGE.tolist(), "dst": _within_target(4).tolist()}
+    header, _ = _decoded(session.preview_map(dict(doc, options={"within": str(outline)})))
+    assert header["ok"] and header["command"].endswith(f"--within {outline}")
+    header, _ = _decoded(session.preview_map(dict(doc, options={"within": None, "outside": "background"})))
+    assert header["ok"] and "--within" not in header["command"] and "--outside" not in header["command"]
+    header, _ = _decoded(session.preview_map(dict(doc, options={"within": str(tmp_path / "other.json")})))
+    assert not header["ok"] and "a polygon file only from the command line" in header["error"]
+    for value, needle in (("0", "positive number"), (str(tmp_path / "missing.json"), "missing.json")):
+        assert main(["edit", image, "--within", value, "--no-browser"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith("warp: error: ") and needle in err
+    assert main(["edit", image, "--within", "image", "--outside", "background", "--no-browser"]) == 2
+    assert "takes no --outside background" in capsys.readouterr().err
+
+
+def test_within_command_line_parses_back(monkeypatch):
+    from warpcli.cli import main
+
+    warp_command = sys.modules["warpcli.cli.warp"]
+    seen = []
+    monkeypatch.setattr(warp_command, "_single", lambda *args: seen.append(args))
+    for within in ("image", "7.5"):
+        opts = WarpOptions(map=MapOptions(method="bem"), interp="cubic", within=within)
+        args = command_args(opts, "in.png", "a.json", "b.json", "out.png")
+        assert "--outside" not in args and args[-2:] == ["--within", within]
+        assert main(args[1:]) == 0
+        assert seen[-1][3] == opts

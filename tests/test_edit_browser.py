@@ -225,3 +225,35 @@ def test_load_polygon_files_on_the_page(tmp_path, chromium_browser):
         assert page.locator("#error").text_content().startswith("c.json: ")
         np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.dst"), pts * 0.8 + 10)
         assert page.page_errors == []
+
+
+def test_within_control_preview_is_the_within_warp(tmp_path, chromium_browser):
+    """Choosing within on the page: the whole image shows the within warp (cage and ring), the command says --within."""
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 160, 120)
+    src = np.array([[50.0, 40.0], [110.0, 40.0], [110.0, 80.0], [50.0, 80.0]])
+    dst = src + [[0, 0], [8, -6], [4, 5], [0, 0]]
+    (tmp_path / "a.json").write_text(json.dumps(src.tolist()))
+    (tmp_path / "b.json").write_text(json.dumps(dst.tolist()))
+    from warpcli.raster.imageio import read_image
+
+    pixels = read_image(image).pixels
+    with served(image, src=str(tmp_path / "a.json"), dst=str(tmp_path / "b.json")) as server:
+        page = open_editor(chromium_browser, server)
+        wait_idle(page, 0)
+        for kind, within in (("image", "image"), ("margin", "20")):
+            frames = page.evaluate("() => window.warpEditor.frames")
+            page.select_option("#within-kind", kind)
+            wait_idle(page, frames)
+            header = page.evaluate("() => window.warpEditor.lastHeader")
+            assert header["ok"], header
+            assert page.locator("#command").text_content().endswith(f"--within {within}")
+            shown = preview_pixels(page)
+            want = warp_image(pixels, src, dst, WarpOptions(within=within, antialias=False),
+                              max_area=tuple(header["max_area"]), grade=False).pixels  # fmt: skip
+            # Everywhere but the image's outer pixels (the outline, where the GPU's clamp and the paste differ).
+            diff = np.abs(shown[1:-1, 1:-1, :3].astype(int) - want[1:-1, 1:-1].astype(int))
+            print(f"within {within}: mean {diff.mean():.3f}, p99 {np.percentile(diff, 99):.1f}, max {diff.max()}")
+            assert diff.mean() <= MEAN_TOLERANCE and np.percentile(diff, 99) <= P99_TOLERANCE
+            assert (shown[:, :, 3] == 255).all()  # the whole image: the input outside the outline
+        assert page.page_errors == []

@@ -20,8 +20,9 @@ from .options import CONTEXT, interp_option, map_options, quiet_option
 @map_options
 @interp_option
 @click.option("--outside", type=click.Choice(("background", "input")), default="background", show_default=True, help="Outside DST: the background, or the input.")
+@click.option("--within", metavar="image|MARGIN|FILE.json", help="A retouch within a fixed outline (as warp --within): the whole image, the cage's box grown by MARGIN pixels, or a polygon file; the page can change it.")
 @quiet_option
-def edit(image_path, src_path, dst_path, output_path, port, browser, mapping, interp, outside):
+def edit(image_path, src_path, dst_path, output_path, port, browser, mapping, interp, outside, within):
     """Draw the two polygons on IMAGE in the browser and watch the warp follow the mouse.
 
     Click to place the source polygon's vertices, close it, and drag the
@@ -39,7 +40,13 @@ def edit(image_path, src_path, dst_path, output_path, port, browser, mapping, in
     from ..edit import serve
     from ..options import WarpOptions
 
-    options = dataclasses.replace(WarpOptions(map=mapping), interp=interp, outside=outside)
+    if within is not None and outside == "background":
+        source = click.get_current_context().get_parameter_source("outside")
+        if source is not None and source.name == "COMMANDLINE":
+            raise click.UsageError("--within keeps the input outside the outline: it takes no --outside background")
+    if within is not None and within.strip() != "image":
+        _check_within(within)
+    options = dataclasses.replace(WarpOptions(map=mapping), interp=interp, outside=outside, within=within)
 
     def announce(url: str) -> None:
         click.echo(f"warp edit: {image_path} at {url} (Ctrl-C stops)", err=True)
@@ -48,3 +55,10 @@ def edit(image_path, src_path, dst_path, output_path, port, browser, mapping, in
         serve(image_path, src_path, dst_path, output_path, options, port=port, browser=browser, announce=announce)
     except KeyboardInterrupt:  # the way a user stops the server: not a failure
         click.echo("warp edit: stopped", err=True)
+
+
+def _check_within(within: str) -> None:
+    """A margin must be a positive number of pixels, a file a polygon the CLI reads (read once here, at the start)."""
+    from ..polygon.outline import outline_polygon
+
+    outline_polygon(within, (1, 1), [[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]])

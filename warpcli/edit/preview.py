@@ -15,10 +15,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..maps.base import ThetaMap
+from ..maps.cage import CageMap
 from ..maps.compose import BijectiveMap, theta_for
 from ..maps.registry import METHODS
 from ..options import MapOptions
 from ..polygon import Polygon, check_pair
+from ..polygon.partition import Partition
 from ..raster.imageio import RasterImage, convert_pixels
 
 __all__ = [
@@ -139,7 +141,7 @@ class PreviewMesh:
     positions: NDArray[np.float32]
     texcoords: NDArray[np.float32]
     triangles: NDArray[np.uint32]
-    map: BijectiveMap
+    map: BijectiveMap | CageMap
     max_area: tuple[float, float]
     rebuilt: tuple[str, ...]
     seconds: float
@@ -210,33 +212,86 @@ class PreviewMapper:
             fmap = BijectiveMap(*maps)
             if options.check:
                 fmap.check_bijective()
-            phi0, phi1 = maps
-            mesh = getattr(phi1, "mesh", None)
-            if mesh is not None and hasattr(phi1, "values"):
-                # FEM: phi1 takes its mesh's vertices to ``values`` by definition.
-                positions, triangles, in_theta = mesh.vertices, mesh.triangles, phi1.values
-            else:
-                from ..maps.fem.mesh import mesh_polygon
-
-                area = options.areas()[1] or max(1.0, abs(dst.signed_area) / PREVIEW_TRIANGLES)
-                mesh = mesh_polygon(dst, area, region=region)
-                positions, triangles = mesh.vertices, mesh.triangles
-                in_theta = phi1.evaluate(positions).points
-            # In Z order, each point starts its search where the last one was
-            # found (``coherent``): the same points, found ten times faster.
-            order = z_order(in_theta)
-            tex = np.empty_like(in_theta)
-            tex[order] = phi0.inverse(in_theta[order], coherent=True).points
-            # A vertex whose pre-image could not be found (none expected) shows nothing.
-            bad = ~np.isfinite(tex).all(axis=1)
-            if bad.any():
-                keep = ~bad[triangles].any(axis=1)
-                triangles = triangles[keep]
-                tex = np.where(bad[:, None], 0.0, tex)
+            positions, triangles, tex = _target_mesh(*maps, dst, options.areas()[1], region)
         return PreviewMesh(
             positions.astype(np.float32), tex.astype(np.float32), np.asarray(triangles, np.uint32), fmap,
             options.areas(), tuple(rebuilt), time.perf_counter() - t0,
         )  # fmt: skip
+
+
+    def build_cage(
+        self, src: Partition, dst: Partition, options: MapOptions, region: tuple[float, float, float, float], factor: int = 1
+    ) -> PreviewMesh:
+        """The map between two cage meshes (`warpcli.maps.cage.build_cage_map`) at ``options``' density, and its mesh of the target.
+
+        The meshes, ``options``' density and ``region`` are in the image's
+        pixels; the mesh returned is in the preview's (divided by ``factor``).
+        The map is the one made in the image's pixels (the export's cage mesh
+        itself), which the preview's own scaled copy would only repeat at the
+        cost of validating two more meshes.
+
+        The whole cage map is built at every call: the ring of ``--within``
+        (`warpcli.within.within_pair`) is cut anew on both sides whenever
+        either side moves, so no side's faces can be kept.
+
+        Raises
+        ------
+        PolygonError, InputError, FoldOverError
+            As `build_cage_map`.
+        """
+        from ..maps.cage import build_cage_map
+
+        t0 = time.perf_counter()
+        with self._lock:
+            fmap = build_cage_map(src, dst, options, regions=(region, region))
+            if options.check:
+                fmap.check_bijective()
+            parts, offset = [], 0
+            for face_map in fmap.face_maps:
+                positions, triangles, tex = _target_mesh(face_map.phi0, face_map.phi1, face_map.dst, options.areas()[1], region)
+                parts.append((positions, np.asarray(triangles) + offset, tex))
+                offset += len(positions)
+            positions = np.concatenate([p[0] for p in parts])
+            triangles = np.concatenate([p[1] for p in parts])
+            tex = np.concatenate([p[2] for p in parts])
+            if factor != 1:
+                positions, tex = positions / factor, tex / factor
+        return PreviewMesh(
+            positions.astype(np.float32), tex.astype(np.float32), np.asarray(triangles, np.uint32), fmap,
+            options.areas(), ("source", "target"), time.perf_counter() - t0,
+        )  # fmt: skip
+
+
+def _target_mesh(
+    phi0: ThetaMap, phi1: ThetaMap, dst: Polygon, area: float | None, region: tuple[float, float, float, float]
+) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.float64]]:
+    """A triangle mesh of the target ``dst`` and f^-1 = phi0^-1 o phi1 at its vertices: (positions, triangles, texcoords).
+
+    FEM: phi1's own mesh (it takes its vertices to ``values`` by
+    definition); the meshless methods: ``dst`` meshed at ``area`` (or
+    `PREVIEW_TRIANGLES` of its area). A vertex whose pre-image could not be
+    found (none expected) shows nothing: its triangles are left out.
+    """
+    mesh = getattr(phi1, "mesh", None)
+    if mesh is not None and hasattr(phi1, "values"):
+        positions, triangles, in_theta = mesh.vertices, mesh.triangles, phi1.values
+    else:
+        from ..maps.fem.mesh import mesh_polygon
+
+        mesh = mesh_polygon(dst, area or max(1.0, abs(dst.signed_area) / PREVIEW_TRIANGLES), region=region)
+        positions, triangles = mesh.vertices, mesh.triangles
+        in_theta = phi1.evaluate(positions).points
+    # In Z order, each point starts its search where the last one was
+    # found (``coherent``): the same points, found ten times faster.
+    order = z_order(in_theta)
+    tex = np.empty_like(in_theta)
+    tex[order] = phi0.inverse(in_theta[order], coherent=True).points
+    bad = ~np.isfinite(tex).all(axis=1)
+    if bad.any():
+        keep = ~bad[triangles].any(axis=1)
+        triangles = triangles[keep]
+        tex = np.where(bad[:, None], 0.0, tex)
+    return positions, triangles, tex
 
 
 def z_order(points: NDArray[np.float64]) -> NDArray[np.intp]:

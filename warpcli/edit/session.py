@@ -17,6 +17,7 @@ from ..options import BOUNDARIES, INTERPOLATIONS, OUTSIDE, MapOptions, WarpOptio
 from ..outputs import atomic_path, check_output_path, write_checked
 from ..polygon import Polygon, check_pair
 from ..raster.imageio import check_image_output, read_image
+from ..within import within_pair
 from .preview import PreviewImage, PreviewMapper, encode_png, preview_image, with_preview_density
 
 #: The editor draws one polygon per side; a cage mesh file is refused with this line.
@@ -207,7 +208,7 @@ class EditSession:
         """The page's options (`PAGE_CHOICES`) of a `WarpOptions`."""
         return {
             "method": options.map.method, "theta": options.map.theta, "boundary": options.map.dst_boundary,
-            "interp": options.interp, "outside": options.outside,
+            "interp": options.interp, "outside": options.outside, "within": options.within,
         }  # fmt: skip
 
     def options_from(self, doc: object) -> WarpOptions:
@@ -223,20 +224,55 @@ class EditSession:
             return self.options
         if not isinstance(doc, dict):
             raise InputError("options must be an object")
-        unknown = sorted(set(doc) - set(PAGE_CHOICES))
+        unknown = sorted(set(doc) - set(PAGE_CHOICES) - {"within"})
         if unknown:
             raise InputError(f"unknown option {unknown[0]!r}")
+        within = self.within_from(doc.get("within", self.options.within))
         for key, value in doc.items():
+            if key == "within":
+                continue
             allowed = PAGE_CHOICES[key] + ((self.options.map.theta,) if key == "theta" else ())
             if value not in allowed:
                 raise InputError(f"unknown {key} {value!r}; choose one of {', '.join(PAGE_CHOICES[key])}")
         mapping = self.options.map
         changes = {"method": doc.get("method", mapping.method), "theta": doc.get("theta", mapping.theta),
                    "dst_boundary": doc.get("boundary", mapping.dst_boundary)}  # fmt: skip
+        # Within an outline the input is kept outside it (WarpOptions sets outside="input"); without, the page's outside.
+        outside = doc.get("outside", self.options.outside)
+        if within is None and self.options.within is not None and "outside" not in doc:
+            outside = "background"
         return dataclasses.replace(
             self.options, map=dataclasses.replace(mapping, **changes),
-            interp=doc.get("interp", self.options.interp), outside=doc.get("outside", self.options.outside),
+            interp=doc.get("interp", self.options.interp), outside=outside, within=within,
         )  # fmt: skip
+
+    def within_from(self, value: object) -> str | None:
+        """The page's ``within``: None, ``"image"``, a margin in pixels, or the command line's own value.
+
+        The page never names a file: a polygon file for the outline is only
+        taken from the command line (``warp edit --within FILE``), and the
+        page may choose it back; any other text is refused, as the CLI
+        refuses a margin that is not a positive number of pixels.
+
+        Raises
+        ------
+        InputError
+            If ``value`` is none of those.
+        """
+        if value is None or value == self.options.within:
+            return value  # type: ignore[return-value]
+        if not isinstance(value, str) or len(value) > 255:
+            raise InputError("within must be null, 'image' or a margin in pixels")
+        text = value.strip()
+        if text == "image":
+            return text
+        try:
+            margin = float(text)
+        except ValueError:
+            raise InputError(f"--within {value}: choose image or a margin in pixels (a polygon file only from the command line)") from None
+        if not (margin > 0 and math.isfinite(margin)):
+            raise InputError(f"--within {value}: the margin must be a positive number of pixels")
+        return text
 
     def polygons(self, doc: dict, src_path: str | None = None, dst_path: str | None = None) -> tuple[Polygon, Polygon]:
         """The page's two polygons, checked as the CLI checks polygon files, named after the files they are saved to.
@@ -305,9 +341,18 @@ class EditSession:
             drag = doc.get("drag")
             if drag not in (None, "src", "dst"):
                 raise InputError(f"drag must be 'src', 'dst' or null, got {drag!r}")
-            mapping = with_preview_density(options.map, psrc, pdst, drag)
             pw, ph = self.preview.preview_size
-            mesh = self.mapper.build(psrc, pdst, mapping, (0.0, 0.0, float(pw), float(ph)))
+            region = (0.0, 0.0, float(pw), float(ph))
+            if options.within is None:
+                mapping = with_preview_density(options.map, psrc, pdst, drag)
+                mesh = self.mapper.build(psrc, pdst, mapping, region)
+            else:
+                # The export's cage mesh (`warp --within`'s, in the image's pixels), mapped at the preview's
+                # density (in the image's pixels: times factor^2) and shown shrunk to the preview.
+                pair = within_pair(src, dst, options.within, self.image_size)
+                k = self.preview.factor
+                mapping = with_preview_density(options.map, pair.src.outline, pair.dst.outline, drag)
+                mesh = self.mapper.build_cage(pair.src, pair.dst, mapping, (0.0, 0.0, pw * k, ph * k), k)
         except WarpError as err:
             text = json.dumps({"ok": False, "error": str(err), "command": None}).encode()
             text += b" " * (-len(text) % 4)
@@ -361,13 +406,13 @@ class EditSession:
         if os.path.abspath(src_path) == os.path.abspath(dst_path):
             raise InputError(f"{src_path}: the same file is given for both polygons")
         src, dst = self.polygons(doc, src_path, dst_path)
+        options = self.options_from(doc.get("options"))  # bad options write nothing
         for path in (src_path, dst_path):
             check_output_path(path, inputs=(self.paths.image,))
         for path, polygon in ((src_path, src), (dst_path, dst)):
             text = json.dumps({"points": polygon.points.tolist()}, indent=1) + "\n"
             with atomic_path(path) as tmp:
                 write_checked(tmp, text.encode(), path)
-        options = self.options_from(doc.get("options"))
         output = self.paths.chosen(doc.get("output_name"), self.paths.output, _image_extensions(self.paths))
         return {"saved": [src_path, dst_path], "warnings": self.warnings(src, dst),
                 "command": self.command(options, src_path, dst_path, output)}  # fmt: skip
@@ -419,7 +464,8 @@ def command_args(options: WarpOptions, image: str, src: str, dst: str, output: s
     ]  # fmt: skip
     w, dw = options, WarpOptions()
     flags += [
-        ("--interp", w.interp, dw.interp), ("--outside", w.outside, dw.outside), ("--vacated", w.vacated, dw.vacated),
+        ("--interp", w.interp, dw.interp), ("--outside", w.outside, "input" if w.within is not None else dw.outside),
+        ("--vacated", w.vacated, dw.vacated),
         ("--dtype", w.dtype, dw.dtype), ("--compression", w.compression, dw.compression),
         ("--size", None if w.size is None else f"{w.size[0]}x{w.size[1]}", None),
     ]  # fmt: skip
@@ -431,4 +477,6 @@ def command_args(options: WarpOptions, image: str, src: str, dst: str, output: s
         args += ["--background", ",".join(repr(float(v)) for v in bg)]
     if not w.antialias:
         args.append("--no-antialias")
+    if w.within is not None:  # implies --outside input
+        args += ["--within", w.within]
     return args

@@ -284,7 +284,8 @@ function render() {
   gl.clear(gl.COLOR_BUFFER_BIT);
   gl.uniform2f(gl.getUniformLocation(program, "u_size"), preview.width, preview.height);
   if (!editor.closed) return;
-  if (editor.options.outside === "input") drawBuffer(quadBuffer, 6, false, 0);
+  // Within an outline the input is kept outside it (and the mesh covers the whole outline).
+  if (editor.options.outside === "input" || editor.options.within) drawBuffer(quadBuffer, 6, false, 0);
   if (meshCount) drawBuffer(meshBuffer, meshCount, $("heatmap").checked, gridSpacing());
   $("legend").hidden = !$("heatmap").checked;
 }
@@ -357,6 +358,36 @@ async function loadFile(side, input) {
   } catch (err) { showError(String(err.message || err)); return null; }
 }
 
+// --- within: none, the image, a margin, or the command line's own outline file --------------------------
+
+function withinValue() {
+  const kind = $("within-kind").value;
+  if (kind === "") return null;
+  if (kind === "margin") return String(Math.max(1, Number($("within-margin").value) || 20));
+  return kind;  // "image", or the command line's file
+}
+
+function setupWithin(given) {
+  const kind = $("within-kind"), margin = $("within-margin");
+  if (given !== null && given !== "image") {
+    if (/^\s*[0-9.eE+-]+\s*$/.test(given) && Number(given) > 0) { kind.value = "margin"; margin.value = given.trim(); }
+    else {  // a polygon file named on the command line: the page can choose it back, never name another
+      const o = document.createElement("option");
+      o.value = given; o.textContent = `file ${given.split(/[\\/]/).pop()}`; kind.appendChild(o); kind.value = given;
+    }
+  } else kind.value = given || "";
+  const update = () => {
+    margin.hidden = kind.value !== "margin";
+    editor.options = Object.assign({}, editor.options, { within: withinValue() });
+    $("outside").disabled = editor.options.within !== null;  // within keeps the input outside the outline
+    changed();
+  };
+  margin.hidden = kind.value !== "margin";
+  $("outside").disabled = given !== null;
+  kind.addEventListener("change", update);
+  margin.addEventListener("change", update);
+}
+
 // --- start ---------------------------------------------------------------------------------------
 
 async function start() {
@@ -376,6 +407,7 @@ async function start() {
     select.addEventListener("change", () => { editor.options = Object.assign({}, editor.options, { [key]: select.value }); changed(); });
   }
   editor.options = Object.assign({}, state.options);
+  setupWithin(state.options.within);
   editor.image = new Image();
   editor.image.src = `/image.png?token=${encodeURIComponent(token)}`;
   await editor.image.decode();
