@@ -196,3 +196,22 @@ def test_numba_cache_writes_hold_a_lock_beside_the_index(tmp_path):
                 for node in ast.walk(tree):
                     if isinstance(node, ast.ImportFrom) and node.module == "numba":
                         assert "njit" not in {a.name for a in node.names}, f"{f} takes njit from numba, not warpcli._jit"
+
+
+def test_mfs_kernel_matches_numba_bitwise():
+    rng = np.random.default_rng(9)
+    K, m = 500, 64
+    p = rng.uniform(-0.5, 0.5, (K, 2))
+    th = 2 * np.pi * rng.random(m)
+    s = 1.5 * np.stack([np.cos(th), np.sin(th)], axis=1)
+    w = rng.normal(size=(m, 2))
+    for want in ((True, True, False), (True, False, False), (False, True, False), (False, False, True)):
+
+        def args(want=want):
+            return (
+                p[:, 0].copy(), p[:, 1].copy(), s[:, 0].copy(), s[:, 1].copy(), w[:, 0].copy(), w[:, 1].copy(),
+                *want, np.zeros((K if want[0] else 0, 2)), np.zeros((K if want[1] else 0, 2, 2)),
+                np.zeros((K if want[2] else 0, 2, 2, 2)),
+            )  # fmt: skip
+
+        _same("warpcli.maps._smooth_kernels", "mfs_evaluate", args)
