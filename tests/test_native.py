@@ -215,3 +215,26 @@ def test_mfs_kernel_matches_numba_bitwise():
             )  # fmt: skip
 
         _same("warpcli.maps._smooth_kernels", "mfs_evaluate", args)
+
+
+def test_compiled_mfs_newton_matches_numba_bitwise():
+    from warpcli.maps.mfs import fit_mfs
+
+    P = star() * 40.0 + 64.0
+    tt = 2 * np.pi * np.arange(len(P)) / len(P)
+    sol = fit_mfs(P, np.stack([np.cos(tt), np.sin(tt)], axis=1), m=64)
+    rng = np.random.default_rng(2)
+    g = P.mean(axis=0) + rng.normal(0.0, 5.0, (300, 2))
+    x = sol.value(g[::-1].copy())
+    f = sol.frame
+    frame = np.array([f.centre[0], f.centre[1], f.scale, f.tcentre[0], f.tcentre[1], f.tscale])
+
+    def args():
+        return (
+            x[:, 0].copy(), x[:, 1].copy(), g[:, 0].copy(), g[:, 1].copy(), sol.sites[:, 0].copy(),
+            sol.sites[:, 1].copy(), sol.weights[:, 0].copy(), sol.weights[:, 1].copy(), sol.affine.copy(), frame,
+            P[:, 0].copy(), P[:, 1].copy(), 1e-12, 1e-9, 20, 40, 1e-4, True, np.zeros((300, 2)),
+            np.zeros(300, dtype=np.uint8), np.zeros((300, 2, 2)),
+        )  # fmt: skip
+
+    _same("warpcli.maps._smooth_kernels", "mfs_invert", args)

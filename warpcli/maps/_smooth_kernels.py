@@ -186,3 +186,158 @@ def mfs_evaluate(px, py, sx, sy, w0, w1, want_val, want_jac, want_hess, val, jac
             hess[k, 1, 0, 1] = -h1i
             hess[k, 1, 1, 0] = -h1i
             hess[k, 1, 1, 1] = -h1r
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _inside(x, y, vx, vy):
+    """Even-odd test of one point against a polygon: `warpcli.grid.inside_polygon`'s arithmetic."""
+    n = vx.shape[0]
+    inside = False
+    for i in range(n):
+        x0 = vx[i]
+        y0 = vy[i]
+        x1 = vx[(i + 1) % n]
+        y1 = vy[(i + 1) % n]
+        if (y0 > y) != (y1 > y):
+            xc = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+            if x < xc:
+                inside = not inside
+    return inside
+
+
+# Not inlined at numba's level: an inlined body would take the caller's flags,
+# without fastmath's reassociation its sums would not vectorise (measured: the
+# compiled Newton ran slower than numpy's passes).
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
+def _mfs_value(x, y, sx, sy, w0, w1):
+    """0.5 sum_i w_i log|z - s_i|^2 at one local point, both components (`mfs_evaluate`'s value loop)."""
+    v0 = 0.0
+    v1 = 0.0
+    for i in range(sx.shape[0]):
+        dx = x - sx[i]
+        dy = y - sy[i]
+        lg = fast_log(dx * dx + dy * dy)
+        v0 += w0[i] * lg
+        v1 += w1[i] * lg
+    return 0.5 * v0, 0.5 * v1
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
+def _mfs_gradient(x, y, sx, sy, w0, w1):
+    """sum_i w_i (z - s_i)/|z - s_i|^2 at one local point, both components (`mfs_evaluate`'s Jacobian loop)."""
+    a00 = 0.0
+    a01 = 0.0
+    a10 = 0.0
+    a11 = 0.0
+    for i in range(sx.shape[0]):
+        dx = x - sx[i]
+        dy = y - sy[i]
+        inv = 1.0 / (dx * dx + dy * dy)
+        gx = dx * inv
+        gy = dy * inv
+        a00 += w0[i] * gx
+        a01 += w0[i] * gy
+        a10 += w1[i] * gx
+        a11 += w1[i] * gy
+    return a00, a01, a10, a11
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def mfs_invert(
+    qx, qy, gx, gy, sx, sy, w0, w1, aff, frame, vx, vy, thresh, noise, max_iter, halvings, armijo,
+    want_jac, out, ok, jac,
+):  # fmt: skip
+    """Damped Newton for phi(y) = q, one point at a time: `warpcli.maps.newton.invert` for an MFS map, compiled.
+
+    The same iteration per point as ``invert`` (a point's steps never depend
+    on the others'): full Newton step, halved until the trial lies in the
+    polygon (vx, vy) and the squared residual decreases by the Armijo factor
+    or meets ``thresh``; a point whose step cannot be accepted is converged
+    if within ``noise``, and so is one out of iterations. phi in the
+    caller's coordinates: local p = (y - centre) / scale, phi = tcentre +
+    tscale (value + affine), J = tscale / scale (gradient + affine), with
+    ``frame`` = (centre x, centre y, scale, tcentre x, tcentre y, tscale)
+    (`warpcli.maps.closed_form.Frame`). ``out`` gets the last iterate, ``ok``
+    1 where converged, ``jac`` (if ``want_jac``) phi's Jacobian there (NaN
+    elsewhere).
+    """
+    cx = frame[0]
+    cy = frame[1]
+    sc = frame[2]
+    tcx = frame[3]
+    tcy = frame[4]
+    ts = frame[5]
+    jf = ts / sc
+    for k in range(qx.shape[0]):
+        x0 = qx[k]
+        x1 = qy[k]
+        y0 = gx[k]
+        y1 = gy[k]
+        ok[k] = 0
+        out[k, 0] = y0
+        out[k, 1] = y1
+        if want_jac:
+            for a in range(2):
+                for b in range(2):
+                    jac[k, a, b] = np.nan
+        if not _inside(y0, y1, vx, vy):
+            continue
+        px = (y0 - cx) / sc
+        py = (y1 - cy) / sc
+        u0, u1 = _mfs_value(px, py, sx, sy, w0, w1)
+        r0 = x0 - (tcx + ts * (u0 + (aff[0, 0] + (px * aff[1, 0] + py * aff[2, 0]))))
+        r1 = x1 - (tcy + ts * (u1 + (aff[0, 1] + (px * aff[1, 1] + py * aff[2, 1]))))
+        f = r0 * r0 + r1 * r1
+        done = np.sqrt(f) <= thresh
+        it = 0
+        while not done and it < max_iter:
+            it += 1
+            g00, g01, g10, g11 = _mfs_gradient(px, py, sx, sy, w0, w1)
+            j00 = (g00 + aff[1, 0]) * jf
+            j01 = (g01 + aff[2, 0]) * jf
+            j10 = (g10 + aff[1, 1]) * jf
+            j11 = (g11 + aff[2, 1]) * jf
+            det = j00 * j11 - j01 * j10
+            d0 = (j11 * r0 - j01 * r1) / det
+            d1 = (j00 * r1 - j10 * r0) / det
+            if not (np.isfinite(d0) and np.isfinite(d1)):
+                break  # singular: dropped, not converged
+            step = 1.0
+            accepted = False
+            for _ in range(halvings):
+                t0 = y0 + step * d0
+                t1 = y1 + step * d1
+                if _inside(t0, t1, vx, vy):
+                    tpx = (t0 - cx) / sc
+                    tpy = (t1 - cy) / sc
+                    v0, v1 = _mfs_value(tpx, tpy, sx, sy, w0, w1)
+                    s0 = x0 - (tcx + ts * (v0 + (aff[0, 0] + (tpx * aff[1, 0] + tpy * aff[2, 0]))))
+                    s1 = x1 - (tcy + ts * (v1 + (aff[0, 1] + (tpx * aff[1, 1] + tpy * aff[2, 1]))))
+                    ft = s0 * s0 + s1 * s1
+                    if ft <= (1.0 - 2.0 * armijo * step) * f or (np.isfinite(ft) and np.sqrt(ft) <= thresh):
+                        y0 = t0
+                        y1 = t1
+                        px = tpx
+                        py = tpy
+                        r0 = s0
+                        r1 = s1
+                        f = ft
+                        accepted = True
+                        break
+                step *= 0.5
+            if not accepted:
+                if np.sqrt(f) <= noise:
+                    ok[k] = 1
+                break
+            if np.sqrt(f) <= thresh:
+                done = True
+        if done or (it >= max_iter and np.sqrt(f) <= noise):
+            ok[k] = 1
+        out[k, 0] = y0
+        out[k, 1] = y1
+        if ok[k] and want_jac:
+            g00, g01, g10, g11 = _mfs_gradient(px, py, sx, sy, w0, w1)
+            jac[k, 0, 0] = (g00 + aff[1, 0]) * jf
+            jac[k, 0, 1] = (g01 + aff[2, 0]) * jf
+            jac[k, 1, 0] = (g10 + aff[1, 1]) * jf
+            jac[k, 1, 1] = (g11 + aff[2, 1]) * jf

@@ -16,12 +16,32 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["invert"]
+__all__ = ["ARMIJO", "MAX_HALVINGS", "invert", "thresholds"]
 
 #: Armijo constant of the sufficient-decrease test on d(y) = ||x - fun(y)||^2.
-_ARMIJO = 1e-4
+ARMIJO = 1e-4
 #: Largest number of step halvings in one line search.
-_MAX_HALVINGS = 40
+MAX_HALVINGS = 40
+
+
+def thresholds(targets_xy: NDArray[np.float64], tol: float, floor: float | None) -> tuple[float, float]:
+    """The absolute residuals of `invert`'s tests: convergence, and the noise floor.
+
+    Parameters
+    ----------
+    targets_xy : (K, 2) ndarray of float
+        The points to invert (K >= 1).
+    tol, floor : float
+        `invert`'s ``tol`` and ``floor`` (relative).
+
+    Returns
+    -------
+    thresh, noise : float
+        ``tol * s`` and ``max(thresh, floor * s)`` with ``s = max(1, max |targets_xy|)``.
+    """
+    s = max(1.0, float(np.max(np.abs(targets_xy))))
+    thresh = tol * s
+    return thresh, max(thresh, (floor or 0.0) * s)
 
 
 def invert(
@@ -93,8 +113,7 @@ def invert(
     converged = np.zeros(K, dtype=bool)
     if K == 0:
         return (y, converged, np.zeros((0, 2, 2))) if jacobian else (y, converged)
-    thresh = tol * max(1.0, float(np.max(np.abs(x))))
-    noise = max(thresh, (floor or 0.0) * max(1.0, float(np.max(np.abs(x)))))
+    thresh, noise = thresholds(x, tol, floor)
 
     active = np.arange(K)
     if inside is not None:
@@ -136,7 +155,7 @@ def invert(
         step = np.ones(len(active))
         pending = np.arange(len(active))
         accepted = np.zeros(len(active), dtype=bool)
-        for _ in range(_MAX_HALVINGS):
+        for _ in range(MAX_HALVINGS):
             if len(pending) == 0:
                 break
             idx = active[pending]
@@ -155,7 +174,7 @@ def invert(
                 else:
                     rt[good] = x[idx[good]] - fun(trial[good])
             ft = np.einsum("ij,ij->i", rt, rt)
-            good &= ft <= (1.0 - 2.0 * _ARMIJO * step[pending]) * f[idx]
+            good &= ft <= (1.0 - 2.0 * ARMIJO * step[pending]) * f[idx]
             # a step that already meets the tolerance is always welcome
             good |= np.isfinite(ft) & (np.sqrt(ft) <= thresh)
             y[idx[good]] = trial[good]
