@@ -24,7 +24,8 @@ one). Contenders:
 * ``OpenCV TPS``: ``cv2.createThinPlateSplineShapeTransformer()`` on the same vertices and
   its ``warpImage`` (bilinear): a thin-plate spline folds and does not take edges onto
   edges, so this is a speed reference, not an equivalent;
-* ``before fem`` (with ``--before DIR``): ``warp`` from another checkout (say the commit
+* ``before fem`` (with ``--before DIR``), and ``before mfs`` / ``before bem`` where ``warp
+  mfs`` / ``warp bem`` run: ``warp`` from another checkout (say the commit
   before issue 24, exported with ``git archive``), its defaults, in the same rounds;
 * ``floor``: a process that imports numpy, OpenImageIO and cv2, reads the PNG, remaps it by
   ``cv2.remap`` (bilinear) with a map given as an ``.npy`` file (warp's own inverse map at
@@ -127,7 +128,8 @@ if o is None or not o.open(out_path, spec) or not o.write_image(np.ascontiguousa
 o.close()
 '''
 
-CONTENDERS = ("warp fem", "warp mfs", "warp bem", "skimage PAT", "skimage TPS", "OpenCV TPS", "floor", "before fem")
+CONTENDERS = ("warp fem", "warp mfs", "warp bem", "skimage PAT", "skimage TPS", "OpenCV TPS", "floor", "before fem",
+              "before mfs", "before bem")
 PEER_KIND = {"skimage PAT": "pat", "skimage TPS": "tps", "OpenCV TPS": "cvtps", "floor": "floor"}
 
 
@@ -146,8 +148,10 @@ def parse_args(argv):
                    help="PNG compression level for every contender (default: warp's default)")
     p.add_argument("--editor-methods", default="fem", help="methods of the editor rebuild table ('' for none)")
     p.add_argument("--editor-repeat", type=int, default=9, help="editor rebuilds per measurement (medians)")
-    p.add_argument("--before", metavar="DIR", help="also run `warp` (FEM) from the checkout in DIR, with its own "
-                   "defaults, as 'before fem' in the same rounds")
+    p.add_argument("--before", metavar="DIR", help="also run `warp` (FEM, and MFS and BEM where this checkout's "
+                   "run) from the checkout in DIR, its defaults, as 'before fem' (mfs, bem) in the same rounds")
+    p.add_argument("--ratio-to", default="floor", metavar="NAME",
+                   help="the contender the ratios in brackets divide by (default: floor; e.g. 'skimage PAT')")
     p.add_argument("--keep", metavar="DIR", help="keep the inputs and outputs in DIR")
     p.add_argument("--out", metavar="FILE", help="also write the table as markdown to FILE")
     return p.parse_args(argv)
@@ -211,11 +215,18 @@ def main(argv=None) -> int:
         np.save(base + "_map.npy", warp_image(img, pair.src, pair.dst).inverse_map.astype(np.float32))
         cmds = {}
         for name in CONTENDERS:
-            if name in skip or mp > above.get(name, float("inf")) or (name == "before fem" and not args.before):
+            before = name.startswith("before")
+            limit = above.get(name, above.get(name.replace("before", "warp"), float("inf")))
+            if name in skip or mp > limit or (before and not args.before):
                 continue
+            if before and name != "before fem" and name.replace("before", "warp") in skip:
+                continue  # the other checkout's MFS or BEM only beside this one's
             out = f"{base}_{name.replace(' ', '_')}.png"
             if name == "before fem":
                 cmd = [sys.executable, "-m", "warpcli", "-q", base + ".png", "--src", src, "--dst", dst, out]
+            elif before:
+                cmd = [sys.executable, "-m", "warpcli", "-q", base + ".png", "--src", src, "--dst", dst, out,
+                       "--method", name.split()[1]]
             elif name.startswith("warp"):
                 cmd = [sys.executable, "-m", "warpcli", "-q", base + ".png", "--src", src, "--dst", dst, out,
                        "--method", name.split()[1]]
@@ -228,13 +239,13 @@ def main(argv=None) -> int:
         for rnd in range(args.repeat + 1):
             for name, cmd in cmds.items():
                 progress(f"{mp:g} MP round {rnd}/{args.repeat}: {name}")
-                wall, rss = run_child(runner, cmd, env if name != "before fem" else before_env)
+                wall, rss = run_child(runner, cmd, before_env if name.startswith("before") else env)
                 if rnd:  # round 0 warms the page cache and any kernel cache
                     res[name][0].append(wall)
                     res[name][1].append(rss)
         rows.append((mp, w, h, res))
-        print(table(rows, md=False), flush=True)
-    text = "\n".join(head) + "\n\n" + table(rows, md=True) + "\n" + footer(rows) + "\n"
+        print(table(rows, md=False, ref=args.ratio_to), flush=True)
+    text = "\n".join(head) + "\n\n" + table(rows, md=True, ref=args.ratio_to) + "\n" + footer(rows, args.ratio_to) + "\n"
     methods = [m.strip() for m in args.editor_methods.split(",") if m.strip()]
     if methods:
         progress("editor rebuilds, in-process")
@@ -303,19 +314,19 @@ def run_child(runner, cmd, env):
         os.environ.update(old)
 
 
-def table(rows, md: bool) -> str:
+def table(rows, md: bool, ref: str = "floor") -> str:
     names = [n for n in CONTENDERS if any(n in r[3] for r in rows)]
     head = ["size"] + names
     lines = []
     for mp, w, h, res in rows:
-        floor = statistics.median(res["floor"][0]) if "floor" in res else None
+        floor = statistics.median(res[ref][0]) if ref in res else None
         cells = [f"{mp:g} MP"]
         for n in names:
             if n not in res:
                 cells.append("")
                 continue
             t = statistics.median(res[n][0])
-            ratio = f" (x{t / floor:.2f})" if floor and n != "floor" else ""
+            ratio = f" (x{t / floor:.2f})" if floor and n != ref else ""
             cells.append(f"{t:.2f} s{ratio}")
         lines.append(cells)
         cells = ["  peak RSS"]
@@ -330,12 +341,12 @@ def table(rows, md: bool) -> str:
     return "\n".join("  ".join(c.ljust(wd) for c, wd in zip(r, widths)) for r in [head] + lines) + "\n"
 
 
-def footer(rows) -> str:
+def footer(rows, ref: str = "floor") -> str:
     lines = ["Spread (min-max of the timed rounds):"]
     for mp, w, h, res in rows:
         spread = ", ".join(f"{n} {min(t):.2f}-{max(t):.2f}" for n, (t, _) in res.items())
         lines.append(f"- {mp:g} MP ({w}x{h}): {spread}")
-    lines.append("Ratios in brackets: to the floor measured in the same rounds.")
+    lines.append(f"Ratios in brackets: to the {ref} measured in the same rounds.")
     return "\n".join(lines)
 
 

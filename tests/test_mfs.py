@@ -296,3 +296,37 @@ def test_refits_of_a_folding_map_stay_within_the_cap(monkeypatch, caplog, cap):
     ms = [256 if m is None else m for m in fitted]
     assert ms == [256 * 2**k for k in range(len(ms))] and ms[-1] <= cap < 2 * ms[-1]
     assert phi.solution.m == ms[-1]
+
+
+@pytest.mark.parametrize("method", ["mfs", "bem"])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_inverse_jacobian_is_the_maps_at_the_pre_images_found(method, seed):
+    """`SmoothMap.inverse` takes phi's Jacobian from Newton's own evaluations (issue 24); the former
+    route, a pass of `evaluate` at the pre-images, is the reference: same points, same NaNs, and
+    the Jacobians of the inverse agree to rounding. Generated star-shaped polygons."""
+    from warpcli import MapOptions, Polygon
+    from warpcli.maps.base import inv2
+    from warpcli.maps.registry import METHODS
+    from warpcli.maps.theta import regular
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(5, 9))
+    th = np.sort(rng.uniform(0, 2 * np.pi, n))
+    r = rng.uniform(20.0, 45.0, n)
+    poly = Polygon(np.stack([60 + r * np.cos(th), 60 + r * np.sin(th)], axis=1))
+    opts = MapOptions(method=method, nodes=96, check=False)
+    phi = METHODS[method].load().build(poly, regular(poly, poly, opts), opts, "source")
+    g = (np.arange(24) + 0.5) / 24
+    X, Y = np.meshgrid(g, g)
+    q = phi.theta.points.min(axis=0) + np.stack([X.ravel(), Y.ravel()], 1) * np.ptp(phi.theta.points, axis=0)
+    q = np.concatenate([q, phi.theta.points[:2], [[np.nan, 0.0]]])  # vertices of Theta and a NaN too
+    got = phi.inverse(q, jacobian=True)
+    plain = phi.inverse(q)
+    assert np.array_equal(got.points, plain.points, equal_nan=True)
+    ref = np.full((len(q), 2, 2), np.nan)
+    ok = np.isfinite(got.points).all(axis=1)
+    ref[ok] = inv2(phi.evaluate(got.points[ok], jacobian=True).jacobian)
+    assert np.array_equal(np.isnan(got.jacobian), np.isnan(ref))
+    fin = np.isfinite(ref)
+    assert fin.sum() > 100
+    assert np.abs(got.jacobian[fin] - ref[fin]).max() <= 1e-10 * np.abs(ref[fin]).max()

@@ -196,3 +196,45 @@ def test_numba_cache_writes_hold_a_lock_beside_the_index(tmp_path):
                 for node in ast.walk(tree):
                     if isinstance(node, ast.ImportFrom) and node.module == "numba":
                         assert "njit" not in {a.name for a in node.names}, f"{f} takes njit from numba, not warpcli._jit"
+
+
+def test_mfs_kernel_matches_numba_bitwise():
+    rng = np.random.default_rng(9)
+    K, m = 500, 64
+    p = rng.uniform(-0.5, 0.5, (K, 2))
+    th = 2 * np.pi * rng.random(m)
+    s = 1.5 * np.stack([np.cos(th), np.sin(th)], axis=1)
+    w = rng.normal(size=(m, 2))
+    for want in ((True, True, False), (True, False, False), (False, True, False), (False, False, True)):
+
+        def args(want=want):
+            return (
+                p[:, 0].copy(), p[:, 1].copy(), s[:, 0].copy(), s[:, 1].copy(), w[:, 0].copy(), w[:, 1].copy(),
+                *want, np.zeros((K if want[0] else 0, 2)), np.zeros((K if want[1] else 0, 2, 2)),
+                np.zeros((K if want[2] else 0, 2, 2, 2)),
+            )  # fmt: skip
+
+        _same("warpcli.maps._smooth_kernels", "mfs_evaluate", args)
+
+
+def test_compiled_mfs_newton_matches_numba_bitwise():
+    from warpcli.maps.mfs import fit_mfs
+
+    P = star() * 40.0 + 64.0
+    tt = 2 * np.pi * np.arange(len(P)) / len(P)
+    sol = fit_mfs(P, np.stack([np.cos(tt), np.sin(tt)], axis=1), m=64)
+    rng = np.random.default_rng(2)
+    g = P.mean(axis=0) + rng.normal(0.0, 5.0, (300, 2))
+    x = sol.value(g[::-1].copy())
+    f = sol.frame
+    frame = np.array([f.centre[0], f.centre[1], f.scale, f.tcentre[0], f.tcentre[1], f.tscale])
+
+    def args():
+        return (
+            x[:, 0].copy(), x[:, 1].copy(), g[:, 0].copy(), g[:, 1].copy(), sol.sites[:, 0].copy(),
+            sol.sites[:, 1].copy(), sol.weights[:, 0].copy(), sol.weights[:, 1].copy(), sol.affine.copy(), frame,
+            P[:, 0].copy(), P[:, 1].copy(), 1e-12, 1e-9, 20, 40, 1e-4, True, np.zeros((300, 2)),
+            np.zeros(300, dtype=np.uint8), np.zeros((300, 2, 2)),
+        )  # fmt: skip
+
+    _same("warpcli.maps._smooth_kernels", "mfs_invert", args)

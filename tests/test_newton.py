@@ -122,3 +122,71 @@ def test_a_point_stuck_at_the_noise_floor_converges_within_the_floor_only():
     y, ok = invert(noisy, lambda y: np.broadcast_to(A, (len(y), 2, 2)), x, guess, tol=1e-12, floor=1e-9)
     assert ok.all()
     np.testing.assert_allclose(y, x @ np.linalg.inv(A).T, atol=1e-9)
+
+
+def test_fused_evaluations_and_the_returned_jacobian_agree_with_separate_passes():
+    # generated targets in the disc, starts scattered around them (the damping acts near the rim)
+    rng = np.random.default_rng(11)
+    y_true = rng.uniform(-0.7, 0.7, (300, 2))
+    y_true = y_true[in_disc(y_true / 0.99)]
+    x = bulge(y_true)
+    guess = np.clip(y_true + rng.normal(0.0, 0.05, y_true.shape), -0.69, 0.69)
+    calls = {"fun": 0, "jac": 0}
+
+    def fun(y):
+        calls["fun"] += 1
+        return bulge(y)
+
+    def jac(y):
+        calls["jac"] += 1
+        return bulge_jac(y)
+
+    y0, ok0 = invert(fun, jac, x, guess, inside=in_disc)
+    y1, ok1, j1 = invert(fun, jac, x, guess, inside=in_disc, jacobian=True)
+    used = dict(calls)
+    y2, ok2, j2 = invert(fun, jac, x, guess, inside=in_disc, fun_jac=lambda y: (bulge(y), bulge_jac(y)), jacobian=True)
+    assert calls == used  # fused: neither fun nor jac called on their own
+    assert ok0.all() and ok1.all() and ok2.all()
+    assert np.array_equal(y0, y1)  # the Jacobian at the end does not change the iterates
+    assert np.abs(y2 - y_true).max() < 1e-10 and np.abs(y1 - y_true).max() < 1e-10
+    # the Jacobian returned is the map's at the last iterate (closed form, independent of invert)
+    assert np.array_equal(j1, bulge_jac(y1))
+    assert np.array_equal(j2, bulge_jac(y2))
+
+
+def test_points_that_do_not_converge_get_no_jacobian():
+    x = np.array([[0.2, 0.1], [5.0, 5.0]])  # the second has no pre-image in the disc
+    y, ok, j = invert(bulge, bulge_jac, x, np.zeros((2, 2)), inside=in_disc, jacobian=True, max_iter=30)
+    assert ok.tolist() == [True, False]
+    assert np.isfinite(j[0]).all() and np.isnan(j[1]).all()
+    _, _, j0 = invert(bulge, bulge_jac, np.zeros((0, 2)), np.zeros((0, 2)), jacobian=True)
+    assert j0.shape == (0, 2, 2)
+
+
+def test_compiled_mfs_newton_agrees_with_invert_on_generated_polygons():
+    """`MFSSolution.invert_newton` (compiled, per point) against `invert` (numpy) as the reference:
+    the same converged points to well below 1e-6 px, and phi's own Jacobian at them."""
+    from warpcli.maps.newton import thresholds
+
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        n = int(rng.integers(5, 10))
+        th = np.sort(rng.uniform(0, 2 * np.pi, n))
+        P = np.stack(np.array([np.cos(th), np.sin(th)]) * rng.uniform(30.0, 60.0, n), axis=1) + rng.uniform(0, 500, 2)
+        tt = 2 * np.pi * np.arange(n) / n
+        sol = fit_mfs(P, np.stack([np.cos(tt), np.sin(tt)], axis=1), m=64)
+        lo, hi = P.min(axis=0), P.max(axis=0)
+        p = lo + rng.random((400, 2)) * (hi - lo)
+        p = p[points_in_polygon(p, P) & (distance_to_boundary(p, P) > 1.0)]
+        x = sol.value(p)
+        guess = np.where(points_in_polygon(p + 2.0, P)[:, None], p + 2.0, p)
+        guess[0] = hi + 10.0  # a start outside the polygon fails in both
+        inside = lambda y: points_in_polygon(y, P)  # noqa: E731
+        y_ref, ok_ref = invert(sol.value, sol.jacobian, x, guess, inside=inside, floor=1e-9)
+        thresh, noise = thresholds(x, 1e-12, 1e-9)
+        y, ok, J = sol.invert_newton(x, guess, P, thresh, noise, jacobian=True)
+        assert np.array_equal(ok, ok_ref) and not ok[0] and ok[1:].all()
+        assert np.abs(y[ok] - y_ref[ok]).max() < 1e-7
+        assert np.abs(y[ok] - p[ok]).max() < 1e-7
+        assert np.isnan(J[~ok]).all()
+        assert np.allclose(J[ok], sol.jacobian(y[ok]), rtol=1e-12, atol=1e-14)

@@ -28,7 +28,8 @@ import numpy as np
 from .._jit import njit
 from numpy.typing import NDArray
 
-from .closed_form import TWO_PI, fast_log
+from ._smooth_kernels import fast_log
+from .closed_form import TWO_PI
 
 __all__ = ["NEAR", "ElementSources", "crecip", "evaluate", "gauss01", "gauss_sources", "local_pair", "near_integrals"]
 

@@ -14,11 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-from numba import types
-from numba.extending import intrinsic
 from numpy.typing import ArrayLike, NDArray
 
-from .._jit import njit
 from ..boundary import to_theta_parameter
 
 __all__ = [
@@ -437,66 +434,15 @@ def lstsq(A: NDArray[np.float64], b: NDArray[np.float64], cond: float | None = N
         return scipy.linalg.lstsq(A, b, cond=cond, lapack_driver="gelsd")[0]
 
 
-@intrinsic
-def _f64_as_i64(typingctx, x):  # noqa: ARG001 - numba intrinsic signature
-    """Reinterpret the bits of a float64 as int64 (numba intrinsic)."""
-    sig = types.int64(types.float64)
+def __getattr__(name: str):
+    # `fast_log` is compiled code (numba) and lives with the kernels in
+    # `warpcli.maps._smooth_kernels`: importing it here on first use keeps
+    # numba out of processes that only call the kernels natively.
+    if name == "fast_log":
+        from ._smooth_kernels import fast_log
 
-    def codegen(context, builder, signature, args):  # noqa: ARG001
-        return builder.bitcast(args[0], context.get_value_type(types.int64))
-
-    return sig, codegen
-
-
-@intrinsic
-def _i64_as_f64(typingctx, x):  # noqa: ARG001
-    """Reinterpret the bits of an int64 as float64 (numba intrinsic)."""
-    sig = types.float64(types.int64)
-
-    def codegen(context, builder, signature, args):  # noqa: ARG001
-        return builder.bitcast(args[0], context.get_value_type(types.float64))
-
-    return sig, codegen
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def fast_log(q):
-    """Natural log of a positive, normal float64, branch-free so that loops vectorise.
-
-    q = 2^e f with f in [sqrt(1/2), sqrt(2)); log f = 2 atanh(s), s = (f-1)/(f+1),
-    |s| < 0.172, summed to s^19: relative error < 3e-16 (numba has no
-    vectorised log without Intel SVML; this one is ~4x faster in SIMD loops).
-    Compiled (numba) and inlined into the compiled evaluation loops of BEM
-    and MFS.
-
-    Parameters
-    ----------
-    q : float
-        Positive and normal.
-
-    Returns
-    -------
-    float
-    """
-    bits = _f64_as_i64(q)
-    e = np.float64((bits >> 52) - 1023)
-    f = _i64_as_f64((bits & 0x000FFFFFFFFFFFFF) | 0x3FF0000000000000)
-    big = f > 1.4142135623730951
-    f = 0.5 * f if big else f
-    e = e + 1.0 if big else e
-    s = (f - 1.0) / (f + 1.0)
-    s2 = s * s
-    p = 1.0 / 19.0
-    p = p * s2 + 1.0 / 17.0
-    p = p * s2 + 1.0 / 15.0
-    p = p * s2 + 1.0 / 13.0
-    p = p * s2 + 1.0 / 11.0
-    p = p * s2 + 1.0 / 9.0
-    p = p * s2 + 1.0 / 7.0
-    p = p * s2 + 1.0 / 5.0
-    p = p * s2 + 1.0 / 3.0
-    p = p * s2 + 1.0
-    return e * 0.6931471805599453 + 2.0 * s * p
+        return fast_log
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class ClosedForm:

@@ -37,7 +37,9 @@ pentagon: a larger offset converges faster for smooth data (sites far from
 the boundary) but the corner sites are what makes reflex corners converge.
 
 All of this happens in the normalised frame of `warpcli.maps.closed_form.Frame`.
-Evaluation is a compiled, vectorised sum over sites per point (`_evaluate`).
+Evaluation is a compiled, vectorised sum over sites per point
+(`warpcli.maps._smooth_kernels.mfs_evaluate`), called as cached machine code
+without importing numba (`warpcli._native.Kernels`).
 """
 
 from __future__ import annotations
@@ -46,8 +48,9 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from .._jit import njit
 from numpy.typing import ArrayLike, NDArray
+
+from .._native import Kernels
 
 from ..grid import inside_polygon
 from .closed_form import (
@@ -56,7 +59,6 @@ from .closed_form import (
     boundary_nodes,
     caller_parameters,
     distance_to_boundary,
-    fast_log,
     interior_angles,
     local_edges,
     lstsq,
@@ -67,6 +69,9 @@ from .closed_form import (
 
 __all__ = ["MFSSolution", "fit_mfs", "default_mfs_sites"]
 
+#: The evaluation kernel, as cached machine code (numba only to compile it once).
+_compiled = Kernels("warpcli.maps._smooth_kernels")
+
 #: Clustering of the corner sites: d_j = D exp(-sigma (sqrt(n_c) - sqrt(j))).
 _CORNER_SIGMA = 4.0
 #: Farthest corner site, as a fraction of the shorter edge at the vertex.
@@ -74,112 +79,6 @@ _CORNER_REACH = 0.5
 #: Grading strength (see `warpcli.maps.closed_form.boundary_nodes`) of the
 #: offset sites and fitting nodes towards reflex vertices.
 _GRADING = 0.5
-
-
-#: Floating-point flags of the evaluation kernel: reassociation lets LLVM
-#: vectorise the sums over sites (the order of the additions then depends on
-#: the SIMD width of the machine: results are deterministic on a machine, and
-#: agree across machines to rounding); contraction allows fused multiply-adds.
-_FASTMATH = {"reassoc", "contract"}
-
-
-@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
-def _evaluate(px, py, sx, sy, w0, w1, want_val, want_jac, want_hess, val, jac, hess):
-    """Sum w_i log|z - s_i| and its derivatives over the sites, for every point.
-
-    One loop over points, and inside it a branch-free loop over sites per
-    requested quantity, which LLVM vectorises (the log is `fast_log` for
-    that reason).  With F(z) = sum_i w_i log(z - s_i): value = Re F,
-    gradient = (Re F', -Im F') with F' = sum w_i / (z - s_i), and
-    phi_xx = -phi_yy = Re F'', phi_xy = -Im F'' with F'' = -sum w_i / (z - s_i)^2.
-    """
-    K = px.shape[0]
-    m = sx.shape[0]
-    for k in range(K):
-        x = px[k]
-        y = py[k]
-        if want_val and want_jac:
-            v0 = 0.0
-            v1 = 0.0
-            a00 = 0.0
-            a01 = 0.0
-            a10 = 0.0
-            a11 = 0.0
-            for i in range(m):
-                dx = x - sx[i]
-                dy = y - sy[i]
-                r2 = dx * dx + dy * dy
-                lg = fast_log(r2)
-                inv = 1.0 / r2
-                gx = dx * inv
-                gy = dy * inv
-                v0 += w0[i] * lg
-                v1 += w1[i] * lg
-                a00 += w0[i] * gx
-                a01 += w0[i] * gy
-                a10 += w1[i] * gx
-                a11 += w1[i] * gy
-            val[k, 0] = 0.5 * v0
-            val[k, 1] = 0.5 * v1
-            jac[k, 0, 0] = a00
-            jac[k, 0, 1] = a01
-            jac[k, 1, 0] = a10
-            jac[k, 1, 1] = a11
-        elif want_val:
-            v0 = 0.0
-            v1 = 0.0
-            for i in range(m):
-                dx = x - sx[i]
-                dy = y - sy[i]
-                lg = fast_log(dx * dx + dy * dy)
-                v0 += w0[i] * lg
-                v1 += w1[i] * lg
-            val[k, 0] = 0.5 * v0
-            val[k, 1] = 0.5 * v1
-        elif want_jac:
-            a00 = 0.0
-            a01 = 0.0
-            a10 = 0.0
-            a11 = 0.0
-            for i in range(m):
-                dx = x - sx[i]
-                dy = y - sy[i]
-                inv = 1.0 / (dx * dx + dy * dy)
-                gx = dx * inv
-                gy = dy * inv
-                a00 += w0[i] * gx
-                a01 += w0[i] * gy
-                a10 += w1[i] * gx
-                a11 += w1[i] * gy
-            jac[k, 0, 0] = a00
-            jac[k, 0, 1] = a01
-            jac[k, 1, 0] = a10
-            jac[k, 1, 1] = a11
-        if want_hess:
-            h0r = 0.0
-            h0i = 0.0
-            h1r = 0.0
-            h1i = 0.0
-            for i in range(m):
-                dx = x - sx[i]
-                dy = y - sy[i]
-                inv = 1.0 / (dx * dx + dy * dy)
-                ur = dx * inv  # u = 1/(z - s)
-                ui = -dy * inv
-                u2r = ur * ur - ui * ui
-                u2i = 2.0 * ur * ui
-                h0r -= w0[i] * u2r
-                h0i -= w0[i] * u2i
-                h1r -= w1[i] * u2r
-                h1i -= w1[i] * u2i
-            hess[k, 0, 0, 0] = h0r
-            hess[k, 0, 0, 1] = -h0i
-            hess[k, 0, 1, 0] = -h0i
-            hess[k, 0, 1, 1] = -h0r
-            hess[k, 1, 0, 0] = h1r
-            hess[k, 1, 0, 1] = -h1i
-            hess[k, 1, 1, 0] = -h1i
-            hess[k, 1, 1, 1] = -h1r
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,7 +124,7 @@ class MFSSolution(ClosedForm):
         jac = np.zeros((K if want_jac else 0, 2, 2))
         hess = np.zeros((K if want_hess else 0, 2, 2, 2))
         if K:
-            _evaluate(
+            _compiled.mfs_evaluate(
                 np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]),
                 np.ascontiguousarray(self.sites[:, 0]), np.ascontiguousarray(self.sites[:, 1]),
                 np.ascontiguousarray(self.weights[:, 0]), np.ascontiguousarray(self.weights[:, 1]),
@@ -236,6 +135,68 @@ class MFSSolution(ClosedForm):
         if want_jac:
             jac += self.affine[1:].T
         return val, jac, hess
+
+
+    def invert_newton(
+        self,
+        targets_xy: NDArray[np.float64],
+        guess: NDArray[np.float64],
+        polygon: NDArray[np.float64],
+        thresh: float,
+        noise: float,
+        *,
+        max_iter: int = 20,
+        jacobian: bool = False,
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64] | None]:
+        """`warpcli.maps.newton.invert` of this map, compiled: the same damped iteration per point.
+
+        One compiled loop per point (`warpcli.maps._smooth_kernels.mfs_invert`)
+        instead of numpy passes over the points still iterating: an MFS point
+        costs a few sums over the sites, and the passes around them (trial
+        points in or out of the polygon, bookkeeping) cost as much.
+
+        Parameters
+        ----------
+        targets_xy, guess : (K, 2) ndarray of float
+            Points to invert (caller's coordinates of the image) and starts.
+        polygon : (n, 2) ndarray of float
+            The domain (caller's coordinates): starts outside fail, trial
+            points outside get their step halved.
+        thresh, noise : float
+            Absolute residuals (`warpcli.maps.newton.thresholds`).
+        max_iter : int
+        jacobian : bool
+            Also return phi's Jacobian at converged points (NaN elsewhere).
+
+        Returns
+        -------
+        points : (K, 2) ndarray of float
+        converged : (K,) ndarray of bool
+        jacobians : (K, 2, 2) ndarray of float or None
+        """
+        from .newton import ARMIJO, MAX_HALVINGS
+
+        q = np.ascontiguousarray(targets_xy, dtype=np.float64)
+        g = np.ascontiguousarray(guess, dtype=np.float64)
+        K = len(q)
+        out = np.empty((K, 2))
+        ok = np.zeros(K, dtype=np.uint8)
+        jac = np.empty((K if jacobian else 0, 2, 2))
+        f = self.frame
+        frame = np.array([f.centre[0], f.centre[1], f.scale, f.tcentre[0], f.tcentre[1], f.tscale], dtype=np.float64)
+        v = np.asarray(polygon, dtype=np.float64)
+        if K:
+            _compiled.mfs_invert(
+                np.ascontiguousarray(q[:, 0]), np.ascontiguousarray(q[:, 1]),
+                np.ascontiguousarray(g[:, 0]), np.ascontiguousarray(g[:, 1]),
+                np.ascontiguousarray(self.sites[:, 0]), np.ascontiguousarray(self.sites[:, 1]),
+                np.ascontiguousarray(self.weights[:, 0]), np.ascontiguousarray(self.weights[:, 1]),
+                np.ascontiguousarray(self.affine, dtype=np.float64), frame,
+                np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]),
+                float(thresh), float(noise), int(max_iter), int(MAX_HALVINGS), float(ARMIJO),
+                bool(jacobian), out, ok, jac,
+            )  # fmt: skip
+        return out, ok.astype(bool), (jac if jacobian else None)
 
 
 def default_mfs_sites(n_vertices: int) -> int:

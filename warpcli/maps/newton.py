@@ -16,12 +16,32 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["invert"]
+__all__ = ["ARMIJO", "MAX_HALVINGS", "invert", "thresholds"]
 
 #: Armijo constant of the sufficient-decrease test on d(y) = ||x - fun(y)||^2.
-_ARMIJO = 1e-4
+ARMIJO = 1e-4
 #: Largest number of step halvings in one line search.
-_MAX_HALVINGS = 40
+MAX_HALVINGS = 40
+
+
+def thresholds(targets_xy: NDArray[np.float64], tol: float, floor: float | None) -> tuple[float, float]:
+    """The absolute residuals of `invert`'s tests: convergence, and the noise floor.
+
+    Parameters
+    ----------
+    targets_xy : (K, 2) ndarray of float
+        The points to invert (K >= 1).
+    tol, floor : float
+        `invert`'s ``tol`` and ``floor`` (relative).
+
+    Returns
+    -------
+    thresh, noise : float
+        ``tol * s`` and ``max(thresh, floor * s)`` with ``s = max(1, max |targets_xy|)``.
+    """
+    s = max(1.0, float(np.max(np.abs(targets_xy))))
+    thresh = tol * s
+    return thresh, max(thresh, (floor or 0.0) * s)
 
 
 def invert(
@@ -34,7 +54,9 @@ def invert(
     max_iter: int = 20,
     inside: Callable[[NDArray[np.float64]], NDArray[np.bool_]] | None = None,
     floor: float | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    fun_jac: Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None,
+    jacobian: bool = False,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
     """Solve fun(y) = x for y, for every row x of ``targets_xy``, by damped Newton.
 
     Parameters
@@ -62,6 +84,17 @@ def invert(
         line search can make no more progress (or that runs out of
         iterations) has converged if its residual is within it. A map summed
         from large terms (MFS with many sites) cannot get below ``tol``.
+    fun_jac : callable, optional
+        ``fun_jac(points)`` returns ``(fun(points), jac(points))`` in one
+        pass. Given, every trial point is evaluated with it and a Newton
+        step reuses the Jacobian of the iterate's own evaluation, instead of
+        a separate ``jac`` pass per iteration: for maps whose Jacobian costs
+        little more than their value once evaluated together (BEM's
+        treecode: one traversal for both). ``jac`` is then not called.
+    jacobian : bool, optional
+        Also return ``jac`` at the last iterate of every converged point
+        (NaN elsewhere): from the last evaluation with ``fun_jac``, else
+        from one pass of ``jac`` over the converged points.
 
     Returns
     -------
@@ -69,6 +102,8 @@ def invert(
         The last iterate for each point.
     converged : (K,) ndarray of bool
         Whether the residual test was met.
+    jacobians : (K, 2, 2) ndarray of float
+        With ``jacobian`` only: ``jac(points)`` where converged, NaN elsewhere.
     """
     x = np.array(targets_xy, dtype=np.float64, ndmin=2)
     y = np.array(guess, dtype=np.float64, ndmin=2)
@@ -77,15 +112,21 @@ def invert(
     K = len(x)
     converged = np.zeros(K, dtype=bool)
     if K == 0:
-        return y, converged
-    thresh = tol * max(1.0, float(np.max(np.abs(x))))
-    noise = max(thresh, (floor or 0.0) * max(1.0, float(np.max(np.abs(x)))))
+        return (y, converged, np.zeros((0, 2, 2))) if jacobian else (y, converged)
+    thresh, noise = thresholds(x, tol, floor)
 
     active = np.arange(K)
     if inside is not None:
         active = active[np.asarray(inside(y), dtype=bool)]
     r = np.zeros_like(x)
-    r[active] = x[active] - fun(y[active])
+    # with fun_jac: the Jacobian at each point's current iterate
+    J_at = np.full((K, 2, 2), np.nan) if fun_jac is not None else None
+    if J_at is not None:
+        v0, j0 = fun_jac(y[active])
+        r[active] = x[active] - v0
+        J_at[active] = j0
+    else:
+        r[active] = x[active] - fun(y[active])
     f = np.einsum("ij,ij->i", r, r)
     ok = np.sqrt(f[active]) <= thresh
     converged[active[ok]] = True
@@ -94,7 +135,7 @@ def invert(
     for _ in range(max_iter):
         if len(active) == 0:
             break
-        J = jac(y[active])
+        J = J_at[active] if J_at is not None else jac(y[active])
         ra = r[active]
         # Newton step J d = r, closed form per point
         det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
@@ -114,7 +155,7 @@ def invert(
         step = np.ones(len(active))
         pending = np.arange(len(active))
         accepted = np.zeros(len(active), dtype=bool)
-        for _ in range(_MAX_HALVINGS):
+        for _ in range(MAX_HALVINGS):
             if len(pending) == 0:
                 break
             idx = active[pending]
@@ -123,15 +164,24 @@ def invert(
             if inside is not None:
                 good &= np.asarray(inside(trial), dtype=bool)
             rt = np.full_like(trial, np.inf)
+            jt = None
             if good.any():
-                rt[good] = x[idx[good]] - fun(trial[good])
+                if J_at is not None:
+                    vt, jt = fun_jac(trial[good])
+                    rt[good] = x[idx[good]] - vt
+                    jt_full = np.empty((len(pending), 2, 2))
+                    jt_full[good] = jt
+                else:
+                    rt[good] = x[idx[good]] - fun(trial[good])
             ft = np.einsum("ij,ij->i", rt, rt)
-            good &= ft <= (1.0 - 2.0 * _ARMIJO * step[pending]) * f[idx]
+            good &= ft <= (1.0 - 2.0 * ARMIJO * step[pending]) * f[idx]
             # a step that already meets the tolerance is always welcome
             good |= np.isfinite(ft) & (np.sqrt(ft) <= thresh)
             y[idx[good]] = trial[good]
             r[idx[good]] = rt[good]
             f[idx[good]] = ft[good]
+            if jt is not None:
+                J_at[idx[good]] = jt_full[good]
             accepted[pending[good]] = True
             pending = pending[~good]
             step[pending] *= 0.5
@@ -144,4 +194,12 @@ def invert(
         converged[active[ok]] = True
         active = active[~ok]
     converged[active[np.sqrt(f[active]) <= noise]] = True
-    return y, converged
+    if not jacobian:
+        return y, converged
+    J_out = np.full((K, 2, 2), np.nan)
+    done = np.flatnonzero(converged)
+    if J_at is not None:
+        J_out[done] = J_at[done]
+    elif done.size:
+        J_out[done] = jac(y[done])
+    return y, converged, J_out
