@@ -237,6 +237,29 @@ def test_batches_and_keyframed_sequences_within(eyes):
     assert not np.array_equal(read_pixels(seq / "o.0002.png"), read_pixels(image))
 
 
+@pytest.mark.parametrize("sequence", [False, True])
+def test_a_within_run_of_images_of_several_sizes_is_refused_before_any_work(eyes, sequence):
+    # The outline (the image, a margin clipped to it) is made once, at the first image's size:
+    # an image of another size would get another image's outline.
+    tmp, image, _, _ = eyes
+    other = tmp / "runs"
+    other.mkdir()
+    write_png(other / "f.0001.png", read_pixels(image))
+    write_png(other / "f.0002.png", read_pixels(image)[:40, :50])
+    if sequence:
+        args = [other / "f.#.png", tmp / "o.#.png", "--frames", "1-2"]
+    else:
+        (tmp / "od2").mkdir()
+        args = [other / "f.0001.png", other / "f.0002.png", "--out-dir", tmp / "od2"]
+    cage = write_polygon(tmp / "cage.json", [[16, 16], [36, 16], [36, 36], [16, 36]])
+    moved = write_polygon(tmp / "moved.json", [[16, 16], [40, 12], [36, 36], [16, 36]])
+    code, err = run_cli([*args, "--src", cage, "--dst", moved, "--within", "image", "--max-area", "24"])
+    assert code == 2 and err.count("\n") == 1, err
+    assert "f.0002.png: 50x40" in err and "56x56" in err, err
+    assert not list(tmp.glob("o.*.png"))
+    assert sequence or not list((tmp / "od2").iterdir())
+
+
 def test_what_within_cannot_take_is_refused_in_one_line(eyes):
     tmp, image, src, dst = eyes
     far = write_polygon(tmp / "far.json", [[10, 14], [22, 14], [22, 26], [10, 70]])

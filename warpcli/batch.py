@@ -190,6 +190,7 @@ def prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, 
         from .within import read_cages, within_pair
 
         size = read_header(input_paths[0]).displayed_size
+        check_same_size(input_paths, size)
         pair = within_pair(read_cages(src_path, src_label), read_cages(dst_path, dst_label), within, size)
         src, dst = pair.src, pair.dst
     else:
@@ -658,6 +659,7 @@ def _within_pairs(pairs: dict, ins: list[tuple[int, str]], missing: dict, within
     if first is None:
         return pairs
     size = read_header(first).displayed_size
+    check_same_size([inp for f, inp in ins if f not in missing], size)
     made: dict[tuple[bytes, bytes], tuple] = {}
     out = {}
     for f, (src, dst) in pairs.items():
@@ -667,6 +669,27 @@ def _within_pairs(pairs: dict, ins: list[tuple[int, str]], missing: dict, within
             made[key] = (pair.src, pair.dst)
         out[f] = made[key]
     return out
+
+
+def check_same_size(paths: Sequence[str], size: tuple[int, int]) -> None:
+    """Refuse a ``--within`` run whose images differ in size from the first: its outline
+    (``image``, a margin clipped to the image) is made once, at the first image's size.
+
+    Images whose header cannot be read are left to fail in their own item.
+
+    Raises
+    ------
+    InputError
+        One line naming the first image of another size, both sizes.
+    """
+    for path in paths[1:]:
+        header = read_header_or_none(path)
+        if header is not None and tuple(header.displayed_size) != tuple(size):
+            w, h = header.displayed_size
+            raise InputError(
+                f"{os.fspath(path)}: {w}x{h}, but --within's outline is made once, at the first image's size "
+                f"{size[0]}x{size[1]} ({os.fspath(paths[0])}): warp images of each size in a run of their own"
+            )
 
 
 def _warn_about_outputs(patterns, frames) -> None:
