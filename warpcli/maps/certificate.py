@@ -21,7 +21,10 @@ s (reach r = s sqrt 2):
   order det J stays positive over the whole cell (the factor covers the
   change of the gradient across it). A cell that is not proved is split in
   four, down to cells of half-side `band_floor`; the samples of those are
-  counted as they are.
+  counted as they are (`CellCertificate.unproved`). With ``rigorous=True``
+  the cell is proved instead by `lower_bound`, a lower bound of det J
+  over the whole cell from the closed form's structure (opt-in: 1.5-5x
+  the first-order test's time on the bench pairs, docs/proving.md).
 
 Around a vertex where the boundary data themselves make the exact map's
 det J tend to 0 (`degenerate_vertices`: a boundary behaviour with no slope
@@ -59,7 +62,7 @@ from ..grid import inside_polygon
 
 __all__ = [
     "BAND", "BAND_RELATIVE", "GRID_CELLS", "MARGIN", "OUTSIDE", "CellCertificate", "Cover", "band_floor", "certify_cells",
-    "cover", "degenerate_vertices", "vertex_ball",
+    "cover", "degenerate_vertices", "lower_bound", "vertex_ball",
 ]  # fmt: skip
 
 #: Cells of the uniform grid over the polygon's interior (its step: sqrt(area / GRID_CELLS)).
