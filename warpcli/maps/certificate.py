@@ -22,9 +22,10 @@ s (reach r = s sqrt 2):
   change of the gradient across it). A cell that is not proved is split in
   four, down to cells of half-side `band_floor`; the samples of those are
   counted as they are (`CellCertificate.unproved`). With ``rigorous=True``
-  the cell is proved instead by `lower_bound`, a lower bound of det J
-  over the whole cell from the closed form's structure (opt-in: 1.5-5x
-  the first-order test's time on the bench pairs, docs/proving.md).
+  (MFS maps' default) the cell is proved instead by `lower_bound`, a
+  lower bound of det J over the whole cell from the closed form's
+  structure (BEM: 1.5-5x the first-order test's time on the bench pairs,
+  so opt-in; docs/proving.md).
 
 Around a vertex where the boundary data themselves make the exact map's
 det J tend to 0 (`degenerate_vertices`: a boundary behaviour with no slope
