@@ -161,6 +161,153 @@ def _assemble(cx, cy, inc_e, inc_t, ax, ay, bx, by, gt, gw):
 
 
 # --------------------------------------------------------------------------
+# Bounds of the derivatives over discs (the certificate's)
+# --------------------------------------------------------------------------
+
+#: The representation formula is evaluated with closed forms, Gauss rules and a treecode whose errors
+#: are ~1e-14 of the terms' sizes (`warpcli.maps.bem_eval`); the certificate's slack is this times their sum.
+_EVAL_ERROR = 1e-13
+
+
+def _node_poles(nodes, flux, data):
+    """A'' and B'' of the representation formula as rational functions with poles at the nodes.
+
+    With A = (U_0' + i U_1') / 2 (phi_a = Re U_a), element e from a to b (unit
+    tangent tau) contributes -1/(2 pi tau) I1[q] - i/(2 pi) I2[c] to A, where
+    I1[q] = int_a^b q(y) / (z - y) dy and I2[c] = int_a^b c(y) / (y - z)^2 dy
+    with the complex densities q = (q_0 + i q_1) / 2, c = (c_0 + i c_1) / 2
+    (B: -i), linear along the element (slopes q', c' per unit of y). In
+    closed form (integrating the linear densities):
+
+        I1'' = q' (1/(z-a) - 1/(z-b)) - q_a/(z-a)^2 + q_b/(z-b)^2,
+        I2'' = c' (1/(z-a)^2 - 1/(z-b)^2) - 2 c_a/(z-a)^3 + 2 c_b/(z-b)^3,
+
+    rational with poles at the element's ends only: A'' and B'' inside the
+    polygon are sums over the nodes of gamma_k / (z - y_n)^k, k = 1, 2, 3
+    (at a node inside an edge the q and c terms of its two elements cancel;
+    the slopes' jumps remain). Returns the nodes' coefficients (m, 3)
+    complex for A and for B.
+    """
+    m = len(nodes)
+    z = nodes[:, 0] + 1j * nodes[:, 1]
+    nxt = (np.arange(m) + 1) % m
+    delta = z[nxt] - z
+    tau = delta / np.abs(delta)
+    out = []
+    for s in (1.0, -1.0):  # A, then B
+        q = 0.5 * (flux[:, :, 0] + s * 1j * flux[:, :, 1])  # (m, 2 ends)
+        c = 0.5 * (data[:, :, 0] + s * 1j * data[:, :, 1])
+        dq = (q[:, 1] - q[:, 0]) / delta
+        dc = (c[:, 1] - c[:, 0]) / delta
+        ks = -1.0 / (TWO_PI * tau)  # the single layer's factor
+        kd = -1j / TWO_PI  # the double layer's
+        g = np.zeros((m, 3), dtype=np.complex128)
+        np.add.at(g, (np.arange(m), 0), ks * dq)
+        np.add.at(g, (nxt, 0), -ks * dq)
+        np.add.at(g, (np.arange(m), 1), -ks * q[:, 0] + kd * dc)
+        np.add.at(g, (nxt, 1), ks * q[:, 1] - kd * dc)
+        np.add.at(g, (np.arange(m), 2), -2.0 * kd * c[:, 0])
+        np.add.at(g, (nxt, 2), 2.0 * kd * c[:, 1])
+        out.append(g)
+    return out[0], out[1]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "contract"})
+def _bounds(px, py, reach, yx, yy, gr, gi, w, ex, ey, il2, size, out):
+    """Per disc (centre p, radius r): the evaluation error of A and B at p and bounds of their Taylor remainders.
+
+    A'' = sum_n sum_k gamma_nk / (z - y_n)^k (`_node_poles`; ``gr``, ``gi``
+    (6, m): real and imaginary parts, rows k = 1, 2, 3 of A then of B), so
+    A''(p) and A^(3)(p) are summed exactly, and over the disc
+
+        |A^(4)| = |sum_n sum_k k (k+1) gamma_nk / (z - y_n)^(k+2)| <= sum_n sum_k w_nk / (d_n - r)^(k+2)
+
+    (d_n = |p - y_n|; ``w`` (3, m): k (k+1) max(|gamma_nk| of A, of B)), whence
+
+        |A(p + h) - A(p) - A'(p) h| <= |A''(p)| r^2 / 2 + |A^(3)(p)| r^3 / 6 + sup|A^(4)| r^4 / 24
+
+    wherever the segment from p to p + h lies in the polygon (the caller
+    checks that). Element n runs from node n along (``ex``, ``ey``)
+    (``il2``: 1 / its squared length); ``size`` holds per element L (|q_0|
+    + |q_1| + |c_0| + |c_1|) / (2 pi): the evaluation error at p is
+    `_EVAL_ERROR` times its sum over elements weighted by 1/d + 1/d^2 (d:
+    p's distance to the element).
+    """
+    K = px.shape[0]
+    m = yx.shape[0]
+    for k in range(K):
+        x = px[k]
+        y = py[k]
+        r = reach[k]
+        a2r = 0.0
+        a2i = 0.0
+        a3r = 0.0
+        a3i = 0.0
+        b2r = 0.0
+        b2i = 0.0
+        b3r = 0.0
+        b3i = 0.0
+        sup = 0.0
+        t0 = 0.0
+        for n in range(m):
+            dx = x - yx[n]
+            dy = y - yy[n]
+            d2 = dx * dx + dy * dy
+            inv = 1.0 / d2
+            ur = dx * inv  # u = 1 / (z - y_n)
+            ui = -dy * inv
+            u2r = ur * ur - ui * ui
+            u2i = 2.0 * ur * ui
+            u3r = u2r * ur - u2i * ui
+            u3i = u2r * ui + u2i * ur
+            u4r = u3r * ur - u3i * ui
+            u4i = u3r * ui + u3i * ur
+            # A'' = sum g_k u^k, A^(3) = -sum k g_k u^(k+1) (moduli below)
+            a2r += gr[0, n] * ur - gi[0, n] * ui + gr[1, n] * u2r - gi[1, n] * u2i + gr[2, n] * u3r - gi[2, n] * u3i
+            a2i += gr[0, n] * ui + gi[0, n] * ur + gr[1, n] * u2i + gi[1, n] * u2r + gr[2, n] * u3i + gi[2, n] * u3r
+            a3r += gr[0, n] * u2r - gi[0, n] * u2i + 2.0 * (gr[1, n] * u3r - gi[1, n] * u3i) + 3.0 * (gr[2, n] * u4r - gi[2, n] * u4i)
+            a3i += gr[0, n] * u2i + gi[0, n] * u2r + 2.0 * (gr[1, n] * u3i + gi[1, n] * u3r) + 3.0 * (gr[2, n] * u4i + gi[2, n] * u4r)
+            b2r += gr[3, n] * ur - gi[3, n] * ui + gr[4, n] * u2r - gi[4, n] * u2i + gr[5, n] * u3r - gi[5, n] * u3i
+            b2i += gr[3, n] * ui + gi[3, n] * ur + gr[4, n] * u2i + gi[4, n] * u2r + gr[5, n] * u3i + gi[5, n] * u3r
+            b3r += gr[3, n] * u2r - gi[3, n] * u2i + 2.0 * (gr[4, n] * u3r - gi[4, n] * u3i) + 3.0 * (gr[5, n] * u4r - gi[5, n] * u4i)
+            b3i += gr[3, n] * u2i + gi[3, n] * u2r + 2.0 * (gr[4, n] * u3i + gi[4, n] * u3r) + 3.0 * (gr[5, n] * u4i + gi[5, n] * u4r)
+            g = max(np.sqrt(d2) - r, 0.0)  # 0: the disc holds the node, 1/0 = inf
+            iv = 1.0 / g
+            sup += iv * iv * iv * (w[0, n] + iv * (w[1, n] + iv * w[2, n]))
+            # the terms' sizes at p, for the evaluation error
+            t = min(1.0, max(0.0, (dx * ex[n] + dy * ey[n]) * il2[n]))
+            fx = dx - t * ex[n]
+            fy = dy - t * ey[n]
+            de = 1.0 / np.sqrt(fx * fx + fy * fy)
+            t0 += size[n] * (1.0 + de) * de
+        r2 = r * r
+        tail = sup * r2 * r2 / 24.0
+        out[k, 0] = _EVAL_ERROR * t0
+        out[k, 1] = 0.5 * np.hypot(a2r, a2i) * r2 + np.hypot(a3r, a3i) * r2 * r / 6.0 + tail
+        out[k, 2] = 0.5 * np.hypot(b2r, b2i) * r2 + np.hypot(b3r, b3i) * r2 * r / 6.0 + tail
+
+
+def _star_shaped(p, r, V):
+    """Whether the disc B(p, r) meets the polygon V in a set star-shaped from p.
+
+    Sufficient conditions: the disc lies inside (farther than r from every
+    edge), or it meets exactly one edge and holds no vertex (the disc cut
+    by one edge's line: convex).
+    """
+    n = len(V)
+    meets = np.zeros(len(p), dtype=np.int64)
+    vertex = np.zeros(len(p), dtype=bool)
+    for i in range(n):  # loop over the polygon's edges, vectorised over discs
+        a = V[i]
+        e = V[(i + 1) % n] - a
+        t = np.clip(((p - a) @ e) / (e @ e), 0.0, 1.0)
+        q = p - (a + t[:, None] * e)
+        meets += np.hypot(q[:, 0], q[:, 1]) <= r
+        vertex |= np.hypot(p[:, 0] - a[0], p[:, 1] - a[1]) <= r
+    return (meets == 0) | ((meets == 1) & ~vertex)
+
+
+# --------------------------------------------------------------------------
 # The method
 # --------------------------------------------------------------------------
 
@@ -198,11 +345,38 @@ class BEMSolution(ClosedForm):
     data: NDArray[np.float64]
     _sources: ElementSources | tuple = ()
     trace: tuple | None = None
+    #: The polygon's local vertices and `_node_poles` (the certificate's bounds).
+    _polygon: NDArray[np.float64] | tuple = ()
+    _poles: tuple = ()
 
     # -- evaluation ---------------------------------------------------------
 
     def _local(self, p: NDArray[np.float64], want_val: bool, want_jac: bool, want_hess: bool):
         return evaluate(p, self._sources, self.flux, self.data, want_val, want_jac, want_hess)
+
+    def _local_bounds(self, p: NDArray[np.float64], reach: NDArray[np.float64]) -> NDArray[np.float64]:
+        out = np.zeros((len(p), 3))
+        if len(p):
+            ga, gb = self._poles
+            g = np.concatenate([ga.T, gb.T])  # (6, m)
+            w = np.array([[2.0], [6.0], [12.0]]) * np.maximum(np.abs(ga), np.abs(gb)).T
+            a = self.nodes
+            b = np.roll(a, -1, axis=0)
+            size = np.hypot(*(b - a).T) * (
+                np.hypot(self.flux[:, 0, 0], self.flux[:, 0, 1]) + np.hypot(self.flux[:, 1, 0], self.flux[:, 1, 1])
+                + np.hypot(self.data[:, 0, 0], self.data[:, 0, 1]) + np.hypot(self.data[:, 1, 0], self.data[:, 1, 1])
+            ) / TWO_PI  # fmt: skip
+            _bounds(
+                np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), reach,
+                np.ascontiguousarray(a[:, 0]), np.ascontiguousarray(a[:, 1]),
+                np.ascontiguousarray(g.real), np.ascontiguousarray(g.imag), np.ascontiguousarray(w),
+                np.ascontiguousarray(b[:, 0] - a[:, 0]), np.ascontiguousarray(b[:, 1] - a[:, 1]),
+                1.0 / ((b - a) ** 2).sum(axis=1), size, out,
+            )  # fmt: skip
+            # the remainder holds along segments inside the polygon: where the
+            # disc meets it in a set not star-shaped from p, nothing is proved
+            out[~_star_shaped(p, reach, self._polygon), 1:] = np.inf
+        return out
 
 
 def default_bem_nodes(n_vertices: int) -> int:
@@ -388,7 +562,7 @@ def fit_bem(
     sources = gauss_sources(a, a[nxt], qflux, cdata)
     return BEMSolution(
         m=m, frame=frame, nodes=nodes, flux=qflux, data=np.ascontiguousarray(cdata), _sources=sources,
-        trace=trace,
+        trace=trace, _polygon=V, _poles=_node_poles(nodes, qflux, cdata),
     )  # fmt: skip
 
 

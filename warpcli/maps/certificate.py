@@ -21,7 +21,11 @@ s (reach r = s sqrt 2):
   order det J stays positive over the whole cell (the factor covers the
   change of the gradient across it). A cell that is not proved is split in
   four, down to cells of half-side `band_floor`; the samples of those are
-  counted as they are.
+  counted as they are (`CellCertificate.unproved`). With ``rigorous=True``
+  (MFS maps' default) the cell is proved instead by `lower_bound`, a
+  lower bound of det J over the whole cell from the closed form's
+  structure (BEM: 1.5-5x the first-order test's time on the bench pairs,
+  so opt-in; docs/proving.md).
 
 Around a vertex where the boundary data themselves make the exact map's
 det J tend to 0 (`degenerate_vertices`: a boundary behaviour with no slope
@@ -59,7 +63,7 @@ from ..grid import inside_polygon
 
 __all__ = [
     "BAND", "BAND_RELATIVE", "GRID_CELLS", "MARGIN", "OUTSIDE", "CellCertificate", "Cover", "band_floor", "certify_cells",
-    "cover", "degenerate_vertices", "vertex_ball",
+    "cover", "degenerate_vertices", "lower_bound", "vertex_ball",
 ]  # fmt: skip
 
 #: Cells of the uniform grid over the polygon's interior (its step: sqrt(area / GRID_CELLS)).
@@ -213,14 +217,21 @@ class CellCertificate:
         ``(vertex, radius)`` of each ball left out around a vertex whose
         boundary data force det J to 0 (see `certify_cells`'s ``balls``):
         the smallest radius outside which every cell was proved.
+    unproved : int
+        Cells whose sample passed but that were not proved at the smallest
+        size (or when `MAX_SAMPLES` stopped the splitting): the first-order
+        test and `lower_bound` leave these to their samples.
     """
 
     failed: int
     checked: int
     excluded: tuple[tuple[int, float], ...] = ()
+    unproved: int = 0
 
 
-def certify_cells(solution, vertices, theta, sign: float, near: float, balls=None) -> CellCertificate:
+def certify_cells(
+    solution, vertices, theta, sign: float, near: float, balls=None, rigorous: bool = False
+) -> CellCertificate:
     """Check a smooth map cell by cell (see the module's docstring).
 
     Parameters
@@ -246,6 +257,11 @@ def certify_cells(solution, vertices, theta, sign: float, near: float, balls=Non
         smallest around the vertex containing all such cells, reported in
         `CellCertificate.excluded`. Every cell reaching beyond the cap is
         certified as everywhere else.
+    rigorous : bool
+        Prove each cell with `lower_bound` (a bound of det J over the whole
+        cell from the closed form's structure) instead of the first-order
+        test; cells still unproved at the smallest size are counted in
+        `CellCertificate.unproved`.
 
     Returns
     -------
@@ -265,7 +281,7 @@ def certify_cells(solution, vertices, theta, sign: float, near: float, balls=Non
     d = np.roll(w, -1, axis=0) - w
     nd = d / np.hypot(d[:, 0], d[:, 1])[:, None]
     slack = OUTSIDE * float(np.ptp(w, axis=0).max())
-    failed = checked = 0
+    failed = checked = left = 0
     for _ in range(MAX_ROUNDS):  # each round splits the cells it could not prove
         if not len(centres):
             break
@@ -307,7 +323,11 @@ def certify_cells(solution, vertices, theta, sign: float, near: float, balls=Non
             out[k] = ~(delta + shift <= band)
         bad = ~(det > 0) | out
         reach = half * math.sqrt(2.0)
-        unproved = bad | ~(det > MARGIN * np.hypot(grad[:, 0], grad[:, 1]) * reach)
+        if rigorous:
+            proved = lower_bound(solution, centres, reach, j, h, sign) > 0
+        else:
+            proved = det > MARGIN * np.hypot(grad[:, 0], grad[:, 1]) * reach
+        unproved = bad | ~proved
         if ball_at.size:
             # A cell wholly inside a vertex's ball whose sample fails is left
             # out with the ball (its radius grows to cover the cell); cells
@@ -325,8 +345,11 @@ def certify_cells(solution, vertices, theta, sign: float, near: float, balls=Non
                     unproved &= ~mine
         failed += int(bad.sum())
         split = np.flatnonzero(unproved & ~bad & (half > floor))
+        left += int((unproved & ~bad & ~(half > floor)).sum())
         # a failure decides the verdict: splitting further would only count more
         if failed or not split.size or checked + 4 * split.size > MAX_SAMPLES:
+            if not failed and checked + 4 * split.size > MAX_SAMPLES:
+                left += split.size
             break
         q = half[split] / 2
         corners = np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]])
@@ -341,7 +364,57 @@ def certify_cells(solution, vertices, theta, sign: float, near: float, balls=Non
             excluded.append((int(i), float(radius[i])))
         else:  # too large to leave out: what it holds fails
             failed += int(held[i])
-    return CellCertificate(failed, checked, tuple(excluded))
+    return CellCertificate(failed, checked, tuple(excluded), left)
+
+
+def lower_bound(solution, centres, reach, j, h, sign: float) -> NDArray[np.float64]:
+    """A lower bound of sign * det J over each disc (centre x0, radius r): positive proves the sign there.
+
+    With f = u + i v, A = f_z and B = conj(f_zbar) analytic, det J = |A|^2 -
+    |B|^2. Write A(x0 + h) = A0 + A1 h + R_A (A1 = A'(x0)) with |R_A| <=
+    rho_A over the disc (`ClosedForm.derivative_bounds`), and the same for
+    B. Then
+
+        |A|^2 - |A0|^2 - 2 Re(A1 h conj(A0)) = |A1 h + R_A|^2 + 2 Re(R_A conj(A0)) >= -2 rho_A |A0|,
+        |B|^2 - |B0|^2 - 2 Re(B1 h conj(B0)) <= (|B1| r + rho_B)^2 + 2 rho_B |B0|,
+
+    and the first-order terms sum to grad det J(x0) . h, so over the disc
+
+        det J >= det J(x0) - |grad det J(x0)| r - 2 rho_A |A0| - 2 rho_B |B0| - (|B1| r + rho_B)^2,
+
+    less the effect of the evaluation error eta of A0 and B0 on det J(x0)
+    (2 eta (|A0| + |B0| + eta)). For ``sign`` -1 (a map that should
+    reverse orientation) the bound is that of -det J = |B|^2 - |A|^2: A
+    and B swap roles. j and h are the Jacobian and Hessian at the centres
+    (the caller's coordinates).
+
+    Returns
+    -------
+    (K,) ndarray of float
+    """
+    bound = solution.derivative_bounds(centres, reach)
+    eta, rho_a, rho_b = bound[:, 0], bound[:, 1], bound[:, 2]
+    ux, uy, vx, vy = j[:, 0, 0], j[:, 0, 1], j[:, 1, 0], j[:, 1, 1]
+    a0 = 0.5 * np.hypot(ux + vy, vx - uy)
+    b0 = 0.5 * np.hypot(ux - vy, vx + uy)
+    uxx, uxy, vxx, vxy = h[:, 0, 0, 0], h[:, 0, 0, 1], h[:, 1, 0, 0], h[:, 1, 0, 1]
+    a1 = 0.5 * np.hypot(uxx + vxy, vxx - uxy)
+    b1 = 0.5 * np.hypot(uxx - vxy, vxx + uxy)
+    # sign * det J and its gradient at the centres
+    det = sign * (ux * vy - uy * vx)
+    grad = sign * (
+        h[:, 0, 0, :] * vy[:, None] + ux[:, None] * h[:, 1, 1, :] - h[:, 0, 1, :] * vx[:, None] - uy[:, None] * h[:, 1, 0, :]
+    )  # fmt: skip
+    if sign < 0:  # -det J = |B|^2 - |A|^2
+        a0, b0, a1, b1, rho_a, rho_b = b0, a0, b1, a1, rho_b, rho_a
+    p0, prho, q0, q1, qrho = a0, rho_a, b0, b1, rho_b
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = (
+            det - np.hypot(grad[:, 0], grad[:, 1]) * reach
+            - 2.0 * prho * p0 - 2.0 * qrho * q0 - (q1 * reach + qrho) ** 2
+            - 2.0 * eta * (a0 + b0 + eta)
+        )  # fmt: skip
+    return np.where(np.isfinite(out), out, -np.inf)
 
 
 def _ball_image(solution, v: NDArray[np.float64], i: int, r: float, floor: float, near: float) -> float:

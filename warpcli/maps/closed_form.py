@@ -527,6 +527,42 @@ class ClosedForm:
         """
         return self._eval(points, True, True, True)
 
+    def _local_bounds(self, p: NDArray[np.float64], reach: NDArray[np.float64]) -> NDArray[np.float64]:
+        raise NotImplementedError
+
+    def derivative_bounds(self, points: ArrayLike, reach: ArrayLike) -> NDArray[np.float64]:
+        """Bounds over discs of how far the map's complex derivatives stray from their first-order Taylor polynomials.
+
+        Write the map as f = u + i v with u = Re U, v = Re V (U, V analytic
+        in the polygon) and let A = (U' + i V') / 2, B = (U' - i V') / 2, so
+        that f_z = A, conj(f_zbar) = B and det J = |A|^2 - |B|^2. Each
+        closed form is a sum of terms (MFS: sites; BEM: single- and
+        double-layer integrals over straight elements) whose k-th
+        derivatives are bounded by the term's weight over a power of its
+        distance from the disc; summed, they bound the Taylor remainders of
+        A and B over the whole disc (see `warpcli.maps.certificate.lower_bound`).
+
+        Parameters
+        ----------
+        points : (K, 2) array_like of float
+            Centres p of the discs (the caller's coordinates).
+        reach : (K,) array_like of float
+            Their radii r.
+
+        Returns
+        -------
+        (K, 3) ndarray of float
+            Column 0: a bound of the evaluation error of A(p) and B(p)
+            (rounding; BEM: its quadrature too); columns 1 and 2: upper
+            bounds of |A(p + h) - A(p) - A'(p) h| and of the same for B over
+            |h| <= r (inf where the disc reaches a site or the boundary).
+        """
+        f = self.frame
+        r = np.asarray(reach, dtype=np.float64) / f.scale
+        b = self._local_bounds(f.to_local(points), np.ascontiguousarray(r))
+        # a disc reaching a pole gives 0 * inf = nan for a zero weight: no bound there
+        return np.where(np.isnan(b), np.inf, b) * (f.tscale / f.scale)
+
     def hessian(self, points: ArrayLike) -> NDArray[np.float64]:
         """Second derivatives of the map at points inside the polygon.
 

@@ -198,6 +198,20 @@ class MFSSolution(ClosedForm):
             )  # fmt: skip
         return out, ok.astype(bool), (jac if jacobian else None)
 
+    def _local_bounds(self, p: NDArray[np.float64], reach: NDArray[np.float64]) -> NDArray[np.float64]:
+        out = np.zeros((len(p), 3))
+        if len(p):
+            w = self.weights
+            a = self.affine[1:]  # rows (x, y), columns (u, v): u_x = a[0, 0], u_y = a[1, 0], ...
+            const = 0.5 * max(np.hypot(a[0, 0] + a[1, 1], a[0, 1] - a[1, 0]), np.hypot(a[0, 0] - a[1, 1], a[0, 1] + a[1, 0]))
+            _compiled.mfs_bounds(
+                np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), reach,
+                np.ascontiguousarray(self.sites[:, 0]), np.ascontiguousarray(self.sites[:, 1]),
+                0.5 * w[:, 0], 0.5 * w[:, 1], 0.5 * w[:, 0], -0.5 * w[:, 1],
+                0.5 * np.hypot(w[:, 0], w[:, 1]), float(const), out,
+            )  # fmt: skip
+        return out
+
 
 def default_mfs_sites(n_vertices: int) -> int:
     """Default number of MFS sites for a polygon with ``n_vertices`` vertices.
