@@ -315,3 +315,41 @@ def test_every_method_within_an_outline(method):
     assert np.array_equal(result.pixels[~inside], image[~inside])
     jac = result.jacobian[inside]
     assert (jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0] > 0).all()
+
+
+def test_several_cages_keyframed_in_a_sequence_are_each_frame_s_single_warp(eyes):
+    # {"frames": {F: {"cages": [...]}}}: both eyes animated at once. Frame 1 does not move (the
+    # identity: the input's pixels); frame 3 is its keyframe's single warp; frame 2, halfway, is
+    # the single warp of the cages blended vertex by vertex.
+    tmp, image, _, _ = eyes
+    left = np.array([[10, 14], [22, 14], [22, 26], [10, 26]], dtype=float)
+    right = np.array([[32, 14], [44, 14], [44, 26], [32, 26]], dtype=float)
+    left_to = left + [[0, 0], [4, -2], [0, 0], [0, 0]]
+    right_to = right + [[0, 0], [0, 0], [2, 4], [0, 0]]
+
+    def cages(*polys):
+        return {"cages": [p.tolist() for p in polys]}
+
+    (tmp / "ks.json").write_text(json.dumps({"frames": {"1": cages(left, right), "3": cages(left, right)}}))
+    (tmp / "kd.json").write_text(json.dumps({"frames": {"1": cages(left, right), "3": cages(left_to, right_to)}}))
+    seq = tmp / "seq"
+    seq.mkdir()
+    for f in (1, 2, 3):
+        (seq / f"f.000{f}.png").write_bytes(open(image, "rb").read())  # noqa: SIM115
+    common = ["--within", "image", "--max-area", "24"]
+    code, err = run_cli([seq / "f.#.png", seq / "o.#.png", "--frames", "1-3", "--src", tmp / "ks.json", "--dst", tmp / "kd.json", *common])
+    assert code == 0, err
+    assert np.array_equal(read_pixels(seq / "o.0001.png"), read_pixels(image))
+    for f, t in ((2, 0.5), (3, 1.0)):
+        (tmp / "s.json").write_text(json.dumps(cages(left, right)))
+        (tmp / "d.json").write_text(json.dumps(cages(left + t * (left_to - left), right + t * (right_to - right))))
+        code, err = run_cli([image, "--src", tmp / "s.json", "--dst", tmp / "d.json", tmp / f"one{f}.png", *common])
+        assert code == 0, err
+        assert (tmp / f"one{f}.png").read_bytes() == (seq / f"o.000{f}.png").read_bytes()
+    # Without an outline, several cages are refused in one line; a cage turned over between keyframes too.
+    code, err = run_cli([seq / "f.#.png", seq / "n.#.png", "--frames", "1-3", "--src", tmp / "ks.json", "--dst", tmp / "kd.json"])
+    assert code == 2 and "--within" in err and err.count("\n") == 1, err
+    (tmp / "kx.json").write_text(json.dumps({"frames": {"1": cages(left, right), "3": cages(left, right[::-1] + [0, 0.5])}}))
+    code, err = run_cli([seq / "f.#.png", seq / "n.#.png", "--frames", "1-3", "--src", tmp / "ks.json", "--dst", tmp / "kx.json", *common])
+    assert code == 2 and "cage 1" in err and err.count("\n") == 1, err
+    assert not list(seq.glob("n.*"))

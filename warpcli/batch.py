@@ -613,7 +613,8 @@ def warp_sequence(
     for f, _ in ins:
         if f not in pairs and f not in missing:
             pairs[f] = (src_keys.at(f), dst_keys.at(f))
-            check_shapes(*pairs[f])
+            if opts.within is None:  # within_pair checks its cages (several at once, too)
+                check_shapes(*pairs[f])
     if opts.within is not None:
         pairs = _within_pairs(pairs, ins, missing, opts.within)
     # Runs of frames with the same pair share one map (a missing frame breaks

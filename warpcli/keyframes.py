@@ -19,7 +19,7 @@ from .errors import InputError, PolygonError
 from .files import read_small_file
 from .polygon import MAX_FILE_BYTES, Polygon, read_polygon
 from .polygon.formats import parse_int, parse_json, points_of
-from .polygon.partition import Partition, is_partition_document, partition_of
+from .polygon.partition import Cages, Partition, cages_of, is_partition_document, partition_of
 from .polygon.messages import short_value
 from .sequence import FRAME_LIMIT
 
@@ -102,9 +102,13 @@ class Keyframes:
                 raise PolygonError(f"{self.name}: keyframes must increase, but {b} follows {a}")
         first = polygons[0]
         for f, poly in zip(frames[1:], polygons[1:]):
-            # A cage mesh (`Partition`) moves its vertices; its faces stay.
-            if isinstance(poly, Partition) != isinstance(first, Partition) or (
-                isinstance(first, Partition) and poly.faces != first.faces
+            # A cage mesh (`Partition`) moves its vertices; its faces stay. Several
+            # cages (`Cages`) keep their number, vertex counts and faces.
+            if (
+                isinstance(poly, Partition) != isinstance(first, Partition)
+                or isinstance(poly, Cages) != isinstance(first, Cages)
+                or (isinstance(first, Partition) and poly.faces != first.faces)
+                or (isinstance(first, Cages) and poly.structure != first.structure)
             ):
                 raise PolygonError(
                     f"{self.name}: keyframe {f} has other faces than keyframe {frames[0]}; every keyframe of a "
@@ -118,9 +122,13 @@ class Keyframes:
         for (fa, pa), (fb, pb) in itertools.pairwise(zip(frames, polygons)):
             # Linear motion from one orientation to the other passes through
             # zero signed area: some frame between would be no polygon at all.
-            if (pa.signed_area > 0) != (pb.signed_area > 0):
+            if _turns(pa) != _turns(pb):
+                what = "keyframe"
+                if isinstance(pa, Cages):
+                    k = next(i for i, (x, y) in enumerate(zip(_turns(pa), _turns(pb))) if x != y)
+                    pa, pb, what = pa.shapes[k], pb.shapes[k], f"cage {k} of keyframe"
                 raise PolygonError(
-                    f"{self.name}: keyframe {fb} runs {_turn(pb)} but keyframe {fa} runs {_turn(pa)} "
+                    f"{self.name}: {what} {fb} runs {_turn(pb)} but {what} {fa} runs {_turn(pa)} "
                     "(are its vertices listed in reverse?); every keyframe must list corresponding "
                     "vertices the same way round"
                 )
@@ -188,7 +196,7 @@ class Keyframes:
             return self.polygons[i]
         a, b = self.frames[i], self.frames[i + 1]
         name = f"{self.name} (frame {_fmt_frame(frame)}, between keyframes {a} and {b})"
-        if isinstance(self.polygons[i], Partition):
+        if isinstance(self.polygons[i], (Partition, Cages)):
             return self.polygons[i].moved(self._blend(i, t), name)
         return Polygon(self._blend(i, t), name=name)
 
@@ -250,6 +258,11 @@ class Keyframes:
 
     def _vertices(self, i: int, t: float) -> NDArray[np.float64]:
         return self.polygons[i].points if t == 0.0 else self._blend(i, t)
+
+
+def _turns(poly: Polygon | Partition | Cages) -> tuple[bool, ...]:
+    """Which way round the shape runs: each cage's, for several."""
+    return poly.turns if isinstance(poly, Cages) else (poly.signed_area > 0,)
 
 
 def _turn(poly: Polygon) -> str:
@@ -350,8 +363,11 @@ def _load(name: str) -> tuple[object, str]:
     return parse_json(text, name), text
 
 
-def _polygon(doc: object, name: str, label: str | None) -> Polygon | Partition:
+def _polygon(doc: object, name: str, label: str | None) -> Polygon | Partition | Cages:
     try:
+        cages = cages_of(doc, name)
+        if cages is not None:
+            return cages
         mesh = partition_of(doc, name, label)
         return mesh if mesh is not None else Polygon(points_of(doc, name, label), name=name)
     except RecursionError as err:  # as read_polygon: arrays nested ~1000 deep

@@ -517,7 +517,7 @@ def warp_file(
         if frame is None:
             src_cages, dst_cages = read_cages(src_path, src_label), read_cages(dst_path, dst_label)
         else:
-            src_cages, dst_cages = [read_shape_at(src_path, src_label, frame)], [read_shape_at(dst_path, dst_label, frame)]
+            src_cages, dst_cages = read_shape_at(src_path, src_label, frame), read_shape_at(dst_path, dst_label, frame)
         header = read_header(input_path)  # the outline needs the image's size before the map
         pair = within_pair(src_cages, dst_cages, opts.within, header.displayed_size)
         src, dst = pair.src, pair.dst

@@ -36,7 +36,7 @@ from .errors import PolygonError
 from .polygon import Polygon
 from .polygon.formats import points_of, read_document
 from .polygon.outline import cut_ring, outline_polygon
-from .polygon.partition import WELD_TOLERANCE, Partition, partition_of, welded
+from .polygon.partition import WELD_TOLERANCE, Cages, Partition, cages_of, welded
 from .report.seam import crossing_pairs
 
 __all__ = ["WithinPair", "read_cages", "within_pair", "within_seams"]
@@ -73,9 +73,11 @@ class WithinPair:
     cuts: tuple[tuple[int, int], ...]
 
 
-def _as_cages(shapes: Shape | Sequence[Shape]) -> list[Shape]:
+def _as_cages(shapes: Shape | Cages | Sequence[Shape]) -> list[Shape]:
     if isinstance(shapes, (Polygon, Partition)):
         return [shapes]
+    if isinstance(shapes, Cages):
+        return list(shapes.shapes)
     return list(shapes)
 
 
@@ -308,16 +310,9 @@ def read_cages(path: str | os.PathLike[str], label: str | None = None) -> tuple[
         One line naming the file and the problem.
     """
     name, doc = read_document(path)
-    if isinstance(doc, dict) and "cages" in doc:
-        items = doc["cages"]
-        if not isinstance(items, list) or not items:
-            raise PolygonError(f'{name}: "cages" must be a non-empty list of polygons or cage meshes')
-        cages = []
-        for k, item in enumerate(items):
-            where = f"{name}: cage {k}"
-            mesh = partition_of(item, where)
-            cages.append(mesh if mesh is not None else Polygon(points_of(item, where, None), name=where))
-        return tuple(cages)
+    found = cages_of(doc, name)
+    if found is not None:
+        return found.shapes
     count = _polygon_count(doc) if label is None else 1
     if count <= 1:
         from .polygon.partition import read_shape

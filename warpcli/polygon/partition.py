@@ -35,8 +35,8 @@ from .messages import LongInteger, format_point, short_value
 from .shape import COORD_LIMIT, Polygon, check_pair
 
 __all__ = [
-    "WELD_TOLERANCE", "Partition", "check_shapes", "is_partition_document", "partition_of", "read_partition", "read_shape",
-    "validate_pair",
+    "WELD_TOLERANCE", "Cages", "Partition", "cages_of", "check_shapes", "is_partition_document", "partition_of",
+    "read_partition", "read_shape", "validate_pair",
 ]  # fmt: skip
 
 #: Vertices of different polygons of a labelme or GeoJSON file closer than this
@@ -149,6 +149,78 @@ class Partition:
         return Partition(np.asarray(vertices, dtype=np.float64), self.faces, self.name if name is None else name)
 
 
+@dataclass(frozen=True, eq=False)
+class Cages:
+    """Several separate cages (polygons or cage meshes) that move together: one keyframe of
+    ``{"cages": [...]}``, warped with ``--within`` (`warpcli.within.within_pair`).
+
+    Its vertices are the cages' vertices, cage after cage, so that keyframes
+    blend them as they blend one polygon's (`warpcli.keyframes.Keyframes`).
+
+    Parameters
+    ----------
+    shapes : tuple of Polygon or Partition
+    name : str
+    """
+
+    shapes: tuple[Polygon | Partition, ...]
+    name: str = "cages"
+
+    @property
+    def points(self) -> NDArray[np.float64]:
+        """(N, 2): every cage's vertices, cage after cage."""
+        return np.concatenate([s.points for s in self.shapes])
+
+    @property
+    def n(self) -> int:
+        """The number of vertices of all cages."""
+        return sum(s.n for s in self.shapes)
+
+    @property
+    def structure(self) -> tuple:
+        """What must not change from keyframe to keyframe: each cage's vertex count and faces."""
+        return tuple((s.n, getattr(s, "faces", None)) for s in self.shapes)
+
+    @property
+    def turns(self) -> tuple[bool, ...]:
+        """Which way round each cage runs (its signed area's sign)."""
+        return tuple(s.signed_area > 0 for s in self.shapes)
+
+    def moved(self, vertices: ArrayLike, name: str | None = None) -> Cages:
+        """The same cages on other vertex positions (each validated again)."""
+        v = np.asarray(vertices, dtype=np.float64)
+        out, start = [], 0
+        label = self.name if name is None else name
+        for k, s in enumerate(self.shapes):
+            part = v[start : start + s.n]
+            start += s.n
+            where = f"{label}: cage {k}"
+            out.append(s.moved(part, where) if isinstance(s, Partition) else Polygon(part, name=where))
+        return Cages(tuple(out), label)
+
+
+def cages_of(doc: object, name: str) -> Cages | None:
+    """The cages of a document ``{"cages": [SHAPE, ...]}`` (each a polygon, as a list of points or
+    ``{"points": ...}``, or a cage mesh ``{"vertices", "faces"}``); None for any other document.
+
+    Raises
+    ------
+    PolygonError
+        One line naming the file (and the cage) and the problem.
+    """
+    if not (isinstance(doc, dict) and "cages" in doc):
+        return None
+    items = doc["cages"]
+    if not isinstance(items, list) or not items:
+        raise PolygonError(f'{name}: "cages" must be a non-empty list of polygons or cage meshes')
+    cages: list[Polygon | Partition] = []
+    for k, item in enumerate(items):
+        where = f"{name}: cage {k}"
+        mesh = partition_of(item, where)
+        cages.append(mesh if mesh is not None else Polygon(points_of(item, where, None), name=where))
+    return Cages(tuple(cages), name)
+
+
 def validate_pair(src: Partition, dst: Partition, src_name: str | None = None, dst_name: str | None = None) -> None:
     """Check that two cage meshes correspond: the same vertex count and the same faces.
 
@@ -191,6 +263,12 @@ def check_shapes(src: Polygon | Partition, dst: Polygon | Partition) -> None:
     PolygonError
         One line naming the target's file.
     """
+    for shape in (src, dst):
+        if isinstance(shape, Cages):
+            raise PolygonError(
+                f"{shape.name}: holds {len(shape.shapes)} separate cages: warp them with --within (an outline round "
+                "them), or give one polygon or one cage mesh"
+            )
     if isinstance(src, Partition) and isinstance(dst, Partition):
         validate_pair(src, dst)
     elif isinstance(src, Partition) or isinstance(dst, Partition):
