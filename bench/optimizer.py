@@ -208,12 +208,20 @@ def main(argv=None):
     parser.add_argument("--energy", default="conformal", choices=("conformal", "isometric", "max-conformal", "max-isometric"))
     parser.add_argument("--pairs", default="", help="only pairs whose name starts with one of these (comma-separated)")
     parser.add_argument("--repeat", type=int, default=1, help="runs per timing (the median is shown)")
+    parser.add_argument("--table2", action="store_true", help="the eight pairs of bench/table2.py instead of these six")
     args = parser.parse_args(argv)
     wanted = [w for w in args.pairs.split(",") if w]
     options = MapOptions(theta="optimized", energy=args.energy)
     print(f"| pair | Theta | coarse {args.energy} | full {args.energy} | evaluations | joint passes it after | seconds |")
     print("|---|---|---:|---:|---:|---:|---:|")
-    for name, src, dst in pairs():
+    if args.table2:
+        sys.path.insert(0, HERE)
+        import table2
+
+        chosen = [(name, src, dst) for name, src, dst, _ in table2.pairs()]
+    else:
+        chosen = list(pairs())
+    for name, src, dst in chosen:
         if wanted and not any(name.startswith(w) for w in wanted):
             continue
         starts = {"regular": regular(src, dst).points, "cyclic": cyclic(src, dst).points}
