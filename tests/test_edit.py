@@ -440,8 +440,11 @@ def test_warp_edit_prints_the_address_serves_and_stops_on_ctrl_c(tmp_path):
         with urllib.request.urlopen(url, timeout=30) as response:
             assert b"warp edit" in response.read()
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=30) == 0
-        assert proc.stderr.read().strip() == "warp edit: stopped"
+        # communicate, not wait: it drains stderr while waiting, so that a child that writes
+        # more than a pipe holds cannot block on the write (see subprocess.Popen.wait).
+        _, rest = proc.communicate(timeout=60)
+        assert proc.returncode == 0, rest
+        assert rest.strip() == "warp edit: stopped"
     finally:
         if proc.poll() is None:
             proc.kill()
