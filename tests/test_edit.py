@@ -430,9 +430,18 @@ def test_warp_edit_prints_the_address_serves_and_stops_on_ctrl_c(tmp_path):
     image = str(tmp_path / "picture.png")
     write_smooth_image(image, 64, 48)
     env = dict(os.environ, PYTHONPATH=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+    def default_sigint() -> None:
+        # Run as a user's shell runs it: SIGINT delivered and not ignored. A child inherits an
+        # ignored or blocked SIGINT from its parent, and earlier tests in this test worker (a
+        # Dask cluster, threads of other libraries) may leave the worker so.
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+
     proc = subprocess.Popen(
-        [sys.executable, "-m", "warpcli", "edit", image, "--no-browser"], stderr=subprocess.PIPE, text=True, env=env
-    )
+        [sys.executable, "-m", "warpcli", "edit", image, "--no-browser"], stderr=subprocess.PIPE, text=True, env=env,
+        preexec_fn=default_sigint,
+    )  # fmt: skip
     try:
         line = proc.stderr.readline()
         assert line.startswith(f"warp edit: {image} at http://127.0.0.1:") and "?token=" in line
