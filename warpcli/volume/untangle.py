@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..polygon.predicates import orient3d_sign
 from .tetmesh import tet_volumes
 
 #: A moved node keeps at least this fraction of the largest distance to the
@@ -118,9 +119,26 @@ def pinned_flat(values: NDArray[np.float64], tets: NDArray[np.integer], fixed: N
 
 
 def inverted(values: NDArray[np.float64], tets: NDArray[np.integer], fixed: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """Tetrahedra whose image is inverted or flat, less those `pinned_flat` by their fixed nodes."""
-    vol, _ = image_volumes(values, tets)
-    return (vol <= 0) & ~pinned_flat(values, tets, fixed)
+    """Tetrahedra whose image is inverted or flat, less those `pinned_flat` by their fixed nodes.
+
+    Orientation is decided exactly (`warpcli.polygon.predicates.orient3d_sign`):
+    a float volume can have the wrong sign on a near-flat tetrahedron, and a
+    certificate that can miss an inversion is no certificate. A corner that
+    is not finite counts as inverted.
+    """
+    positive = tet_signs(values, tets) > 0
+    candidates = np.flatnonzero(~positive)
+    out = np.zeros(len(tets), dtype=bool)
+    if candidates.size:  # the tolerance of pinned_flat is only asked about where the sign fails
+        sub = tets[candidates]
+        out[candidates] = ~pinned_flat(values, sub, fixed)
+    return out
+
+
+def tet_signs(values: NDArray[np.float64], tets: NDArray[np.integer]) -> NDArray[np.float64]:
+    """The exact orientation (1, 0, -1; NaN for a corner not finite) of each tetrahedron's image,
+    with the sign of `warpcli.volume.tetmesh.tet_volumes`."""
+    return orient3d_sign(*(values[tets[:, k]] for k in range(4)))
 
 
 def untangle(

@@ -31,7 +31,7 @@ from ...simplicial import PiecewiseLinear
 from . import sparse, topology
 from .locate import TriangleLocator, affine_coefficients, triangle_neighbours
 from .mesh import TriMesh, auto_max_area, mesh_polygon
-from .solve import DirichletSolver, flipped_exactly, flipped_triangles, solve_dirichlet
+from .solve import DirichletSolver, flipped_triangles, solve_dirichlet
 
 log = logging.getLogger("warpcli")
 
@@ -111,11 +111,9 @@ class FEMMap(ThetaMap):
     @cached_property
     def _flipped(self) -> NDArray[np.bool_]:
         # Asked for by the repair and again by the certificate: computed once.
-        if isinstance(self.theta, TargetTheta):
-            # Straight onto a non-convex target: no theorem behind the map, so
-            # every orientation is decided exactly (the degree argument then
-            # needs no tolerance, docs/proving.md).
-            return flipped_exactly(self.mesh, self.values, self.theta.points)
+        # Every orientation is decided exactly, onto a convex Theta as onto a
+        # target (--theta none, where the degree argument then needs no
+        # tolerance, docs/proving.md): a float area can miss a fold.
         return flipped_triangles(self.mesh, self.values, self.theta.points)
 
     def precompute(self, side: str) -> None:

@@ -9,9 +9,9 @@ from ...boundary import edge_points, to_theta_parameter
 from ...errors import InputError
 from ...options import WEIGHTS
 from ...polygon import signed_area
-from ...polygon.predicates import orient_sign
+from ...polygon.predicates import orientations
 from . import sparse
-from .mesh import TriMesh, triangle_areas
+from .mesh import TriMesh
 from .sparse import cotan_terms
 from .topology import NotManifold
 
@@ -19,28 +19,26 @@ from .topology import NotManifold
 def flipped_triangles(
     mesh: TriMesh, values: NDArray[np.float64], theta: NDArray[np.float64]
 ) -> NDArray[np.bool_]:
-    """Triangles whose image under a map onto ``theta`` is flipped or degenerate.
+    """Triangles whose image under a map onto ``theta`` is flipped or degenerate, decided exactly.
 
     Mesh triangles are oriented like their polygon, and the boundary goes onto
     Theta's boundary in vertex order, so a one-to-one map gives every image
-    triangle Theta's orientation, whichever way the polygon runs.
+    triangle Theta's orientation, whichever way the polygon runs. Each image
+    triangle's orientation is the exact sign of its area for the doubles
+    given (`warpcli.polygon.predicates.orientations`: a float area can have
+    the wrong sign on a sliver, and a certificate that can miss a fold is no
+    certificate); a triangle counts as flipped unless that sign is strictly
+    Theta's, so degenerate images and corners that are not finite are flipped.
     """
-    img = triangle_areas(values, mesh.triangles)
-    return img * np.sign(signed_area(theta)) <= 0
+    sign = orientations(values, mesh.triangles)
+    return ~(sign * np.sign(signed_area(theta)) > 0)
 
 
 def flipped_exactly(
     mesh: TriMesh, values: NDArray[np.float64], target: NDArray[np.float64]
 ) -> NDArray[np.bool_]:
-    """`flipped_triangles` with exact orientation tests (`warpcli.polygon.predicates.orient_sign`).
-
-    A triangle counts as flipped unless the exact orientation of its image
-    (as doubles) is strictly that of ``target``: degenerate images are flipped.
-    """
-    t = mesh.triangles
-    a, b, c = values[t[:, 0]], values[t[:, 1]], values[t[:, 2]]
-    sign = orient_sign(a[:, 0], a[:, 1], b[:, 0], b[:, 1], c[:, 0], c[:, 1])
-    return sign * np.sign(signed_area(target)) <= 0
+    """`flipped_triangles` onto a target polygon (``--theta none``): the same exact test."""
+    return flipped_triangles(mesh, values, target)
 
 
 def cotan_laplacian(vertices: NDArray[np.float64], triangles: NDArray[np.integer]):
