@@ -10,7 +10,7 @@ import tempfile
 import threading
 from collections.abc import Iterator
 
-__all__ = ["Captured", "c_stderr", "one_line"]
+__all__ = ["Captured", "c_stderr", "one_line", "stderr_fd", "terminal_saved"]
 
 
 class Captured:
@@ -27,6 +27,32 @@ class Captured:
 
 _CAPTURE_LOCK = threading.Lock()
 _CAPTURE_MAX = 1 << 16
+
+#: Copies of the real file descriptor 2 kept while it points elsewhere (the
+#: innermost last): a signal handler that ends the process writes its line
+#: there, or it would land in the capture and be lost (`stderr_fd`).
+_TERMINAL: list[int] = []
+
+
+def stderr_fd() -> int:
+    """The file descriptor of the real stderr: 2, or its saved copy while C output is captured.
+
+    For a line written with ``os.write`` from a signal handler (SIGTERM ends
+    the run at once, `warpcli.cli.run`): a `c_stderr` block or TetGen's quiet
+    run may have file descriptor 2 pointing into a capture at that moment.
+    """
+    return _TERMINAL[-1] if _TERMINAL else 2
+
+
+@contextlib.contextmanager
+def terminal_saved(copy: int) -> Iterator[None]:
+    """Within the block, `stderr_fd` is ``copy``: a duplicate of the real file descriptor 2
+    made before 2 was pointed elsewhere (close ``copy`` only after the block)."""
+    _TERMINAL.append(copy)
+    try:
+        yield
+    finally:
+        _TERMINAL.remove(copy)
 
 
 @contextlib.contextmanager
@@ -55,9 +81,11 @@ def c_stderr() -> Iterator[Captured]:
             if sys.stderr is not None:
                 sys.stderr.flush()
             saved = os.dup(2)
+            _TERMINAL.append(saved)
             os.dup2(sink.fileno(), 2)
         except (OSError, ValueError):
             if saved is not None:
+                _TERMINAL.remove(saved)
                 os.close(saved)
                 saved = None
         yield said
@@ -65,6 +93,7 @@ def c_stderr() -> Iterator[Captured]:
         try:
             if saved is not None:
                 os.dup2(saved, 2)
+                _TERMINAL.remove(saved)
                 os.close(saved)
                 sink.seek(0)
                 said.text = sink.read(_CAPTURE_MAX).decode("utf-8", "replace")

@@ -8,6 +8,7 @@ import threading
 
 import click
 
+from ..capture import stderr_fd
 from ..errors import WarpError
 from ..outputs import end_when_consistent, remove_temporaries
 from .apply_map import apply_map
@@ -47,7 +48,8 @@ def _terminate(signum, frame):
     def end():
         remove_temporaries()
         try:
-            os.write(2, b"warp: terminated\n")
+            # Not plain 2: a C library's output may be being captured right now (warpcli.capture).
+            os.write(stderr_fd(), b"warp: terminated\n")
         finally:
             os._exit(EXIT_TERMINATED)
 

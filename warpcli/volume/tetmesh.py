@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..capture import terminal_saved
 from ..errors import InputError, MeshingError
 from ..polygon.predicates import orient3d_sign
 from .surface import Surface, reflex_edges
@@ -316,6 +317,7 @@ def _quiet_fds():
     sink = tempfile.TemporaryFile()
     saved = []
     said = {"text": ""}
+    keep = contextlib.ExitStack()
     try:
         for fd in (1, 2):
             try:
@@ -323,11 +325,15 @@ def _quiet_fds():
             except OSError:
                 pass
             saved.append((fd, os.dup(fd)))
+            if fd == 2:
+                keep.enter_context(terminal_saved(saved[-1][1]))  # a SIGTERM's line goes to the terminal
             os.dup2(sink.fileno(), fd)
         yield said
     finally:
         for fd, old in saved:
             os.dup2(old, fd)
+        keep.close()
+        for fd, old in saved:
             os.close(old)
         sink.seek(0)
         said["text"] = sink.read().decode("utf-8", "replace")
