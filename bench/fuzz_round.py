@@ -431,8 +431,9 @@ def cases() -> list[Case]:
              run_kw={"fsize": 50_000}))  # fmt: skip
     for method in ("bem", "mfs"):
         add(Case(f"{method} with a 7-gon Theta flattened 1e9 in x", "silent wrong",
-                 lambda d: (basic(d), dump(d, "t.json", regular(7, 1.0, 0.0, sx=1e9))),
-                 ["in.png", "--src", "src.json", "--dst", "dst.json", "--method", method, "--theta", "t.json",
+                 lambda d: (basic(d), dump(d, "t.json", regular(7, 1.0, 0.0, sx=1e9)), dump(d, "s7.json", regular(7, 24)),
+                            dump(d, "d7.json", regular(7, 22, phase=0.2))),
+                 ["in.png", "--src", "s7.json", "--dst", "d7.json", "--method", method, "--theta", "t.json",
                   "--report", "r.json", "o.png"], rc=(0, 1, 2),
                  check=lambda d, out: None if out.rc != 0 or None not in json.load(open(os.path.join(d, "r.json"))
                                                                                   ).get("conformal", {}).values()

@@ -405,6 +405,23 @@ def test_a_target_whose_start_vertex_is_moved_is_warned_about_and_ordinary_pairs
     assert len(relabel) == 1 and f"vertex i + {k} " in relabel[0] and f"at its vertex {k} " in relabel[0], said
 
 
+@given(st.integers(3, 40), st.integers(0, 39), st.floats(-3.0, 3.0), st.sampled_from([1e-3, 1.0, 1e4]),
+       st.sampled_from([0.0, 1e-9, 1e-4]), st.integers(0, 2**32 - 1))
+@settings(max_examples=25, deadline=None)
+def test_symmetric_shapes_matched_as_given_are_not_called_twisted(n, k, angle, scale, noise, seed):
+    """A regular polygon (every shift of it matches) onto itself, rotated, scaled, moved, slightly noisy, and
+    labelled from any vertex: the labelling given is a match, so no warning (it once warned on 0 against 2.2e-16)."""
+    from warpcli.polygon import Polygon, cyclic_relabelling
+
+    rng = np.random.default_rng(seed)
+    a = 2 * np.pi * np.arange(n) / n
+    src = np.stack([np.cos(a), np.sin(a)], axis=1) * 20 * scale + 50 * scale
+    b = a + angle
+    dst = np.stack([np.cos(b), np.sin(b)], axis=1) * 17 * scale + 40 * scale
+    dst = np.roll(dst + rng.normal(0, noise * 17 * scale, dst.shape), k % n, axis=0)
+    assert cyclic_relabelling(Polygon(src, name="s"), Polygon(dst, name="d")) is None
+
+
 @given(st.integers(32, 200), st.integers(32, 200), st.floats(0.05, 0.4))
 @settings(max_examples=5, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 def test_polygons_in_normalised_coordinates_are_warned_about(tmp_path_factory, w, h, margin):

@@ -200,12 +200,16 @@ def cyclic_relabelling(src: Polygon, dst: Polygon) -> tuple[int, float, float] |
     (k, d0, dk) or None
         The shift and the shape distances (`shape_distances`) of the given
         labelling and of the shift; None when no shift is far better
-        (`RELABEL_DISTANCE`, `RELABEL_RATIO`).
+        (`RELABEL_DISTANCE`, `RELABEL_RATIO`) or the given labelling matches
+        well itself (its distance below `RELABEL_DISTANCE`).
     """
     if src.n != dst.n or src.n < 3:
         return None
     d = shape_distances(src.points, dst.points)
     k = int(np.argmin(d[1:])) + 1
-    if d[k] < RELABEL_DISTANCE and d[k] * RELABEL_RATIO < d[0]:
+    # The given labelling must itself be a poor match: on a shape with symmetries (a regular
+    # polygon onto itself) every shift matches, and a relabelling then "won" by rounding
+    # (0 against 2.2e-16), warning of a twist that is not there.
+    if d[k] < RELABEL_DISTANCE <= d[0] and d[k] * RELABEL_RATIO < d[0]:
         return k, float(d[0]), float(d[k])
     return None
