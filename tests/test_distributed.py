@@ -40,6 +40,27 @@ def test_a_batch_on_a_local_cluster_matches_the_local_batch(tmp_path):
     assert local == remote and len(local) == 3
 
 
+def test_relative_paths_reach_workers_that_run_in_another_directory(tmp_path, monkeypatch):
+    """Workers started elsewhere (a `dask worker` in its own directory) get the images the names
+    given here mean, and errors name them as given (every image was "no such file")."""
+    rng = np.random.default_rng(4)
+    for k in range(3):
+        write_png(tmp_path / f"in{k}.png", rng.integers(0, 256, (40, 56, 3), dtype=np.uint8))
+    (tmp_path / "in2.png").write_bytes(b"not a png")
+    write_polygon(tmp_path / "s.json", star(cx=28, cy=20, r_in=6, r_out=16))
+    write_polygon(tmp_path / "d.json", star(cx=28, cy=20, r_in=5, r_out=17, phase=0.3))
+    (tmp_path / "out").mkdir()
+    args = ["in0.png", "in1.png", "in2.png", "--src", "s.json", "--dst", "d.json", "--out-dir", "out"]
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        monkeypatch.chdir(tmp_path)  # after the worker started: it runs in the directory the test began in
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            code = main([*args, "--scheduler", cluster.scheduler_address])
+    assert code == 2 and sorted(p.name for p in (tmp_path / "out").iterdir()) == ["in0.png", "in1.png"]
+    lines = [line for line in err.getvalue().splitlines() if "error" in line]
+    assert len(lines) == 1 and lines[0].startswith("warp: error: in2.png:"), err.getvalue()
+
+
 def test_an_unreachable_scheduler_is_one_line(tmp_path):
     img = write_png(tmp_path / "in.png", np.zeros((16, 16, 3), dtype=np.uint8))
     poly = write_polygon(tmp_path / "p.json", [[2, 2], [14, 2], [8, 14]])

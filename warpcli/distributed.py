@@ -244,6 +244,16 @@ def _mute(record: logging.LogRecord) -> bool:
     return False
 
 
+def _named(err: WarpError | None, absolute: tuple[str, str], given: tuple[str, str]) -> WarpError | None:
+    """A worker's error with the paths as the user gave them (the worker was given absolute ones)."""
+    if err is not None and len(err.args) == 1 and isinstance(err.args[0], str):
+        text = err.args[0]
+        for a, g in zip(absolute, given):
+            text = text.replace(a, str(g))
+        err.args = (text,)
+    return err
+
+
 def _run(Client, LocalCluster, scheduler, workers, timeout, tasks, plans, on_item) -> list[BatchItem]:
     cluster = None
     if isinstance(scheduler, Client):
@@ -259,15 +269,20 @@ def _run(Client, LocalCluster, scheduler, workers, timeout, tasks, plans, on_ite
         except (OSError, TimeoutError) as err:
             raise InputError(f"cannot reach the Dask scheduler {scheduler}: {err}") from None
         own = True
+    # The workers get absolute paths: they run in directories of their own (a `dask worker`
+    # started anywhere on the shared file system), where the relative names given here
+    # meant nothing ("i00.png: no such file" for every image).
+    named = tasks
+    tasks = [(os.path.abspath(inp), os.path.abspath(out)) for inp, out in tasks]
     try:
         shipped = client.scatter(plans, broadcast=True)
         futures = [client.submit(warp_one, inp, out, shipped, pure=False) for inp, out in tasks]
         items = []
         resent = 0
-        for k, (inp, out) in enumerate(tasks):
+        for k, (inp, out) in enumerate(named):
             while True:
                 try:
-                    item = futures[k].result()
+                    item = BatchItem(inp, out, _named(futures[k].result().error, tasks[k], (inp, out)))
                 except WarpError as err:
                     item = BatchItem(inp, out, err)
                 except Exception as err:  # a lost worker, a killed task: that image's failure
