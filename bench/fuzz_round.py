@@ -135,13 +135,15 @@ class Outcome:
 
 
 def run(d: str, args: list[str], *, env: dict | None = None, timeout: float = TIMEOUT, fsize: int | None = None,
-        stdin=None, term_after: float | None = None, cpu: int | None = None) -> Outcome:  # fmt: skip
+        stdin=None, term_after: float | None = None, cpu: int | None = None, umask: int | None = None) -> Outcome:  # fmt: skip
     """``python -m warpcli ARGS`` in ``d``, capped at 2 GB and ``timeout`` s (wall; ``cpu``: CPU seconds too)."""
 
     def limits() -> None:
         resource.setrlimit(resource.RLIMIT_AS, (MEMORY, MEMORY))
         if cpu is not None:
             resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu))
+        if umask is not None:
+            os.umask(umask)
         if fsize is not None:
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
             resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
@@ -189,6 +191,7 @@ class Case:
     run_kw: dict = field(default_factory=dict)
     allow_lines: int = 1  # error lines allowed on stderr
     partial: bool = False  # a batch: the other inputs' outputs stay when one fails
+    replaced: tuple[str, ...] = ()  # existing files the run replaces (their bytes may change, not their mode)
 
     def __call__(self) -> tuple[bool, str, Outcome | None]:
         with tempfile.TemporaryDirectory(prefix="fuzz27-") as d:
@@ -210,7 +213,7 @@ class Case:
                 now = after.get(name)
                 if now is None:
                     problems.append(f"input {name} removed")
-                elif now[0] != digest:
+                elif now[0] != digest and name not in self.replaced:
                     problems.append(f"input {name} changed")
                 elif now[1] != mode:
                     problems.append(f"input {name} mode {oct(mode)} -> {oct(now[1])}")
@@ -642,6 +645,61 @@ def cases() -> list[Case]:
                  ["in.png", "--src", "src.json", "--dst", "dst.json", "--size", "6000x6000", "--tiled", "o.tif"],
                  rc=(0, 1, 143, -15), run_kw={"term_after": delay, "timeout": 60},
                  check=lambda d, o: None if o.rc != 0 or os.path.exists(os.path.join(d, "o.tif")) else "exit 0, no output"))  # fmt: skip
+    # -- more of each class, generated the same way
+    for flag, name in (("--grid", "src.json"), ("--heatmap", "dst.json"), ("--save-forward-map", "in.png")):
+        add(Case(f"{flag} naming an input", "data loss", basic,
+                 ["in.png", "--src", "src.json", "--dst", "dst.json", flag, name, "o.png"]))  # fmt: skip
+    add(Case("--labels OUT naming the image input", "data loss", lambda d: (basic(d), write_png(os.path.join(d, "l.png"), image(channels=1))),
+             ["in.png", "--src", "src.json", "--dst", "dst.json", "--labels", "l.png", "in.png", "o.png"]))  # fmt: skip
+    add(Case("points OUT is IN", "data loss", lambda d: points_setup(d, "20,20\n"),
+             ["points", "p.csv", "p.csv", "--src", "src.json", "--dst", "dst.json"]))  # fmt: skip
+    add(Case("apply-map OUTPUT is MAP", "data loss",
+             lambda d: (basic(d), run(d, ["in.png", "--src", "src.json", "--dst", "dst.json", "--save-map", "m.exr", "o.png"])),
+             ["apply-map", "m.exr", "in.png", "m.exr"]))  # fmt: skip
+    add(Case("volume --report naming --src", "data loss", vol_setup("good"),
+             ["volume", "v.tif", "o.tif", "--src", "a.obj", "--dst", "b.obj", "--report", "a.obj"]))  # fmt: skip
+    add(Case("volume OUT is IN", "data loss", vol_setup("good"),
+             ["volume", "v.tif", "v.tif", "--src", "a.obj", "--dst", "b.obj"]))  # fmt: skip
+    add(Case("texture --texture is OUT", "data loss", texture_setup,
+             ["texture", "texture_square.obj", "texture_arch.obj", "texture_cat.png", "--src-corners", "0,8,80,72",
+              "--dst-corners", "16,0,102,118"]))  # fmt: skip
+    add(Case("output into a missing directory", "message", basic,
+             ["in.png", "--src", "src.json", "--dst", "dst.json", "no/such/dir/o.png"], says=r"no/such/dir"))  # fmt: skip
+    add(Case("input is a directory", "message", lambda d: (basic(d), os.mkdir(os.path.join(d, "dir.png"))),
+             ["dir.png", "--src", "src.json", "--dst", "dst.json", "o.png"], says=r"dir\.png"))  # fmt: skip
+    add(Case("existing 0644 report kept 0644 under umask 077", "silent wrong",
+             lambda d: (basic(d), text(d, "r.json", "{}"), os.chmod(os.path.join(d, "r.json"), 0o644)),
+             ["in.png", "--src", "src.json", "--dst", "dst.json", "--report", "r.json", "o.png"], rc=(0,),
+             check=mode_of("r.json"), run_kw={"umask": 0o077}, replaced=("r.json",)))  # fmt: skip
+    add(Case("new output under umask 077 is 0600", "silent wrong", basic,
+             ["in.png", "--src", "src.json", "--dst", "dst.json", "--report", "r.json", "o.png"], rc=(0,),
+             check=lambda d, o: mode_of("r.json", 0o600)(d, o) or mode_of("o.png", 0o600)(d, o), run_kw={"umask": 0o077}))  # fmt: skip
+    add(Case("--size 100000x100000 (30 GB) on a 1 MB disk", "bomb", basic,
+             ["in.png", "--src", "src.json", "--dst", "dst.json", "--size", "100000x100000", "o.png"], rc=(1, 2),
+             check=seconds_below(50), run_kw={"fsize": 1 << 20}))  # fmt: skip
+    add(Case("--frames 0-999999999", "bomb", basic,
+             ["f.@.png", "--src", "src.json", "--dst", "dst.json", "o.@.png", "--frames", "0-999999999"], rc=(1, 2),
+             allow_lines=6, check=seconds_below(30)))  # fmt: skip
+    add(Case("a polygon of 200,000 vertices", "bomb",
+             lambda d: (basic(d), dump(d, "s.json", regular(200_000, 24)), dump(d, "t.json", regular(200_000, 22))),
+             ["in.png", "--src", "s.json", "--dst", "t.json", "o.png"], rc=(0, 1, 2), check=seconds_below(50)))  # fmt: skip
+    add(Case("Theta file with NaN", "message", lambda d: (basic(d), text(d, "t.json", "[[0, 0], [1, NaN], [1, 1], [0, 1]]")),
+             ["in.png", "--src", "src.json", "--dst", "dst.json", "--theta", "t.json", "o.png"], says=r"t\.json"))  # fmt: skip
+    for body, why in (("", "empty"), ("x,y\n", "header only"), ('{"points": [[1, 2, 3]]}', "triples"),
+                      ("\ufeffx,y,name\r\n20,20,a\r\n30,30,b\r\n", "BOM, header and CRLF")):
+        name = "p.json" if body.startswith("{") else "p.csv"
+        add(Case(f"points: {why}", "message", lambda d, body=body, name=name: points_setup(d, body.encode(), name),
+                 ["points", name, "q" + name[1:], "--src", "src.json", "--dst", "dst.json"],
+                 rc=(0,) if "CRLF" in why else (0, 2)))  # fmt: skip
+    add(Case("--compression with a JPEG output", "new surface", basic,
+             ["in.png", "--src", "src.json", "--dst", "dst.json", "--compression", "3", "o.jpg"], rc=(0, 2)))  # fmt: skip
+    add(Case("--within garbage JSON", "new surface", lambda d: (basic(d), text(d, "w.json", "{not json")),
+             ["in.png", "--src", "src.json", "--dst", "dst.json", "--within", "w.json", "o.png"], says=r"w\.json"))  # fmt: skip
+    add(Case("keyframed cage meshes through a sequence", "new surface",
+             lambda d: (sequence_setup(d), dump(d, "c.json", cage),
+                        dump(d, "k.json", {"frames": {"1": cage, "11": {**cage, "vertices": [[10, 6], [58, 12], [50, 58], [6, 50], [30, 34]]}}})),
+             ["f.@.png", "--src", "c.json", "--dst", "k.json", "o.@.png", "--frames", "1,11"], rc=(0,),
+             outputs=("o.1.png", "o.11.png")))  # fmt: skip
     add(Case("edit with a missing image", "new surface", basic,
              ["edit", "nope.png", "--src", "src.json"], rc=(2,)))  # fmt: skip
     return C

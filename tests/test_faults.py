@@ -379,6 +379,26 @@ def test_sigterm_while_c_output_is_captured_still_says_terminated(where):
     assert (proc.returncode, proc.stderr) == (143, "warp: terminated\n")
 
 
+def test_strips_stop_at_the_first_that_the_full_disk_refuses(full_disk, tmp_path, monkeypatch):
+    """PNG's writer keeps returning success after a failed write: the run went on to the last of
+    its strips (all of a 30 GB image) before saying so. Now it stops at the first failure."""
+    from warpcli.pipeline import warp_file
+    from warpcli.raster import parts
+
+    strips = []
+    write = parts.StripWriter.write
+    monkeypatch.setattr(parts.StripWriter, "write", lambda self, px: (strips.append(len(px)), write(self, px))[1])
+    # Noise stretched 4 times: each strip holds 64 distinct rows (75 KiB), more than the disk.
+    inp = write_png(tmp_path / "in.png", noise(640, 400, 3, np.uint8))
+    frame = write_polygon(tmp_path / "f.json", [[0, 0], [400, 0], [400, 640], [0, 640]])
+    tall = write_polygon(tmp_path / "t.json", [[0, 0], [400, 0], [400, 2560], [0, 2560]])
+    with pytest.raises(ImageIOError):
+        warp_file(inp, full_disk / "out.png", frame, tall, tiled=True, interp="nearest", size=(400, 2560))
+    # (Other formats report the failed write at once, or have their room checked first: only PNG went on.)
+    assert len(strips) <= 2, f"{len(strips)} of 10 strips written to a full disk"
+    assert listing(full_disk) == []
+
+
 @pytest.mark.parametrize("ext", STRIP_FORMATS)
 def test_strips_on_a_full_disk_fail_in_every_format_and_leave_nothing(full_disk, tmp_path, ext):
     from warpcli.pipeline import warp_file

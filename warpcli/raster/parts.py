@@ -207,7 +207,10 @@ class StripWriter:
                 ok = self._out.write_tiles(0, self._spec.width, y0, y1, 0, 1, px)
             else:
                 ok = self._out.write_scanlines(y0, y1, 0, px)
-        if not ok:
+        # Some writers (PNG) report a failed write (a full disk, a file size limit) as an error
+        # of the file but go on returning success: without this, every strip to the end of an
+        # image of any size was still computed and compressed before close() said so.
+        if not ok or self._out.has_error:
             self._fail(one_line(self._out.geterror(), said.text))
         self._next = y1
 
