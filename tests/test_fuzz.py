@@ -420,6 +420,11 @@ def test_symmetric_shapes_matched_as_given_are_not_called_twisted(n, k, angle, s
     dst = np.stack([np.cos(b), np.sin(b)], axis=1) * 17 * scale + 40 * scale
     dst = np.roll(dst + rng.normal(0, noise * 17 * scale, dst.shape), k % n, axis=0)
     assert cyclic_relabelling(Polygon(src, name="s"), Polygon(dst, name="d")) is None
+    # One vertex pulled halfway in breaks the symmetry: a moved start is then warned about again.
+    if 5 <= n <= 10 and k % n:
+        src[0] = 0.5 * src[0] + 0.5 * src.mean(axis=0)
+        moved = np.roll(src, k % n, axis=0)
+        assert cyclic_relabelling(Polygon(src, name="s"), Polygon(moved, name="d"))[0] == k % n
 
 
 @given(st.integers(32, 200), st.integers(32, 200), st.floats(0.05, 0.4))

@@ -13,7 +13,7 @@ from .messages import LongInteger, short_value
 from .predicates import signed_area
 from .validate import validate_points
 
-__all__ = ["COORD_LIMIT", "RELABEL_DISTANCE", "RELABEL_RATIO", "Polygon", "check_pair", "cyclic_relabelling", "shape_distances"]
+__all__ = ["COORD_LIMIT", "RELABEL_DISTANCE", "RELABEL_GAIN", "RELABEL_RATIO", "Polygon", "check_pair", "cyclic_relabelling", "shape_distances"]
 
 #: Largest coordinate magnitude accepted, in pixels: far beyond any image, and
 #: small enough that areas and orientation tests cannot overflow.
@@ -148,6 +148,11 @@ def _out_of_range(name: str, i: int, value: object) -> str:
 RELABEL_DISTANCE = 0.05
 #: See `RELABEL_DISTANCE`.
 RELABEL_RATIO = 5.0
+#: ... and better by at least this much: on a shape with symmetries (a regular
+#: polygon onto itself) every shift matches, and a relabelling "won" by the
+#: ratio alone on rounding (0 against 2.2e-16) or on noise far below what can
+#: be seen, warning of a twist that is not there.
+RELABEL_GAIN = 0.01
 
 
 def shape_distances(src: ArrayLike, dst: ArrayLike) -> NDArray[np.float64]:
@@ -200,16 +205,12 @@ def cyclic_relabelling(src: Polygon, dst: Polygon) -> tuple[int, float, float] |
     (k, d0, dk) or None
         The shift and the shape distances (`shape_distances`) of the given
         labelling and of the shift; None when no shift is far better
-        (`RELABEL_DISTANCE`, `RELABEL_RATIO`) or the given labelling matches
-        well itself (its distance below `RELABEL_DISTANCE`).
+        (`RELABEL_DISTANCE`, `RELABEL_RATIO`, `RELABEL_GAIN`).
     """
     if src.n != dst.n or src.n < 3:
         return None
     d = shape_distances(src.points, dst.points)
     k = int(np.argmin(d[1:])) + 1
-    # The given labelling must itself be a poor match: on a shape with symmetries (a regular
-    # polygon onto itself) every shift matches, and a relabelling then "won" by rounding
-    # (0 against 2.2e-16), warning of a twist that is not there.
-    if d[k] < RELABEL_DISTANCE <= d[0] and d[k] * RELABEL_RATIO < d[0]:
+    if d[k] < RELABEL_DISTANCE and d[k] * RELABEL_RATIO < d[0] and d[0] - d[k] >= RELABEL_GAIN:
         return k, float(d[0]), float(d[k])
     return None
