@@ -351,6 +351,12 @@ def vol_setup(kind: str):
             pages = [x[k] for k in range(16)]
             pages[5] = np.zeros((8, 16), np.uint8)
             tiff_stack(os.path.join(d, "v.tif"), pages)
+        elif kind == "page-by-page":
+            import tifffile
+
+            with tifffile.TiffWriter(os.path.join(d, "v.tif")) as tw:
+                for k in range(16):
+                    tw.write(x[k], contiguous=False)
         elif kind == "good":
             import tifffile
 
@@ -455,6 +461,8 @@ def cases() -> list[Case]:
              rc=(0,), check=lambda d, o: mode_of("r.json")(d, o) or mode_of("t.json")(d, o)))  # fmt: skip
     add(Case("points output mode follows the umask", "silent wrong", lambda d: points_setup(d, "20,20\n"),
              ["points", "p.csv", "q.csv", "--src", "src.json", "--dst", "dst.json"], rc=(0,), check=mode_of("q.csv")))  # fmt: skip
+    add(Case("volume: a TIFF stack written page by page", "message", vol_setup("page-by-page"),
+             ["volume", "v.tif", "o.tif", "--src", "a.obj", "--dst", "b.obj"], rc=(0,), outputs=("o.tif",)))  # fmt: skip
     add(Case("volume output mode follows the umask", "silent wrong", vol_setup("good"),
              ["volume", "v.tif", "o.tif", "--src", "a.obj", "--dst", "b.obj", "--report", "r.json"], rc=(0,),
              check=lambda d, o: mode_of("o.tif")(d, o) or mode_of("r.json")(d, o)))  # fmt: skip

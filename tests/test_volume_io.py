@@ -306,3 +306,22 @@ def test_a_header_declaring_more_than_its_file_is_refused_before_reading(tmp_pat
     monkeypatch.setattr(nib.arrayproxy.ArrayProxy, "get_unscaled", lambda self: pytest.fail("data were read"))
     with pytest.raises(ImageInputError, match=r"bomb\.nii(\.gz)?: declares .* in a file of .*refused before reading"):
         read_volume(path)
+
+
+@pytest.mark.parametrize(("shape", "dtype"), [((5, 7, 9), np.uint8), ((3, 4, 6, 3), np.uint16), ((4, 5, 6), np.float32)])
+def test_a_stack_written_page_by_page_reads_as_the_same_volume(tmp_path, shape, dtype):
+    """tifffile writing page by page makes each page a series of its own; that stack was refused
+    ("got axes YX") though its pages are the volume. Every way of writing the pages reads the same."""
+    import tifffile
+
+    data = np.random.default_rng(len(shape)).integers(0, 200, shape).astype(dtype)
+    tifffile.imwrite(tmp_path / "one.tif", data, photometric="rgb" if len(shape) == 4 else None)
+    for name, metadata in (("shaped.tif", {}), ("plain.tif", None)):
+        with tifffile.TiffWriter(tmp_path / name) as tw:
+            for page in data:
+                tw.write(page, contiguous=False, metadata=metadata, photometric="rgb" if len(shape) == 4 else None)
+    want = read_volume(tmp_path / "one.tif").data
+    assert want.shape[:3] == shape[:3]
+    for name in ("shaped.tif", "plain.tif"):
+        got = read_volume(tmp_path / name)
+        assert got.data.dtype == want.dtype and np.array_equal(got.data, want), name

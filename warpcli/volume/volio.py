@@ -206,9 +206,18 @@ def _read_tiff(name: str) -> Volume:
             axes = series.axes
             shape = series.shape
             dtype = np.dtype(series.dtype)
+            # tifffile's own writer, page by page, makes each page a series of its own
+            # (a shape in each page's description): its pages, alike (`check_pages`),
+            # are the stack. Other files put their pages in one series.
+            stacked = len(tif.series) > 1 and len(series.pages) == 1 and axes in ("YX", "YXS")
+            if stacked:
+                axes, shape = "Z" + axes, (len(tif.pages), *shape)
             # Checked from the header, before any page is decoded.
             refused = _refused(name, shape, dtype)
-            data = None if refused else _native(series.asarray())
+            if refused:
+                data = None
+            else:
+                data = _native(tif.asarray(key=range(len(tif.pages))) if stacked else series.asarray())
     except (tifffile.TiffFileError, OSError, ValueError) as err:
         raise ImageInputError(f"{name}: cannot read TIFF: {err}") from None
     if refused is not None:
