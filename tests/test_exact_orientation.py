@@ -107,8 +107,8 @@ def test_orient3d_sign_conventions():
     """The sign of tet_volumes; swapping two corners flips it; exactly 0 on a plane; NaN for a corner not finite."""
     rng = np.random.default_rng(3)
     a, b, c, d = (rng.normal(size=(50, 3)) for _ in range(4))
-    assert orient3d_sign(a, b, c, d).tolist() == np.sign(tet_volumes(np.vstack([a, b, c, d]),
-                                                                      np.arange(200).reshape(4, 50).T)).tolist()  # fmt: skip
+    tets = np.arange(200).reshape(4, 50).T
+    assert orient3d_sign(a, b, c, d).tolist() == np.sign(tet_volumes(np.vstack([a, b, c, d]), tets)).tolist()
     assert (orient3d_sign(b, a, c, d) == -orient3d_sign(a, b, c, d)).all()
     ia, ib, ic = (rng.integers(-1000, 1000, (50, 3)).astype(float) for _ in range(3))
     assert (orient3d_sign(ia, ib, ic, 3.0 * ia - 5.0 * ib + 3.0 * ic) == 0).all()  # on the plane, in integers

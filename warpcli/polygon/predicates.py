@@ -248,7 +248,9 @@ def orient3d_sign(a, b, c, d) -> NDArray[np.float64]:
         vw3, vw4, vw5 = v[:, 0] * w[:, 2], v[:, 0] * w[:, 1], v[:, 1] * w[:, 0]
         det = u[:, 0] * (vw0 - vw1) + u[:, 1] * (vw2 - vw3) + u[:, 2] * (vw4 - vw5)
         u0, u1, u2 = np.abs(u[:, 0]), np.abs(u[:, 1]), np.abs(u[:, 2])
-        permanent = u0 * (np.abs(vw0) + np.abs(vw1)) + u1 * (np.abs(vw2) + np.abs(vw3)) + u2 * (np.abs(vw4) + np.abs(vw5))
+        permanent = (
+            u0 * (np.abs(vw0) + np.abs(vw1)) + u1 * (np.abs(vw2) + np.abs(vw3)) + u2 * (np.abs(vw4) + np.abs(vw5))
+        )
         bound = _ORIENT3D_BOUND * permanent + _UNDERFLOW * (1.0 + u0 + u1 + u2)
         unsure = ~(np.abs(det) > bound)
     sign = np.sign(det)
