@@ -40,7 +40,8 @@ from ..files import format_bytes
 from ..grid import inside_polygon
 from ..polygon import Polygon
 from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, slide, sliding_tables
-from .certificate import CellCertificate, certify_cells, degenerate_vertices, vertex_ball
+from .boundary_certificate import BoundaryCertificate, certify_boundary
+from .certificate import CellCertificate, band_floor, certify_cells, degenerate_vertices, vertex_ball
 from .theta import Theta
 
 #: Points closer than this (times the polygon's size) to its boundary take the exact boundary data.
@@ -60,6 +61,10 @@ MAX_AUTO_NODES = 2048
 #: m = 4800, 512 x 512): a fit with m nodes is refused, or not attempted as a
 #: refit, when this times m^2 is more than `warpcli.budget.max_image_bytes`.
 FIT_BYTES_PER_NODE2 = {"bem": 220, "mfs": 300}
+
+#: Methods certified by `certify_boundary` (rigorous; docs/proving.md), unless a vertex is degenerate;
+#: the others by the cell certificate (`certify_cells`).
+BOUNDARY_CERTIFIED = frozenset({"mfs"})
 
 log = logging.getLogger("warpcli")
 
@@ -227,8 +232,28 @@ class SmoothMap(ThetaMap):
 
     @cached_property
     def _certificate(self) -> Certificate:
-        cells = self.cell_certificate
-        return Certificate(cells.failed, cells.checked, "samples")
+        proof = self.boundary_certificate if self.name in BOUNDARY_CERTIFIED else None
+        if proof is None:
+            proof = self.cell_certificate
+        return Certificate(proof.failed, proof.checked, "samples")
+
+    @cached_property
+    def _degenerate(self) -> NDArray[np.bool_]:
+        return degenerate_vertices(self.polygon.points, self.theta.points, self.boundary_to_theta, self.conditions == "mixed")
+
+    @cached_property
+    def boundary_certificate(self) -> BoundaryCertificate | None:
+        """`warpcli.maps.boundary_certificate.certify_boundary`, computed once; None where the boundary data
+        force det J -> 0 at a vertex (`degenerate_vertices`: those maps keep the cell certificate and its balls).
+
+        Gamma is the polygon's boundary for MFS (its sites lie outside: the closed form is analytic on the
+        closed polygon) and a curve `band_floor` inside for BEM (singular at its boundary nodes).
+        """
+        if self._degenerate.any():
+            return None
+        sign = self.theta.orientation * np.sign(self.polygon.signed_area)
+        offset = 0.0 if self.name == "mfs" else band_floor(self._size)
+        return certify_boundary(self.solution, self.polygon.points, self.theta, sign, offset)
 
     @cached_property
     def cell_certificate(self) -> CellCertificate:
@@ -236,8 +261,7 @@ class SmoothMap(ThetaMap):
         ask), with balls of at most `vertex_ball` left out around the `degenerate_vertices`."""
         sign = self.theta.orientation * np.sign(self.polygon.signed_area)
         near = ON_BOUNDARY * self._size
-        slow = degenerate_vertices(self.polygon.points, self.theta.points, self.boundary_to_theta, self.conditions == "mixed")
-        balls = np.where(slow, vertex_ball(self._size), 0.0)
+        balls = np.where(self._degenerate, vertex_ball(self._size), 0.0)
         # MFS: the rigorous cell bound (1.2-2.3x the first-order test's time on the bench pairs, median
         # 1.8; docs/proving.md); BEM's costs 3-5x, so it keeps the first-order test for now.
         rigorous = self.name == "mfs"
