@@ -77,7 +77,9 @@ Theta's edge line) must stay within the band (`BAND`): sampled, not
 proved, as there.
 
 Left to other arguments: the band between the polygon's boundary and Gamma
-(BEM: `offset`; MFS: nothing), and vertices where the boundary data force
+(BEM: `offset`; MFS: nothing, unless the caller moves Gamma inwards after a
+failure on the polygon itself, as `SmoothMap.boundary_certificate` does),
+and vertices where the boundary data force
 det J -> 0 (`degenerate_vertices`): the caller keeps the cell certificate
 with its left-out balls for those maps.
 """
@@ -91,6 +93,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..boundary import nearest_edge
+from ..grid import inside_polygon
 from .certificate import BAND, BAND_RELATIVE, OUTSIDE
 
 __all__ = ["MAX_PIECES", "MIN_PIECE", "BoundaryCertificate", "certify_boundary", "inner_offset"]
@@ -146,6 +149,13 @@ class BoundaryCertificate:
     tangled : int
         Pieces of the smallest length whose image could not be told apart
         from another's (among ``failed``).
+    where : (float, float) or None
+        A point of Gamma where a piece failed (the centre of the worst fold
+        if any), in the polygon's coordinates.
+    closer : int
+        Failures of an attempt with Gamma closer to the boundary, when the
+        caller moved it inwards (`SmoothMap.boundary_certificate` for MFS:
+        the polygon itself first); 0 otherwise.
     """
 
     failed: int
@@ -157,6 +167,13 @@ class BoundaryCertificate:
     folds: int = 0
     outside: int = 0
     tangled: int = 0
+    where: tuple[float, float] | None = None
+    closer: int = 0
+
+    @property
+    def ok(self) -> bool:
+        """True when the map is proved (``failed`` is 0)."""
+        return self.failed == 0
 
 
 def inner_offset(vertices: NDArray[np.float64], delta: float) -> NDArray[np.float64] | None:
@@ -216,13 +233,27 @@ def inner_offset(vertices: NDArray[np.float64], delta: float) -> NDArray[np.floa
     if ((moved * e).sum(axis=1) <= 0).any():
         return None
     g = np.concatenate(pts)
-    if _self_crossing(g):
+    if _self_crossing(g) or _crossing(g, v) or not inside_polygon(g[:1], v)[0]:
         return None
     return g
 
 
 def _area2(v: NDArray[np.float64]) -> float:
     return float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
+
+
+def _crossing(g: NDArray[np.float64], v: NDArray[np.float64]) -> bool:
+    """Whether an edge of the closed polyline g meets (or touches) an edge of the polygon v."""
+    a, b = g, np.roll(g, -1, axis=0)
+    for i in range(len(v)):  # loop over the polygon's edges, vectorised over g's
+        p, q = v[i], v[(i + 1) % len(v)]
+        d1 = (q[0] - p[0]) * (a[:, 1] - p[1]) - (q[1] - p[1]) * (a[:, 0] - p[0])
+        d2 = (q[0] - p[0]) * (b[:, 1] - p[1]) - (q[1] - p[1]) * (b[:, 0] - p[0])
+        d3 = (b[:, 0] - a[:, 0]) * (p[1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (p[0] - a[:, 0])
+        d4 = (b[:, 0] - a[:, 0]) * (q[1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (q[0] - a[:, 0])
+        if ((d1 * d2 <= 0) & (d3 * d4 <= 0)).any():
+            return True
+    return False
 
 
 def _self_crossing(g: NDArray[np.float64]) -> bool:
@@ -290,7 +321,7 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
     centre = w.mean(axis=0)
     c0 = complex(centre[0], centre[1])
     # starting pieces: every edge of Gamma cut into equal pieces of at most START_PIECE * size;
-    # a piece is (start, end, key) with key its position along Gamma (edge + fraction) for the ordering
+    # a piece is (edge, t0, t1): the part of Gamma's edge between those parameters
     ge = np.roll(gamma, -1, axis=0) - gamma
     length = np.hypot(ge[:, 0], ge[:, 1])
     count = np.maximum(1, np.ceil(length / (START_PIECE * size))).astype(np.int64)
@@ -306,8 +337,8 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
     noise = VALUE_ERROR * tsize
     # the pieces kept so far (proved one by one), column-wise
     keep = {k: [] for k in ("edge", "t0", "t1", "p0", "w0", "d0", "dd", "r")}
-    failed = folds = outside = checked = 0
-    stuck = 0  # pieces of the smallest length in a pair of capsules that could not be told apart
+    failed = folds = outside = checked = tangled = 0
+    winding = where = None
     for _ in range(MAX_ROUNDS):
         while len(edge):  # condition 1 (and the tangent's direction), splitting what is not proved
             a = gamma[edge] + t0[:, None] * ge[edge]
@@ -344,6 +375,9 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
             outside += int((far & ~fold).sum())
             failed += int(bad.sum() + lost.sum())
             if failed:
+                k = np.flatnonzero(bad | lost)
+                worst = k[np.argmin((np.abs(p0) - np.abs(q0))[k])] if fold.any() else k[0]
+                where = (float(x0[worst, 0]), float(x0[worst, 1]))
                 break
             k = np.flatnonzero(proved)
             for name, col in (("edge", edge), ("t0", t0), ("t1", t1), ("p0", p0), ("d0", d0), ("dd", dd), ("r", r)):
@@ -363,14 +397,22 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
         order = np.lexsort((col["t0"], col["edge"]))
         col = {name: c[order] for name, c in col.items()}
         keep = {name: [c] for name, c in col.items()}
+        if winding is None:
+            # condition 2, once every piece has condition 1 (later splits cannot change it):
+            # consecutive centres, cyclically, whose principal increments add up to the exact change
+            p = col["p0"]
+            winding = int(round(float(np.angle(np.roll(p, -1) / p).sum()) / (2 * math.pi)))
+            if winding != 0:  # P has a zero inside: det J <= 0 there
+                failed += 1
+                break
         # condition 3: pairs of pieces whose images' capsules meet, each resolved by a chain
         unresolved = _crossing_candidates(col, noise)
         if not unresolved.size:
             break
         small = 2.0 * col["r"][unresolved] <= floor
         if small.any() or checked + 2 * unresolved.size > MAX_PIECES:
-            stuck = int(small.sum()) or int(unresolved.size)
-            failed += stuck
+            tangled = int(small.sum()) or int(unresolved.size)
+            failed += tangled
             break
         rest = np.ones(len(col["r"]), dtype=bool)
         rest[unresolved] = False
@@ -379,16 +421,13 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
     else:
         failed += 1  # MAX_ROUNDS of splitting did not tell the capsules apart
     if failed:
-        return BoundaryCertificate(failed, checked, 0, None, None, offset, folds, outside, stuck)
-    p = col["p0"]
-    # consecutive centres (cyclically): the principal increments add up to the exact change
-    winding = int(round(float(np.angle(np.roll(p, -1) / p).sum()) / (2 * math.pi)))
+        return BoundaryCertificate(failed, checked, 0, winding, None, offset, folds, outside, tangled, where)
     wv = col["w0"] - c0
     reach = np.abs(col["d0"]) * col["r"] + col["dd"] * col["r"] + noise
     turns = None
     if (reach < np.abs(wv)).all():  # every piece's image keeps off Theta's centre: its turns, for the record
         turns = int(round(sign * float(np.angle(np.roll(wv, -1) / wv).sum()) / (2 * math.pi)))
-    return BoundaryCertificate(int(winding != 0), checked, len(p), winding, turns, offset, folds, outside, 0)
+    return BoundaryCertificate(0, checked, len(wv), winding, turns, offset, 0, 0, 0)
 
 
 def _halves(edge, t0, t1):
@@ -461,7 +500,7 @@ def _crossing_candidates(col, noise: float) -> NDArray[np.intp]:
     pts = np.stack([w0.real, w0.imag], axis=1)
     tree = cKDTree(pts)
     # a meeting pair is within ext_i + ext_j <= 2 max(ext_i, ext_j): found from its larger capsule
-    found = tree.query_ball_point(pts, 2.0 * extent)
+    found = tree.query_ball_point(pts, 2.0 * extent * (1.0 + 1e-9) + 1e-300)
     count = np.fromiter((len(f) for f in found), dtype=np.int64, count=n)
     i = np.repeat(np.arange(n), count)
     jj = np.fromiter((x for f in found for x in f), dtype=np.int64, count=int(count.sum()))
