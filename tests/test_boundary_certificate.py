@@ -242,3 +242,25 @@ def test_degenerate_vertices_keep_the_cell_certificate():
     phi = MFS.build(poly, regular_theta(poly, poly, opts), opts)
     assert phi.boundary_certificate is None
     assert phi.certify().checked == phi.cell_certificate.checked
+
+
+def test_an_mfs_fold_on_the_polygon_itself_is_real_and_the_map_is_proved_inside_instead():
+    """A generated zigzag at the default 256 sites folds on its boundary next to a reflex vertex (under 0.001 px
+    from it, where the cells never looked): the certificate on the polygon names a point with det J <= 0 by the
+    map's own Jacobian, and the default proves the map 0.01 px inside instead (BEM's Gamma), counting the failure."""
+    from warpcli.maps.certificate import band_floor
+
+    v = SHAPES["zigzag"](np.random.default_rng(11))
+    poly = Polygon(v, name="zigzag")
+    opts = MapOptions(method="mfs", check=False)
+    phi = MFS.build(poly, regular_theta(poly, poly, opts), opts)
+    sign = phi.theta.orientation * np.sign(poly.signed_area)
+    whole = certify_boundary(phi.solution, v, phi.theta, sign, 0.0)
+    assert whole.folds and not whole.ok
+    j = phi.solution.jacobian(np.array([whole.where]))
+    assert sign * np.linalg.det(j[0]) <= 0
+    edge, _, dist = nearest_edge(np.array([whole.where]), v)
+    assert dist[0] < 1e-9 * 300 and np.hypot(*(v - whole.where).T).min() < 0.05  # on an edge, next to a vertex
+    cert = phi.boundary_certificate
+    assert cert.ok and cert.offset == band_floor(phi._size) and cert.closer == whole.failed
+    assert phi.certify().ok
