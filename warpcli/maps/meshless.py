@@ -13,10 +13,13 @@ analytic derivatives; this module makes them `ThetaMap`s:
   ||x - phi(y)||^2 with the analytic Jacobian, constrained to the polygon
   (`newton.invert`); points of Theta's boundary go through the exact
   inverse boundary map;
-- certify: `warpcli.maps.certificate`, det J and the values cell by cell,
-  refined along every edge and in every corner, with a sub-band ball left
-  out only at vertices where this map's boundary data (its behaviour,
-  its conditions) force det J -> 0 (a smooth map has no
+- certify: `warpcli.maps.boundary_certificate`, a proof from one curve
+  (the polygon for MFS, 0.01 px inside it for BEM) that det J > 0 and the
+  map is one-to-one inside it (maximum modulus of the dilatation B/A, the
+  argument principle, a simple image curve); where the boundary data
+  themselves force det J -> 0 at a vertex (its behaviour, its conditions),
+  `warpcli.maps.certificate` instead: det J and the values cell by cell,
+  with a sub-band ball left out at such vertices (a smooth map has no
   triangles to check; Radó-Kneser-Choquet holds for the exact map, and the
   approximations converge to it as m grows).
 """
@@ -26,7 +29,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -40,7 +43,8 @@ from ..files import format_bytes
 from ..grid import inside_polygon
 from ..polygon import Polygon
 from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, slide, sliding_tables
-from .certificate import CellCertificate, certify_cells, degenerate_vertices, vertex_ball
+from .boundary_certificate import BoundaryCertificate, certify_boundary
+from .certificate import CellCertificate, band_floor, certify_cells, degenerate_vertices, vertex_ball
 from .theta import Theta
 
 #: Points closer than this (times the polygon's size) to its boundary take the exact boundary data.
@@ -60,6 +64,14 @@ MAX_AUTO_NODES = 2048
 #: m = 4800, 512 x 512): a fit with m nodes is refused, or not attempted as a
 #: refit, when this times m^2 is more than `warpcli.budget.max_image_bytes`.
 FIT_BYTES_PER_NODE2 = {"bem": 220, "mfs": 300}
+
+#: Methods certified by `certify_boundary` (rigorous, and 0.3-0.5x the first-order cell test's time for BEM,
+#: 0.02-0.15x the rigorous cells' for MFS on the bench pairs; docs/proving.md), unless a vertex is
+#: degenerate; the others by the cell certificate (`certify_cells`).
+BOUNDARY_CERTIFIED = frozenset({"bem", "mfs"})
+#: An MFS map whose boundary certificate fails with Gamma the polygon itself is certified again with
+#: Gamma `band_floor` inside (BEM's), and accepted if that holds (the band is then not proved).
+MFS_INNER_FALLBACK = True
 
 log = logging.getLogger("warpcli")
 
@@ -227,8 +239,38 @@ class SmoothMap(ThetaMap):
 
     @cached_property
     def _certificate(self) -> Certificate:
-        cells = self.cell_certificate
-        return Certificate(cells.failed, cells.checked, "samples")
+        proof = self.boundary_certificate if self.name in BOUNDARY_CERTIFIED else None
+        if proof is None:
+            proof = self.cell_certificate
+        return Certificate(proof.failed, proof.checked, "samples")
+
+    @cached_property
+    def _degenerate(self) -> NDArray[np.bool_]:
+        return degenerate_vertices(self.polygon.points, self.theta.points, self.boundary_to_theta, self.conditions == "mixed")
+
+    @cached_property
+    def boundary_certificate(self) -> BoundaryCertificate | None:
+        """`warpcli.maps.boundary_certificate.certify_boundary`, computed once; None where the boundary data
+        force det J -> 0 at a vertex (`degenerate_vertices`: those maps keep the cell certificate and its balls).
+
+        Gamma is the polygon's boundary for MFS (its sites lie outside: the closed form is analytic on the
+        closed polygon) and a curve `band_floor` inside for BEM (singular at its boundary nodes); an MFS map
+        that fails on its polygon is tried again with BEM's Gamma (`MFS_INNER_FALLBACK`).
+        """
+        if self._degenerate.any():
+            return None
+        sign = self.theta.orientation * np.sign(self.polygon.signed_area)
+        inner = band_floor(self._size)
+        if self.name == "mfs":
+            whole = certify_boundary(self.solution, self.polygon.points, self.theta, sign, 0.0)
+            if whole.ok or not MFS_INNER_FALLBACK:
+                return whole
+            # MFS folds at the boundary itself next to some reflex vertices (0.0004-0.04 px from the
+            # vertex, under 0.001 px deep at 1 MP), at every m: proved deeper than BEM's band instead,
+            # the failures on the boundary counted
+            moved = certify_boundary(self.solution, self.polygon.points, self.theta, sign, inner)
+            return replace(moved, closer=whole.failed) if moved.ok else whole
+        return certify_boundary(self.solution, self.polygon.points, self.theta, sign, inner)
 
     @cached_property
     def cell_certificate(self) -> CellCertificate:
@@ -236,8 +278,7 @@ class SmoothMap(ThetaMap):
         ask), with balls of at most `vertex_ball` left out around the `degenerate_vertices`."""
         sign = self.theta.orientation * np.sign(self.polygon.signed_area)
         near = ON_BOUNDARY * self._size
-        slow = degenerate_vertices(self.polygon.points, self.theta.points, self.boundary_to_theta, self.conditions == "mixed")
-        balls = np.where(slow, vertex_ball(self._size), 0.0)
+        balls = np.where(self._degenerate, vertex_ball(self._size), 0.0)
         # MFS: the rigorous cell bound (1.2-2.3x the first-order test's time on the bench pairs, median
         # 1.8; docs/proving.md); BEM's costs 3-5x, so it keeps the first-order test for now.
         rigorous = self.name == "mfs"

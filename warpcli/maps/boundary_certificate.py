@@ -1,0 +1,595 @@
+"""The boundary certificate of a smooth map onto Theta (BEM, MFS): det J > 0 and one-to-one, proved on one curve.
+
+Write the map as phi = u + i v (harmonic where the closed form is defined)
+and let A = phi_z, B = conj(phi_zbar): both are analytic there and det J =
+|A|^2 - |B|^2 (`warpcli.maps.certificate.lower_bound` uses the same
+notation). Let Gamma be a closed polygonal curve, simple and
+counter-clockwise, bounding a region R whose closure lies where A and B are
+analytic (MFS: the polygon itself, its sites are outside; BEM: a curve
+`offset` inside the polygon, `inner_offset`, its closed form being singular
+at the boundary nodes). Write P for A and Q for B when the map should
+preserve orientation (``sign`` +1), the other way round when it should
+reverse it. If
+
+1. |P| > |Q| at every point of Gamma, and
+2. the winding number of P along Gamma is 0,
+
+then P has no zero in R (argument principle: P is analytic, so the number
+of its zeros inside is its winding number along Gamma), omega = Q / P is
+analytic in R and continuous on its closure, |omega| < 1 on Gamma, hence
+|omega| < 1 on all of R (maximum modulus principle) and sign * det J =
+|P|^2 (1 - |omega|^2) > 0 on the closure of R. (Chen & Weber, "Bounded
+distortion harmonic mappings in the plane", ACM Trans. Graph. 34(4), 2015,
+build their injectivity criterion on the same argument: a harmonic map
+whose f_z does not vanish and whose dilatation |f_zbar / f_z| is below 1 on
+the boundary is locally injective inside.) If moreover
+
+3. phi(Gamma) is a simple closed curve,
+
+then phi is one-to-one on R: for y off phi(Gamma), the number of
+pre-images of y in R, each counted with the sign of det J (+1 everywhere),
+is the degree of phi on R at y, which is the winding number of phi(Gamma)
+around y, 0 or +-1 for a simple curve, and never -1 since no pre-image
+counts negatively (the degree argument of docs/proving.md, for a smooth
+map). So phi maps R one-to-one onto the inside of phi(Gamma).
+
+Each condition is proved piece by piece along Gamma, rigorously up to the
+rounding bounds of `ClosedForm.derivative_bounds`. A piece is a segment of
+Gamma of length 2 r, centre x0, unit direction e; at x0 the closed form
+gives phi, J and the Hessian (A0, B0, A1 = A'(x0), B1), and
+`ClosedForm.derivative_bounds` bounds the Taylor remainders rho_A, rho_B
+over the disc of radius r and the evaluation error eta. On the piece:
+
+- |P| >= |P0| - |P1| r - rho_P - eta and |Q| <= |Q0| + |Q1| r + rho_Q + eta:
+  condition 1 holds where the first exceeds the second;
+- P then stays in a disc around P0 that excludes 0, so its argument moves
+  by less than pi / 2 from its value at x0, and the change between two
+  consecutive centres is the principal value of arg(P0' / P0): their sum
+  is the winding number (condition 2), exactly;
+- the tangent of the image, D = dphi/ds = A e + conj(B e), stays within dD
+  = (|A1| + |B1|) r + rho_A + rho_B + 2 eta of D0, so (with dD < |D0|) its
+  direction within asin(dD / |D0|) of D0's, and phi(x0 + s e) within dD |s|
+  of phi(x0) + s D0: the piece's image lies in a capsule (the segment
+  phi(x0) +- r D0 thickened by dD r).
+
+Condition 3 from the capsules: two pieces whose capsules do not meet have
+disjoint images; two pieces whose capsules meet are joined along Gamma by a
+chain of pieces (either way round); if the tangent directions of a chain's
+pieces all lie in an open half-plane {D : u . D > 0}, then u . phi is
+strictly increasing along the chain and the two pieces' images meet only
+where the chain joins them (nowhere, unless they are neighbours). A pair
+of pieces resolved neither way splits both (their capsules shrink); every
+pair resolved proves phi(Gamma) simple. The capsules' candidate pairs come
+from a k-d tree (`scipy.spatial.cKDTree`); the chains' ranges of tangent
+directions from sparse tables, O(1) per pair.
+
+A piece that is not proved is split in two, down to pieces of `MIN_PIECE`
+of the polygon's size; a piece not proved there fails: the certificate
+proves the map or refuses it, nothing is left "unproved". A piece whose
+centre has sign * det J <= 0 fails at once (a fold of the closed form, not
+a weakness of the bound).
+
+Values outside Theta: phi maps R onto the inside of phi(Gamma), so a value
+outside Theta comes from near Gamma; at every piece's centre the cell
+certificate's measure (the distance to the polygon's boundary plus how
+far, to first order, the point must move for its value to come back onto
+Theta's edge line) must stay within the band (`BAND`): sampled, not
+proved, as there.
+
+Left to other arguments: the band between the polygon's boundary and Gamma
+(BEM: `offset`; MFS: nothing, unless the caller moves Gamma inwards after a
+failure on the polygon itself, as `SmoothMap.boundary_certificate` does),
+and vertices where the boundary data force
+det J -> 0 (`degenerate_vertices`): the caller keeps the cell certificate
+with its left-out balls for those maps.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..boundary import nearest_edge
+from ..grid import inside_polygon
+from .certificate import BAND, BAND_RELATIVE, OUTSIDE
+
+__all__ = ["MAX_PIECES", "MIN_PIECE", "BoundaryCertificate", "certify_boundary", "inner_offset"]
+
+#: The polygonal arcs around reflex vertices (`inner_offset`) turn by at most this per chord (radians).
+ARC_STEP = math.pi / 32
+#: Starting pieces along Gamma are no longer than this fraction of the polygon's size.
+START_PIECE = 1.0 / 256
+#: Pieces are split down to this fraction of the polygon's size; one not proved there fails.
+MIN_PIECE = 1e-9
+#: Evaluations at most; beyond, the pieces still unproved fail.
+MAX_PIECES = 2_000_000
+#: Rounding of the value phi(x0) relative to Theta's size (sums of O(m) terms; the bounds' eta covers A, B).
+VALUE_ERROR = 1e-11
+#: Rounds of splitting by the bounds alone before an evaluation (`_graded`).
+GRADING_ROUNDS = 30
+#: Rounds of the simplicity test (each splits the pieces in pairs it could not resolve).
+MAX_ROUNDS = 40
+
+
+@dataclass(frozen=True)
+class BoundaryCertificate:
+    """What `certify_boundary` found.
+
+    Attributes
+    ----------
+    failed : int
+        0 when the map is proved one-to-one with det J > 0 on the region
+        Gamma bounds. Otherwise at least 1: pieces of Gamma where condition
+        1 fails at the centre or could not be proved at the smallest
+        length, pieces in pairs whose images could not be told apart, or 1
+        for a winding number of P that is not 0 (a zero of P inside).
+    checked : int
+        Evaluations of the closed form (pieces, all rounds).
+    pieces : int
+        Pieces of Gamma in the end (0 when a piece failed).
+    winding : int or None
+        The winding number of P along Gamma: its zeros inside (None when a
+        piece failed: not computed).
+    turns : int or None
+        How many times phi(Gamma) goes around Theta's centre in the map's
+        orientation (1 for a proved map; None when not computed, or when a
+        piece's image comes near the centre). For the record: not needed
+        by the proof.
+    offset : float
+        Gamma's distance inside the polygon (0: the boundary itself); the
+        band between is not proved.
+    folds : int
+        Pieces whose centre has sign * det J <= 0 (among ``failed``).
+    outside : int
+        Pieces whose centre's value leaves Theta beyond the band (among
+        ``failed``).
+    tangled : int
+        Pieces of the smallest length whose image could not be told apart
+        from another's (among ``failed``).
+    where : (float, float) or None
+        A point of Gamma where a piece failed (the centre of the worst fold
+        if any), in the polygon's coordinates.
+    closer : int
+        Failures of an attempt with Gamma closer to the boundary, when the
+        caller moved it inwards (`SmoothMap.boundary_certificate` for MFS:
+        the polygon itself first); 0 otherwise.
+    """
+
+    failed: int
+    checked: int
+    pieces: int
+    winding: int | None
+    turns: int | None
+    offset: float
+    folds: int = 0
+    outside: int = 0
+    tangled: int = 0
+    where: tuple[float, float] | None = None
+    closer: int = 0
+
+    @property
+    def ok(self) -> bool:
+        """True when the map is proved (``failed`` is 0)."""
+        return self.failed == 0
+
+
+def inner_offset(vertices: NDArray[np.float64], delta: float) -> NDArray[np.float64] | None:
+    """The polygon moved ``delta`` inwards, counter-clockwise: mitred at convex corners, rounded at reflex ones; None if not simple.
+
+    Each edge moves delta along its inward normal n. At a convex vertex the
+    two moved edges meet at v + delta (n_prev + n) / (1 + n_prev . n); at a
+    reflex vertex they are joined by a polygonal arc around v at radius
+    delta (`ARC_STEP` radians per chord, so that Gamma turns there by small
+    steps: a mitred reflex corner turns by up to pi at once, and a smooth
+    map's image of it turns back by as much, which condition 3 of
+    `certify_boundary` cannot accept). The result is checked: every moved
+    edge keeps its direction and no two of its edges that do not share a
+    vertex meet, so it is a simple polygon.
+
+    Parameters
+    ----------
+    vertices : (n, 2) ndarray of float
+        The polygon, either orientation.
+    delta : float
+        The distance; 0 returns the polygon counter-clockwise.
+
+    Returns
+    -------
+    (k, 2) ndarray of float or None
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    if _area2(v) < 0:
+        v = v[::-1]
+    if delta == 0:
+        return v.copy()
+    n = len(v)
+    e = np.roll(v, -1, axis=0) - v
+    nrm = np.stack([-e[:, 1], e[:, 0]], axis=1) / np.hypot(e[:, 0], e[:, 1])[:, None]  # inward (left of a ccw edge)
+    prev = np.roll(nrm, 1, axis=0)
+    cos = (prev * nrm).sum(axis=1)
+    turn = np.roll(e, 1, axis=0)[:, 0] * e[:, 1] - np.roll(e, 1, axis=0)[:, 1] * e[:, 0]  # < 0: reflex
+    pts, first, last = [], np.zeros((n, 2)), np.zeros((n, 2))
+    for i in range(n):  # loop over vertices: one point (convex) or an arc (reflex)
+        if turn[i] >= 0:
+            if 1.0 + cos[i] < 1e-12:
+                return None
+            g = v[i] + delta * (prev[i] + nrm[i]) / (1.0 + cos[i])
+            pts.append(g[None])
+            first[i] = last[i] = g
+        else:
+            a0 = math.atan2(prev[i, 1], prev[i, 0])
+            sweep = math.atan2(prev[i, 0] * nrm[i, 1] - prev[i, 1] * nrm[i, 0], float(prev[i] @ nrm[i]))
+            sweep = sweep if sweep < 0 else sweep - 2 * math.pi  # clockwise, from n_prev to n
+            k = max(1, math.ceil(abs(sweep) / ARC_STEP))
+            ang = a0 + sweep * np.arange(k + 1) / k
+            arc = v[i] + delta * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+            pts.append(arc)
+            first[i], last[i] = arc[0], arc[-1]
+    # moved edge i runs from vertex i's last point to vertex i + 1's first
+    moved = np.roll(first, -1, axis=0) - last
+    if ((moved * e).sum(axis=1) <= 0).any():
+        return None
+    g = np.concatenate(pts)
+    if _self_crossing(g) or _crossing(g, v) or not inside_polygon(g[:1], v)[0]:
+        return None
+    return g
+
+
+def _area2(v: NDArray[np.float64]) -> float:
+    return float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
+
+
+def _crossing(g: NDArray[np.float64], v: NDArray[np.float64]) -> bool:
+    """Whether an edge of the closed polyline g meets (or touches) an edge of the polygon v."""
+    a, b = g, np.roll(g, -1, axis=0)
+    for i in range(len(v)):  # loop over the polygon's edges, vectorised over g's
+        p, q = v[i], v[(i + 1) % len(v)]
+        d1 = (q[0] - p[0]) * (a[:, 1] - p[1]) - (q[1] - p[1]) * (a[:, 0] - p[0])
+        d2 = (q[0] - p[0]) * (b[:, 1] - p[1]) - (q[1] - p[1]) * (b[:, 0] - p[0])
+        d3 = (b[:, 0] - a[:, 0]) * (p[1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (p[0] - a[:, 0])
+        d4 = (b[:, 0] - a[:, 0]) * (q[1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (q[0] - a[:, 0])
+        if ((d1 * d2 <= 0) & (d3 * d4 <= 0)).any():
+            return True
+    return False
+
+
+def _self_crossing(g: NDArray[np.float64]) -> bool:
+    """Whether two edges of the closed polyline g that do not share a vertex meet (O(n^2), vectorised per edge)."""
+    n = len(g)
+    a, b = g, np.roll(g, -1, axis=0)
+    for i in range(n):  # loop over edges, vectorised over the others
+        j = np.arange(i + 2, n)
+        if i == 0:
+            j = j[j != n - 1]
+        if not j.size:
+            continue
+        p, q, c, d = a[i], b[i], a[j], b[j]
+
+        def cross(o, s, t):
+            return (s[..., 0] - o[..., 0]) * (t[..., 1] - o[..., 1]) - (s[..., 1] - o[..., 1]) * (t[..., 0] - o[..., 0])
+
+        d1, d2 = cross(p, q, c), cross(p, q, d)
+        d3, d4 = cross(c, d, p), cross(c, d, q)
+        meet = (d1 * d2 <= 0) & (d3 * d4 <= 0)
+        # collinear edges (all four signs 0) meet only if their projections overlap
+        line = (d1 == 0) & (d2 == 0)
+        if line.any():
+            u = q - p
+            s0, s1 = (c[line] - p) @ u, (d[line] - p) @ u
+            meet[line] = (np.maximum(s0, s1) >= 0) & (np.minimum(s0, s1) <= u @ u)
+        if meet.any():
+            return True
+    return False
+
+
+def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0) -> BoundaryCertificate:
+    """Prove det J > 0 and injectivity on the region bounded by a curve `offset` inside the polygon.
+
+    See the module's docstring for what is proved and how.
+
+    Parameters
+    ----------
+    solution : ClosedForm
+        ``value_jacobian_hessian`` and ``derivative_bounds`` of the map;
+        analytic on a neighbourhood of Gamma and of the region it bounds.
+    vertices : (n, 2) ndarray of float
+        The polygon.
+    theta : Theta
+        Where its values must lie (convex).
+    sign : float
+        +1 or -1: the sign det J has when the map preserves the orientation
+        it should (Theta's orientation times the polygon's).
+    offset : float
+        Gamma's distance inside the polygon (`inner_offset`); 0: the
+        polygon's boundary (MFS).
+
+    Returns
+    -------
+    BoundaryCertificate
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    size = float(np.ptp(v, axis=0).max())
+    band = min(BAND, BAND_RELATIVE * size)
+    gamma = inner_offset(v, offset)
+    if gamma is None:  # the offset curve is not simple: nothing proved
+        return BoundaryCertificate(1, 0, 0, None, None, offset)
+    w = theta.points
+    tsize = float(np.ptp(w, axis=0).max())
+    centre = w.mean(axis=0)
+    c0 = complex(centre[0], centre[1])
+    # starting pieces: every edge of Gamma cut into equal pieces of at most START_PIECE * size;
+    # a piece is (edge, t0, t1): the part of Gamma's edge between those parameters
+    ge = np.roll(gamma, -1, axis=0) - gamma
+    length = np.hypot(ge[:, 0], ge[:, 1])
+    count = np.maximum(1, np.ceil(length / (START_PIECE * size))).astype(np.int64)
+    edge = np.repeat(np.arange(len(gamma)), count)
+    first = np.concatenate([[0], np.cumsum(count)[:-1]])
+    idx = np.arange(int(count.sum())) - np.repeat(first, count)
+    t0 = idx / count[edge]
+    t1 = (idx + 1) / count[edge]
+    floor = MIN_PIECE * size
+    nd = np.roll(w, -1, axis=0) - w
+    nd = nd / np.hypot(nd[:, 0], nd[:, 1])[:, None]
+    slack = OUTSIDE * tsize
+    noise = VALUE_ERROR * tsize
+    # the pieces kept so far (proved one by one), column-wise
+    keep = {k: [] for k in ("edge", "t0", "t1", "p0", "w0", "d0", "dd", "r")}
+    failed = folds = outside = checked = tangled = 0
+    winding = where = None
+    for _ in range(MAX_ROUNDS):
+        while len(edge):  # condition 1 (and the tangent's direction), splitting what is not proved
+            a = gamma[edge] + t0[:, None] * ge[edge]
+            b = gamma[edge] + t1[:, None] * ge[edge]
+            x0 = 0.5 * (a + b)
+            r = 0.5 * (t1 - t0) * length[edge]
+            val, j, h = solution.value_jacobian_hessian(x0)
+            bound = solution.derivative_bounds(x0, r)
+            checked += len(x0)
+            eta, rho_a, rho_b = bound[:, 0], bound[:, 1], bound[:, 2]
+            ux, uy, vx, vy = j[:, 0, 0], j[:, 0, 1], j[:, 1, 0], j[:, 1, 1]
+            a0 = 0.5 * ((ux + vy) + 1j * (vx - uy))
+            b0 = 0.5 * ((ux - vy) - 1j * (vx + uy))
+            uxx, uxy, vxx, vxy = h[:, 0, 0, 0], h[:, 0, 0, 1], h[:, 1, 0, 0], h[:, 1, 0, 1]
+            a1 = np.abs(0.5 * ((uxx + vxy) + 1j * (vxx - uxy)))
+            b1 = np.abs(0.5 * ((uxx - vxy) - 1j * (vxx + uxy)))
+            if sign > 0:
+                p0, p1, rp, q0, q1, rq = a0, a1, rho_a, b0, b1, rho_b
+            else:
+                p0, p1, rp, q0, q1, rq = b0, b1, rho_b, a0, a1, rho_a
+            e = (ge[edge, 0] + 1j * ge[edge, 1]) / length[edge]
+            d0 = a0 * e + np.conj(b0 * e)
+            with np.errstate(invalid="ignore", over="ignore"):
+                low = np.abs(p0) - p1 * r - rp - eta
+                high = np.abs(q0) + q1 * r + rq + eta
+                dd = (a1 + b1) * r + rho_a + rho_b + 2.0 * eta
+                proved = (low > high) & (dd < np.abs(d0))  # condition 1; the tangent's direction known
+            fold = ~(np.abs(p0) > np.abs(q0))
+            far = _outside(val, j, x0, v, w, nd, theta.orientation, slack, band)
+            bad = fold | far
+            proved &= ~bad
+            lost = ~proved & ~bad & (2.0 * r <= floor)
+            folds += int(fold.sum())
+            outside += int((far & ~fold).sum())
+            failed += int(bad.sum() + lost.sum())
+            if failed:
+                k = np.flatnonzero(bad | lost)
+                worst = k[np.argmin((np.abs(p0) - np.abs(q0))[k])] if fold.any() else k[0]
+                where = (float(x0[worst, 0]), float(x0[worst, 1]))
+                break
+            k = np.flatnonzero(proved)
+            for name, col in (("edge", edge), ("t0", t0), ("t1", t1), ("p0", p0), ("d0", d0), ("dd", dd), ("r", r)):
+                keep[name].append(col[k])
+            keep["w0"].append(val[k, 0] + 1j * val[k, 1])
+            split = np.flatnonzero(~proved)
+            if checked + 2 * split.size > MAX_PIECES:
+                failed += int(split.size)
+                break
+            edge, t0, t1 = _graded(
+                solution, gamma, ge, length, floor, edge[split], t0[split], t1[split],
+                (np.abs(p0) - np.abs(q0))[split], (p1 + q1)[split], np.abs(d0)[split], (a1 + b1)[split],
+            )  # fmt: skip
+        if failed:
+            break
+        col = {name: np.concatenate(parts) for name, parts in keep.items()}
+        order = np.lexsort((col["t0"], col["edge"]))
+        col = {name: c[order] for name, c in col.items()}
+        keep = {name: [c] for name, c in col.items()}
+        if winding is None:
+            # condition 2, once every piece has condition 1 (later splits cannot change it):
+            # consecutive centres, cyclically, whose principal increments add up to the exact change
+            p = col["p0"]
+            winding = int(round(float(np.angle(np.roll(p, -1) / p).sum()) / (2 * math.pi)))
+            if winding != 0:  # P has a zero inside: det J <= 0 there
+                failed += 1
+                break
+        # condition 3: pairs of pieces whose images' capsules meet, each resolved by a chain
+        unresolved = _crossing_candidates(col, noise)
+        if not unresolved.size:
+            break
+        small = 2.0 * col["r"][unresolved] <= floor
+        if small.any() or checked + 2 * unresolved.size > MAX_PIECES:
+            tangled = int(small.sum()) or int(unresolved.size)
+            failed += tangled
+            break
+        rest = np.ones(len(col["r"]), dtype=bool)
+        rest[unresolved] = False
+        keep = {name: [c[rest]] for name, c in col.items()}
+        edge, t0, t1 = _halves(col["edge"][unresolved], col["t0"][unresolved], col["t1"][unresolved])
+    else:
+        failed += 1  # MAX_ROUNDS of splitting did not tell the capsules apart
+    if failed:
+        return BoundaryCertificate(failed, checked, 0, winding, None, offset, folds, outside, tangled, where)
+    wv = col["w0"] - c0
+    reach = np.abs(col["d0"]) * col["r"] + col["dd"] * col["r"] + noise
+    turns = None
+    if (reach < np.abs(wv)).all():  # every piece's image keeps off Theta's centre: its turns, for the record
+        turns = int(round(sign * float(np.angle(np.roll(wv, -1) / wv).sum()) / (2 * math.pi)))
+    return BoundaryCertificate(0, checked, len(wv), winding, turns, offset, 0, 0, 0)
+
+
+def _halves(edge, t0, t1):
+    """Each piece (edge, t0, t1) split in two."""
+    mid = 0.5 * (t0 + t1)
+    return np.repeat(edge, 2), np.stack([t0, mid], axis=1).ravel(), np.stack([mid, t1], axis=1).ravel()
+
+
+def _graded(solution, gamma, ge, length, floor, edge, t0, t1, margin, slope, tangent, bend):
+    """The pieces (edge, t0, t1) that were not proved, split where the remainder bounds alone say they must be.
+
+    Evaluating the closed form costs BEM a pass of its treecode (~0.1 s for
+    300 points next to the boundary), its bounds far less: each piece is
+    split in two, then its parts again while `ClosedForm.derivative_bounds`
+    says that, with the parent's margin |P0| - |Q0| and first derivatives,
+    half that margin would not be enough (a prediction: what is proved is
+    decided on evaluation). So a piece next to a node is cut down to the
+    node's scale in one evaluation round instead of ten.
+    """
+    edge, t0, t1 = _parts(edge, t0, t1, np.full(len(edge), 2))
+    owner = np.repeat(np.arange(len(margin)), 2)
+    done_e, done_0, done_1 = [], [], []
+    for _ in range(GRADING_ROUNDS):  # each halves what the bounds alone cannot accept
+        x0 = gamma[edge] + (0.5 * (t0 + t1))[:, None] * ge[edge]
+        r = 0.5 * (t1 - t0) * length[edge]
+        bound = solution.derivative_bounds(x0, r)
+        with np.errstate(invalid="ignore", over="ignore"):
+            loss = slope[owner] * r + bound[:, 1] + bound[:, 2] + 2.0 * bound[:, 0]
+            ok = (loss < 0.5 * margin[owner]) & (bend[owner] * r + bound[:, 1] + bound[:, 2] < 0.5 * tangent[owner])
+        ok |= ~(margin[owner] > 0) | (2.0 * r <= 2.0 * floor)  # a fold, or as small as pieces get: evaluate
+        done_e.append(edge[ok])
+        done_0.append(t0[ok])
+        done_1.append(t1[ok])
+        more = np.flatnonzero(~ok)
+        if not more.size:
+            break
+        edge, t0, t1 = _parts(edge[more], t0[more], t1[more], np.full(more.size, 2))
+        owner = np.repeat(owner[more], 2)
+    else:
+        done_e.append(edge)
+        done_0.append(t0)
+        done_1.append(t1)
+    return np.concatenate(done_e), np.concatenate(done_0), np.concatenate(done_1)
+
+
+def _parts(edge, t0, t1, parts):
+    """Piece k (edge, t0, t1) split into parts[k] equal pieces."""
+    k = np.repeat(np.arange(len(edge)), parts)
+    first = np.cumsum(parts) - parts
+    i = np.arange(int(parts.sum())) - np.repeat(first, parts)
+    span = (t1 - t0)[k] / parts[k]
+    return edge[k], t0[k] + i * span, np.where(i + 1 == parts[k], t1[k], t0[k] + (i + 1) * span)
+
+
+def _crossing_candidates(col, noise: float) -> NDArray[np.intp]:
+    """The pieces (indices, in Gamma's order) in a pair whose capsules meet and that no chain resolves.
+
+    Capsule k: the segment phi(x0) +- r D0 thickened by dD r (+ rounding).
+    A pair is resolved when the chain of pieces between them, either way
+    round Gamma, has all its tangent directions (arg D0 +- asin(dD / |D0|))
+    within an arc shorter than pi.
+    """
+    from scipy.spatial import cKDTree
+
+    n = len(col["r"])
+    w0, d0, r, dd = col["w0"], col["d0"], col["r"], col["dd"]
+    half = r * d0
+    thick = dd * r + noise
+    extent = np.abs(half) + thick
+    pts = np.stack([w0.real, w0.imag], axis=1)
+    tree = cKDTree(pts)
+    # a meeting pair is within ext_i + ext_j <= 2 max(ext_i, ext_j): found from its larger capsule
+    found = tree.query_ball_point(pts, 2.0 * extent * (1.0 + 1e-9) + 1e-300)
+    count = np.fromiter((len(f) for f in found), dtype=np.int64, count=n)
+    i = np.repeat(np.arange(n), count)
+    jj = np.fromiter((x for f in found for x in f), dtype=np.int64, count=int(count.sum()))
+    pick = (jj != i) & ((extent[i] > extent[jj]) | ((extent[i] == extent[jj]) & (i < jj)))
+    i, jj = i[pick], jj[pick]
+    meet = _segment_distance(w0[i] - half[i], w0[i] + half[i], w0[jj] - half[jj], w0[jj] + half[jj]) <= thick[i] + thick[jj]
+    i, jj = i[meet], jj[meet]
+    if not i.size:
+        return np.zeros(0, dtype=np.intp)
+    lo_i, hi_i = np.minimum(i, jj), np.maximum(i, jj)
+    # tangent directions unwrapped along Gamma (principal steps: exact wherever a chain's
+    # directions fit in a half-circle, the only case the test accepts), twice round
+    step = np.angle(np.roll(d0, -1) / d0)
+    phi = np.concatenate([[0.0], np.cumsum(step)])  # phi[k] for k = 0..n (phi[n]: once round)
+    total = phi[n]
+    ang = np.concatenate([phi[:n], phi[:n] + total])
+    eps = np.arcsin(np.minimum(1.0, dd / np.abs(d0)))
+    eps = np.concatenate([eps, eps])
+    top, bottom = _SparseTable(ang + eps, np.maximum), _SparseTable(ang - eps, np.minimum)
+    forward = top.query(lo_i, hi_i) - bottom.query(lo_i, hi_i) < math.pi
+    backward = top.query(hi_i, lo_i + n) - bottom.query(hi_i, lo_i + n) < math.pi
+    bad = ~(forward | backward)
+    return np.unique(np.concatenate([lo_i[bad], hi_i[bad]]))
+
+
+class _SparseTable:
+    """Range maxima (or minima) of a fixed array in O(1) per query, vectorised."""
+
+    def __init__(self, values: NDArray[np.float64], op) -> None:
+        self.op = op
+        self.levels = [values]
+        k = 1
+        while 2 * k <= len(values):
+            prev = self.levels[-1]
+            self.levels.append(op(prev[:-k], prev[k:]))
+            k *= 2
+
+    def query(self, lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
+        """op over values[lo..hi] (inclusive, lo <= hi)."""
+        span = hi - lo + 1
+        level = np.floor(np.log2(span)).astype(np.int64)
+        out = np.empty(len(lo))
+        for lv in np.unique(level):  # loop over the (few) levels present
+            k = level == lv
+            table = self.levels[lv]
+            out[k] = self.op(table[lo[k]], table[hi[k] - (1 << lv) + 1])
+        return out
+
+
+def _segment_distance(a, b, c, d) -> NDArray[np.float64]:
+    """Distances between the segments [a, b] and [c, d] (complex endpoints, vectorised)."""
+
+    def cross(u, v):
+        return (np.conj(u) * v).imag
+
+    def to_segment(p, s, t):
+        e = t - s
+        den = np.abs(e) ** 2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = np.where(den > 0, ((np.conj(e) * (p - s)).real) / den, 0.0)
+        return np.abs(p - (s + np.clip(u, 0.0, 1.0) * e))
+
+    d1, d2 = cross(b - a, c - a), cross(b - a, d - a)
+    d3, d4 = cross(d - c, a - c), cross(d - c, b - c)
+    crossing = (d1 * d2 < 0) & (d3 * d4 < 0)
+    near = np.minimum(np.minimum(to_segment(a, c, d), to_segment(b, c, d)), np.minimum(to_segment(c, a, b), to_segment(d, a, b)))
+    return np.where(crossing, 0.0, near)
+
+
+def _outside(val, j, x0, v, w, nd, orientation, slack, band) -> NDArray[np.bool_]:
+    """Centres whose value lies outside Theta so far that the boundary, seen through phi, moves in by more than the band.
+
+    The cell certificate's measure (`warpcli.maps.certificate.certify_cells`):
+    the distance of x0 to the polygon's boundary plus max_i e_i / |J^T n_i|
+    (e_i: how far phi(x0) lies beyond Theta's edge line i, n_i its normal).
+    """
+    beyond = np.zeros(len(val))
+    shift = np.zeros(len(val))
+    for i in range(len(w)):  # loop over Theta's edges (convex Theta: the farthest edge line)
+        cross = nd[i, 0] * (val[:, 1] - w[i, 1]) - nd[i, 1] * (val[:, 0] - w[i, 0])
+        ei = -cross * orientation
+        beyond = np.maximum(beyond, ei)
+        normal = np.array([nd[i, 1], -nd[i, 0]]) * orientation  # outward
+        across = np.hypot(*(np.einsum("kab,a->kb", j, normal)).T)  # |J^T n_i|
+        with np.errstate(divide="ignore", invalid="ignore"):
+            shift = np.where(ei > slack, np.fmax(shift, np.where(across > 0, ei / across, np.inf)), shift)
+    out = beyond > slack
+    if out.any():
+        k = np.flatnonzero(out)
+        delta = nearest_edge(x0[k], v)[2]
+        out[k] = ~(delta + shift[k] <= band)
+    return out
