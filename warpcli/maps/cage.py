@@ -160,6 +160,8 @@ class CageMap:
         self.src_mesh = src_mesh
         self.dst_mesh = dst_mesh
         self.face_maps = tuple(face_maps)
+        # (options, regions) when made by build_cage_map: which of its face maps a later build may reuse.
+        self.built_with: tuple | None = None
         self.timings: dict[str, float] = {}
         for fmap in self.face_maps:
             for stage, seconds in fmap.timings.items():
@@ -390,6 +392,7 @@ def build_cage_map(
     options: MapOptions | None = None,
     *,
     regions: tuple[Region | None, Region | None] = (None, None),
+    kept: CageMap | None = None,
 ) -> CageMap:
     """Build the map between two cage meshes: `build_map` for every face.
 
@@ -406,11 +409,20 @@ def build_cage_map(
         sides are refused: the faces of an edge would not meet on it.
     regions : (region, region)
         Where the source and the target map will be evaluated (see `build_map`).
+    kept : CageMap or None
+        A map built before by this function (the editor's last preview): a
+        side's map of a face (phi0 of the source face, phi1 of the target's)
+        is taken from it instead of being built again where it was built
+        from the same polygon (points and name), Theta, options and region,
+        as building it again would make the same map. Only meshes of more
+        than `CONCURRENT_FACES` faces reuse (the others go through
+        `build_map`).
 
     Returns
     -------
     CageMap
-        Its ``timings`` sum the faces'.
+        Its ``timings`` sum the faces'; ``built_with`` holds the options and
+        regions it was built at.
 
     Raises
     ------
@@ -448,8 +460,27 @@ def build_cage_map(
     if len(pairs) <= CONCURRENT_FACES:
         maps = [build_map(a, b, opts, regions=regions) for a, b in pairs]
     else:
-        maps = [_face_map(a, b, opts, regions) for a, b in pairs]
-    return CageMap(src, dst, maps)
+        sides = _kept_sides(kept, opts, regions)
+        maps = [_face_map(a, b, opts, regions, sides) for a, b in pairs]
+    result = CageMap(src, dst, maps)
+    result.built_with = (opts, regions)
+    return result
+
+
+def _side_key(phi) -> tuple:
+    """What a side's map of a face was built from (besides the options and region): polygon and Theta."""
+    return (phi.polygon.points.tobytes(), phi.polygon.name, phi.theta.points.tobytes(), phi.theta.name)
+
+
+def _kept_sides(kept: CageMap | None, opts: MapOptions, regions) -> dict[tuple, object]:
+    """The side maps of ``kept`` by role and `_side_key`, if it was built with the same options and regions."""
+    if kept is None or getattr(kept, "built_with", None) != (opts, regions):
+        return {}
+    sides: dict[tuple, object] = {}
+    for fmap in kept.face_maps:
+        sides[("source", *_side_key(fmap.phi0))] = fmap.phi0
+        sides[("target", *_side_key(fmap.phi1))] = fmap.phi1
+    return sides
 
 
 #: Meshes of at most this many faces build each face with `build_map`, its two
@@ -463,8 +494,10 @@ def build_cage_map(
 CONCURRENT_FACES = 2
 
 
-def _face_map(src: Polygon, dst: Polygon, opts: MapOptions, regions: tuple[Region | None, Region | None]) -> BijectiveMap:
-    """`build_map`'s policy for one face, both maps built on this thread."""
+def _face_map(
+    src: Polygon, dst: Polygon, opts: MapOptions, regions: tuple[Region | None, Region | None], kept: dict | None = None
+) -> BijectiveMap:
+    """`build_map`'s policy for one face, both maps built on this thread (or taken from ``kept``, `_kept_sides`)."""
     from .compose import theta_for
     from .registry import METHODS
 
@@ -472,6 +505,11 @@ def _face_map(src: Polygon, dst: Polygon, opts: MapOptions, regions: tuple[Regio
     method = METHODS[opts.method].load()
     maps = []
     for polygon, role, region, side in ((src, "source", regions[0], "inverse"), (dst, "target", regions[1], "grid")):
+        key = (role, polygon.points.tobytes(), polygon.name, theta.points.tobytes(), theta.name)
+        phi = kept.get(key) if kept else None
+        if phi is not None:
+            maps.append(phi)  # built from the same polygon, Theta, options and region: the same map
+            continue
         phi = method.build(polygon, theta, opts, role, region)
         if region is not None and hasattr(phi, "precompute"):
             phi.precompute(side)
