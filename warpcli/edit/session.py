@@ -17,7 +17,6 @@ from ..options import BOUNDARIES, INTERPOLATIONS, OUTSIDE, MapOptions, WarpOptio
 from ..outputs import atomic_path, check_output_path, write_checked
 from ..polygon import Polygon, check_pair
 from ..raster.imageio import check_image_output, read_image
-from ..within import within_pair
 from .preview import PreviewImage, PreviewMapper, encode_png, preview_image, with_preview_density
 
 #: The editor draws one polygon per side; a cage mesh file is refused with this line.
@@ -349,7 +348,7 @@ class EditSession:
             else:
                 # The export's cage mesh (`warp --within`'s, in the image's pixels), mapped at the preview's
                 # density (in the image's pixels: times factor^2) and shown shrunk to the preview.
-                pair = within_pair(src, dst, options.within, self.image_size)
+                pair = self.mapper.within_pair(src, dst, options.within, self.image_size, drag)
                 k = self.preview.factor
                 mapping = with_preview_density(options.map, pair.src.outline, pair.dst.outline, drag)
                 mesh = self.mapper.build_cage(pair.src, pair.dst, mapping, (0.0, 0.0, pw * k, ph * k), k)
