@@ -413,8 +413,9 @@ def build_cage_map(
         A map built before by this function (the editor's last preview): a
         side's map of a face (phi0 of the source face, phi1 of the target's)
         is taken from it instead of being built again where it was built
-        from the same polygon (points and name), Theta, options and region,
-        as building it again would make the same map. Only meshes of more
+        from the same polygon (points and name), Theta, options (with that
+        side's ``max_area``) and region, as building it again would make the
+        same map. Only meshes of more
         than `CONCURRENT_FACES` faces reuse (the others go through
         `build_map`).
 
@@ -460,26 +461,34 @@ def build_cage_map(
     if len(pairs) <= CONCURRENT_FACES:
         maps = [build_map(a, b, opts, regions=regions) for a, b in pairs]
     else:
-        sides = _kept_sides(kept, opts, regions)
+        sides = _kept_sides(kept)
         maps = [_face_map(a, b, opts, regions, sides) for a, b in pairs]
     result = CageMap(src, dst, maps)
     result.built_with = (opts, regions)
     return result
 
 
-def _side_key(phi) -> tuple:
-    """What a side's map of a face was built from (besides the options and region): polygon and Theta."""
-    return (phi.polygon.points.tobytes(), phi.polygon.name, phi.theta.points.tobytes(), phi.theta.name)
+def _side_key(role: str, polygon: Polygon, theta, opts: MapOptions, regions) -> tuple:
+    """What a side's map of a face is built from: its role, polygon, Theta, its own options and region.
+
+    A side's map depends on the other side's ``max_area`` not at all (the
+    methods take their role's): the key holds the side's alone, so that the
+    source's maps are kept when a drag meshes the target more coarsely.
+    """
+    i = 0 if role == "source" else 1
+    own = dataclasses.replace(opts, max_area=opts.areas()[i])
+    return (role, polygon.points.tobytes(), polygon.name, theta.points.tobytes(), theta.name, own, regions[i])
 
 
-def _kept_sides(kept: CageMap | None, opts: MapOptions, regions) -> dict[tuple, object]:
-    """The side maps of ``kept`` by role and `_side_key`, if it was built with the same options and regions."""
-    if kept is None or getattr(kept, "built_with", None) != (opts, regions):
+def _kept_sides(kept: CageMap | None) -> dict[tuple, object]:
+    """The side maps of ``kept`` by `_side_key`."""
+    if kept is None or kept.built_with is None:
         return {}
+    opts, regions = kept.built_with
     sides: dict[tuple, object] = {}
     for fmap in kept.face_maps:
-        sides[("source", *_side_key(fmap.phi0))] = fmap.phi0
-        sides[("target", *_side_key(fmap.phi1))] = fmap.phi1
+        for role, phi in (("source", fmap.phi0), ("target", fmap.phi1)):
+            sides[_side_key(role, phi.polygon, phi.theta, opts, regions)] = phi
     return sides
 
 
@@ -505,8 +514,7 @@ def _face_map(
     method = METHODS[opts.method].load()
     maps = []
     for polygon, role, region, side in ((src, "source", regions[0], "inverse"), (dst, "target", regions[1], "grid")):
-        key = (role, polygon.points.tobytes(), polygon.name, theta.points.tobytes(), theta.name)
-        phi = kept.get(key) if kept else None
+        phi = kept.get(_side_key(role, polygon, theta, opts, regions)) if kept else None
         if phi is not None:
             maps.append(phi)  # built from the same polygon, Theta, options and region: the same map
             continue

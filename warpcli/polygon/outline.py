@@ -496,7 +496,8 @@ def _is_ring(outline: NDArray, cages: list[NDArray]) -> bool:
 
 def _repair(sv: NDArray, dv: NDArray, tris: NDArray, seg: NDArray) -> NDArray[np.intp]:
     """Flip interior edges of folded triangles while that lowers the count of folds (on either side)."""
-    tris = [[int(v) for v in t] for t in tris]
+    arr = np.asarray(tris, dtype=np.intp).reshape(-1, 3)
+    tris = arr.tolist()
     fixed = {frozenset((int(a), int(b))) for a, b in seg}
     # A triangle's folds are tested one at a time, exactly, in Python floats (`orient_sign_one`: a numpy
     # call per triangle cost 50 times more), and remembered: flips test the same triangles again and again.
@@ -522,7 +523,7 @@ def _repair(sv: NDArray, dv: NDArray, tris: NDArray, seg: NDArray) -> NDArray[np
     # is there already (a flip across a quadrilateral that is not convex can), they are found again
     # after every flip, as the last triangle holding an edge owns it.
     edges = edge_owners()
-    folded = {i for i, t in enumerate(tris) if badness(t)}  # folded on either side, as _folded says
+    folded = set(np.flatnonzero(_folded(sv, dv, arr)).tolist())  # folded on either side, as badness says
     rebuild = False
     for _ in range(FLIPS_PER_TRIANGLE * len(tris)):
         if rebuild:

@@ -81,7 +81,8 @@ class Partition:
         object.__setattr__(self, "faces", faces)
         loop = _topology(faces, len(verts), self.name)
         object.__setattr__(self, "_loop", loop)
-        _geometry(verts, faces, loop, self.name)
+        # The outline and the faces as the checks made them (checked once: `outline` and `face_polygon` rename them).
+        object.__setattr__(self, "_polygons", _geometry(verts, faces, loop, self.name))
 
     @property
     def points(self) -> NDArray[np.float64]:
@@ -106,7 +107,7 @@ class Partition:
     @cached_property
     def outline(self) -> Polygon:
         """The outer boundary as a `Polygon`, running the faces' way round."""
-        return Polygon(self.vertices[self._loop], name=self.name)  # type: ignore[attr-defined]
+        return self._polygons[0].renamed(self.name)  # type: ignore[attr-defined]
 
     @cached_property
     def outline_edges(self) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -126,7 +127,7 @@ class Partition:
 
     def face_polygon(self, k: int) -> Polygon:
         """Face ``k`` as a `Polygon`, named ``"NAME face k"``."""
-        return Polygon(self.face_points(k), name=f"{self.name} face {k}")
+        return self._polygons[1][k].renamed(f"{self.name} face {k}")  # type: ignore[attr-defined]
 
     def face_polygons(self) -> tuple[Polygon, ...]:
         """Every face as a `Polygon` (see `face_polygon`)."""
@@ -429,13 +430,17 @@ def _corner_angles(points: NDArray[np.float64], positive: bool) -> NDArray[np.fl
     return np.mod(ang, 2 * np.pi)
 
 
-def _geometry(verts: NDArray[np.float64], faces: tuple[tuple[int, ...], ...], loop: NDArray[np.intp], name: str) -> None:
-    """The geometric checks of one side (see the module's docstring)."""
+def _geometry(
+    verts: NDArray[np.float64], faces: tuple[tuple[int, ...], ...], loop: NDArray[np.intp], name: str
+) -> tuple[Polygon, tuple[Polygon, ...]]:
+    """The geometric checks of one side (see the module's docstring); the outline and the faces, checked."""
     outline = Polygon(verts[loop], name=f"{name} (the cage mesh's outline)")
     positive = outline.signed_area > 0
     total = np.zeros(len(verts))
+    polygons = []
     for k, f in enumerate(faces):
         poly = Polygon(verts[list(f)], name=f"{name}: face {k}")
+        polygons.append(poly)
         if (poly.signed_area > 0) != positive:
             raise PolygonError(
                 f"{name}: face {k} runs {_turn(poly.signed_area)} but the mesh's outline runs "
@@ -453,6 +458,7 @@ def _geometry(verts: NDArray[np.float64], faces: tuple[tuple[int, ...], ...], lo
             f"{name}: the faces {where} vertex {v} {format_point(verts[v])} overlap: their angles there sum to "
             f"{math.degrees(total[v]):.6g} degrees, not {math.degrees(expected[v]):.6g}"
         )
+    return outline, tuple(polygons)
 
 
 # ---------------------------------------------------------------- files
