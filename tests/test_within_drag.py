@@ -200,6 +200,38 @@ def test_a_cage_map_reusing_unmoved_faces_is_the_map_built_afresh():
     assert not any(m.phi0 is f.phi0 for m, f in zip(other.face_maps, first.face_maps))
 
 
+# --- moving a cage mesh -------------------------------------------------------------------------------------
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), count=st.integers(1, 3), scale=st.sampled_from([0.5, 3.0, 12.0, 40.0]),
+       rename=st.booleans())  # fmt: skip
+def test_a_moved_mesh_is_checked_as_a_new_one(seed, count, scale, rename):
+    """`Partition.moved` (unmoved faces not checked again) accepts and refuses what `Partition` does, with the
+    same message, and keeps the same polygons."""
+    base = within_pair(Polygon(CAGE, name="a"), Polygon(CAGE, name="b"), "image", SIZE).dst
+    rng = np.random.default_rng(seed)
+    vertices = np.array(base.vertices)
+    which = rng.choice(len(CAGE) + 2, count, replace=False)  # cage vertices, or an outline point (index 6, 7)
+    vertices[which] += rng.normal(0, scale, (count, 2))
+    name = "moved" if rename else None
+    try:
+        want = Partition(vertices, base.faces, name or base.name)
+    except PolygonError as err:
+        with pytest.raises(PolygonError) as got:
+            base.moved(vertices, name)
+        assert str(got.value) == str(err)
+        return
+    got = base.moved(vertices, name)
+    assert got.name == want.name and got.faces == want.faces
+    np.testing.assert_array_equal(got.vertices, want.vertices)
+    assert not got.vertices.flags.writeable
+    np.testing.assert_array_equal(got.loops[0], want.loops[0])
+    for a, b in zip((got.outline, *got.face_polygons()), (want.outline, *want.face_polygons())):
+        assert a.name == b.name
+        np.testing.assert_array_equal(a.points, b.points)
+
+
 # --- the editor's drag --------------------------------------------------------------------------------------
 
 

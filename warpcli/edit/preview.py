@@ -14,13 +14,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import PolygonError
 from ..maps.base import ThetaMap
 from ..maps.cage import CageMap
 from ..maps.compose import BijectiveMap, theta_for
 from ..maps.registry import METHODS
 from ..options import MapOptions
 from ..polygon import Polygon, check_pair
-from ..errors import PolygonError
 from ..polygon.partition import Partition
 from ..raster.imageio import RasterImage, convert_pixels
 from ..within import WithinPair
@@ -337,7 +337,7 @@ def _moved_pair(
         vertices = np.array(mesh.vertices)
         vertices[:n] = new.points
         try:
-            sides.append(Partition(vertices, mesh.faces, mesh.name))  # every check of a cage mesh, exactly
+            sides.append(mesh.moved(vertices))  # every check of a cage mesh, exactly
         except PolygonError:
             return None
     return dataclasses.replace(pair, src=sides[0], dst=sides[1])

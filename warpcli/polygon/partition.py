@@ -146,8 +146,30 @@ class Partition:
         return self.outline.signed_area
 
     def moved(self, vertices: ArrayLike, name: str | None = None) -> Partition:
-        """The same faces on other vertex positions (validated again)."""
-        return Partition(np.asarray(vertices, dtype=np.float64), self.faces, self.name if name is None else name)
+        """The same faces on other vertex positions (validated again).
+
+        All of `Partition`'s checks, with what cannot have changed taken from
+        this mesh: the faces' combinatorics (the same faces), and a face's own
+        polygon checks where none of its vertices moved (they depend on its
+        points alone). The orientation and angle checks run on every face.
+        A drag in the editor moves the faces at one vertex.
+
+        Raises
+        ------
+        PolygonError
+            As `Partition`, with the same messages.
+        """
+        label = self.name if name is None else name
+        verts = _as_vertices(np.asarray(vertices, dtype=np.float64), label)
+        if verts.shape != self.vertices.shape:
+            return Partition(verts, self.faces, label)
+        verts.setflags(write=False)
+        moved = object.__new__(Partition)
+        for key, value in (("vertices", verts), ("faces", self.faces), ("name", label), ("_loop", self._loop)):  # type: ignore[attr-defined]
+            object.__setattr__(moved, key, value)
+        kept = (self.vertices, self._polygons)  # type: ignore[attr-defined]
+        object.__setattr__(moved, "_polygons", _geometry(verts, self.faces, self._loop, label, kept))  # type: ignore[attr-defined]
+        return moved
 
 
 @dataclass(frozen=True, eq=False)
@@ -431,15 +453,31 @@ def _corner_angles(points: NDArray[np.float64], positive: bool) -> NDArray[np.fl
 
 
 def _geometry(
-    verts: NDArray[np.float64], faces: tuple[tuple[int, ...], ...], loop: NDArray[np.intp], name: str
+    verts: NDArray[np.float64],
+    faces: tuple[tuple[int, ...], ...],
+    loop: NDArray[np.intp],
+    name: str,
+    kept: tuple[NDArray[np.float64], tuple[Polygon, tuple[Polygon, ...]]] | None = None,
 ) -> tuple[Polygon, tuple[Polygon, ...]]:
-    """The geometric checks of one side (see the module's docstring); the outline and the faces, checked."""
-    outline = Polygon(verts[loop], name=f"{name} (the cage mesh's outline)")
+    """The geometric checks of one side (see the module's docstring); the outline and the faces, checked.
+
+    ``kept``: the vertices and polygons of the same faces checked before; a
+    polygon whose points are the same is taken from there (renamed), not
+    checked again.
+    """
+
+    def polygon(index: NDArray[np.intp] | list[int], label: str, old: Polygon | None) -> Polygon:
+        points = verts[index]
+        if old is not None and kept is not None and np.array_equal(kept[0][index], points):
+            return old.renamed(label)
+        return Polygon(points, name=label)
+
+    outline = polygon(loop, f"{name} (the cage mesh's outline)", kept[1][0] if kept else None)
     positive = outline.signed_area > 0
     total = np.zeros(len(verts))
     polygons = []
     for k, f in enumerate(faces):
-        poly = Polygon(verts[list(f)], name=f"{name}: face {k}")
+        poly = polygon(list(f), f"{name}: face {k}", kept[1][1][k] if kept else None)
         polygons.append(poly)
         if (poly.signed_area > 0) != positive:
             raise PolygonError(
