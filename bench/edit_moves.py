@@ -4,6 +4,7 @@
     python bench/edit_moves.py                                  # 1 MP, star12 and wavy48, within none, image, 20
     python bench/edit_moves.py --sizes 1,12 --moves 40 --repeat 3
     python bench/edit_moves.py --pairs wavy48 --within image --profile 25   # cProfile: the 25 costliest calls
+    python bench/edit_moves.py --within 20 --vertex outer      # the rightmost vertex outwards: the margin's box moves
 
 The same drag as `bench/edit_latency.py` (one target vertex around a small circle,
 ``--moves`` positions), sent straight to `warpcli.edit.session.EditSession.preview_map`
@@ -44,15 +45,16 @@ def header(data: bytes) -> dict:
     return json.loads(data[4 : 4 + n])
 
 
-def drag(session, src, dst, within, moves, radius, profile=None):
-    """One drag: ``moves`` previews with ``drag="dst"``, then the release; (move seconds, release seconds, errors)."""
+def drag(session, src, dst, within, moves, radius, profile=None, index=0, outward=False):
+    """One drag of target vertex ``index``: ``moves`` previews with ``drag="dst"``, then the release;
+    (move seconds, release seconds, errors). ``outward``: round a circle to the vertex's right instead of its left."""
     options = {"within": None if within == "none" else within}
-    vertex = dst[0].copy()
+    vertex = dst[index].copy()
     times, errors = [], []
     for i in range(moves):
         a = 2 * math.pi * (i + 1) / moves
         moved = dst.copy()
-        moved[0] = vertex + radius * np.array([math.cos(a) - 1.0, math.sin(a)])
+        moved[index] = vertex + radius * np.array([(1.0 - math.cos(a)) if outward else (math.cos(a) - 1.0), math.sin(a)])
         doc = {"src": src.tolist(), "dst": moved.tolist(), "options": options, "drag": "dst"}
         t0 = time.perf_counter()
         if profile is not None:
@@ -81,6 +83,8 @@ def main(argv=None) -> int:
     ap.add_argument("--moves", type=int, default=40, help="pointer moves per drag [40]")
     ap.add_argument("--repeat", type=int, default=3, help="drags per case [3]")
     ap.add_argument("--profile", type=int, default=0, help="print cProfile's N costliest calls (cumulative) per case")
+    ap.add_argument("--vertex", default="0", help="the target vertex dragged: an index, or 'outer': the rightmost "
+                    "vertex of both polygons, dragged to its right (a margin's box follows it) [0]")  # fmt: skip
     ap.add_argument("--out", help="also write the table (markdown) there")
     args = ap.parse_args(argv)
     from warpcli.edit.session import EditPaths, EditSession
@@ -97,13 +101,21 @@ def main(argv=None) -> int:
                     continue
                 for within in args.within.split(","):
                     print(f"edit_moves: {mp:g} MP ({w}x{h}), {pair.name}, within {within}...", file=sys.stderr, flush=True)
+                    outward = args.vertex == "outer"
+                    if outward:  # the rightmost vertex of both, made the target's
+                        both = np.concatenate([pair.src, pair.dst])
+                        index = int(np.argmax(both[:, 0])) % len(pair.dst)
+                        pair = bench_run.Pair(pair.name, pair.src, pair.dst.copy())
+                        pair.dst[index, 0] = both[:, 0].max()
+                    else:
+                        index = int(args.vertex)
                     session = EditSession(EditPaths.defaults(image, os.path.join(tmp, "a.json"), os.path.join(tmp, "b.json")))
                     session.preview_map({"src": pair.src.tolist(), "dst": pair.dst.tolist(),
                                          "options": {"within": None if within == "none" else within}})  # fmt: skip
                     prof = cProfile.Profile() if args.profile else None
                     moves, releases, errors = [], [], []
                     for _ in range(args.repeat):
-                        t, r, e = drag(session, pair.src, pair.dst, within, args.moves, 0.03 * min(w, h), prof)
+                        t, r, e = drag(session, pair.src, pair.dst, within, args.moves, 0.03 * min(w, h), prof, index, outward)
                         moves += t
                         releases.append(r)
                         errors += e
@@ -111,6 +123,7 @@ def main(argv=None) -> int:
                         print(f"--- cProfile of the moves: {mp:g} MP, {pair.name}, within {within}", file=sys.stderr)
                         pstats.Stats(prof, stream=sys.stderr).sort_stats("cumulative").print_stats(args.profile)
                     name = pair.name if within == "none" else f"{pair.name}, within {within}"
+                    name += "" if args.vertex == "0" else f", vertex {index}" + (" outwards" if outward else "")
                     rows.append((mp, w, h, name, moves, releases, errors))
     lines = [
         f"warp edit: server time per drag move, in process ({platform.node()}, {os.cpu_count()} CPUs, load average "

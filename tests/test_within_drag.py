@@ -308,6 +308,27 @@ def test_a_drag_that_breaks_the_kept_cut_cuts_the_ring_anew(where):
     np.testing.assert_array_equal(got.dst.vertices, want.dst.vertices)
 
 
+def test_dragging_an_outermost_vertex_stretches_a_margins_box_and_keeps_the_cut():
+    """Within a margin the box follows an outermost vertex: the kept cut's outline points go along, on the new
+    box (the command line's outline), both sides valid cage meshes."""
+    mapper = PreviewMapper()
+    src = Polygon(CAGE, name="a")
+    first = mapper.within_pair(src, Polygon(CAGE, name="b"), "10", SIZE)
+    moved = CAGE.copy()
+    for step in range(1, 4):
+        moved[2] = CAGE[2] + [2.0 * step, 1.0 * step]  # the rightmost vertex, further right
+        dst = Polygon(moved, name="b")
+        pair = mapper.within_pair(src, dst, "10", SIZE, "dst")
+        assert pair.src.faces == first.src.faces  # the cut kept
+        assert_valid_pair(pair, src, dst, "10")
+        x0, y0 = pair.outline.min(axis=0)
+        x1, y1 = pair.outline.max(axis=0)
+        assert x1 == moved[2, 0] + 10
+        ring = pair.dst.outline.points
+        on_side = (ring[:, 0] == x0) | (ring[:, 0] == x1) | (ring[:, 1] == y0) | (ring[:, 1] == y1)
+        assert on_side.all() and ((ring >= [x0, y0]) & (ring <= [x1, y1])).all()
+
+
 def test_the_drag_preview_is_the_cage_map_of_its_cut(tmp_path):
     """While dragging, the preview's texture is f^-1 of the cage map of the pair it shows (built afresh here)."""
     image = str(tmp_path / "picture.png")

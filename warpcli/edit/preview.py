@@ -327,20 +327,47 @@ def _moved_pair(
     if pair.cage_faces != 1 or pair.cage_loops[0] != tuple(range(n)):
         return None  # one polygon cage, its vertices first and in order: as within_pair makes it for one polygon
     outline = outline_polygon(within, image_size, [src.points, dst.points])
+    stretched = None
     if not np.array_equal(outline, pair.outline):
-        return None  # a margin's box moved: the outline's points move too
+        # A margin's box moved with an outermost vertex: its points (on the box's sides, the same on both
+        # sides) go along with it, stretched as the box was; the corners exactly to the new box's.
+        stretched = _stretched_outline(pair, outline)
+        if stretched is None:
+            return None
     sides = []
     for mesh, old, new in ((pair.src, old_src, src), (pair.dst, old_dst, dst)):
-        if np.array_equal(old.points, new.points):
+        if np.array_equal(old.points, new.points) and stretched is None:
             sides.append(mesh)
             continue
         vertices = np.array(mesh.vertices)
         vertices[:n] = new.points
+        if stretched is not None:
+            vertices[stretched[0]] = stretched[1]
         try:
             sides.append(mesh.moved(vertices))  # every check of a cage mesh, exactly
         except PolygonError:
             return None
-    return dataclasses.replace(pair, src=sides[0], dst=sides[1])
+    return dataclasses.replace(pair, src=sides[0], dst=sides[1], outline=outline)
+
+
+def _stretched_outline(pair: WithinPair, outline: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.float64]] | None:
+    """The outline's points of ``pair`` (vertex indices, new positions) moved from its box onto the box ``outline``,
+    or None unless both are boxes (four corners, sides parallel to the axes) and the points are the same on both sides."""
+    old = pair.outline
+    loop = pair.src.loops[0]
+    if len(old) != 4 or len(outline) != 4 or not np.array_equal(pair.src.vertices[loop], pair.dst.vertices[loop]):
+        return None
+    lo, hi, new_lo, new_hi = old.min(axis=0), old.max(axis=0), outline.min(axis=0), outline.max(axis=0)
+    corners = {tuple(p) for p in old.tolist()}
+    if corners != {(x, y) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])} or not (hi > lo).all():
+        return None
+    points = pair.src.vertices[loop]
+    moved = new_lo + (points - lo) * ((new_hi - new_lo) / (hi - lo))
+    # On a side a coordinate is the box's own (lo or hi): it becomes the new box's exactly.
+    for axis in (0, 1):
+        for was, now in ((lo[axis], new_lo[axis]), (hi[axis], new_hi[axis])):
+            moved[points[:, axis] == was, axis] = now
+    return loop, moved
 
 
 def _target_mesh(
