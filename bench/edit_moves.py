@@ -5,6 +5,7 @@
     python bench/edit_moves.py --sizes 1,12 --moves 40 --repeat 3
     python bench/edit_moves.py --pairs wavy48 --within image --profile 25   # cProfile: the 25 costliest calls
     python bench/edit_moves.py --within 20 --vertex outer      # the rightmost vertex outwards: the margin's box moves
+    python bench/edit_moves.py --within image,20 --cut 5       # also within_pair alone (the CLI's cut of the ring)
 
 The same drag as `bench/edit_latency.py` (one target vertex around a small circle,
 ``--moves`` positions), sent straight to `warpcli.edit.session.EditSession.preview_map`
@@ -75,6 +76,24 @@ def drag(session, src, dst, within, moves, radius, profile=None, index=0, outwar
     return times, release, errors
 
 
+def time_cut(pair, within, size, count):
+    """Median seconds of ``within_pair`` (refused or not) for the pair's polygons."""
+    from warpcli.errors import PolygonError
+    from warpcli.polygon import Polygon
+    from warpcli.within import within_pair
+
+    src, dst = Polygon(pair.src, name="a.json"), Polygon(pair.dst, name="b.json")
+    times = []
+    for _ in range(count):
+        t0 = time.perf_counter()
+        try:
+            within_pair(src, dst, within, size)
+        except PolygonError:
+            pass
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default="1", help="megapixels [1]")
@@ -85,6 +104,8 @@ def main(argv=None) -> int:
     ap.add_argument("--profile", type=int, default=0, help="print cProfile's N costliest calls (cumulative) per case")
     ap.add_argument("--vertex", default="0", help="the target vertex dragged: an index, or 'outer': the rightmost "
                     "vertex of both polygons, dragged to its right (a margin's box follows it) [0]")  # fmt: skip
+    ap.add_argument("--cut", type=int, default=0, help="also time N calls of within_pair per case (the command "
+                    "line's cut of the ring, as on release), without the editor")  # fmt: skip
     ap.add_argument("--out", help="also write the table (markdown) there")
     args = ap.parse_args(argv)
     from warpcli.edit.session import EditPaths, EditSession
@@ -122,21 +143,26 @@ def main(argv=None) -> int:
                     if prof is not None:
                         print(f"--- cProfile of the moves: {mp:g} MP, {pair.name}, within {within}", file=sys.stderr)
                         pstats.Stats(prof, stream=sys.stderr).sort_stats("cumulative").print_stats(args.profile)
+                    cut = float("nan")
+                    if args.cut and within != "none":
+                        cut = time_cut(pair, within, (w, h), args.cut)
                     name = pair.name if within == "none" else f"{pair.name}, within {within}"
                     name += "" if args.vertex == "0" else f", vertex {index}" + (" outwards" if outward else "")
-                    rows.append((mp, w, h, name, moves, releases, errors))
+                    rows.append((mp, w, h, name, moves, releases, errors, cut))
     lines = [
         f"warp edit: server time per drag move, in process ({platform.node()}, {os.cpu_count()} CPUs, load average "
         f"{load_before:.1f} before and {os.getloadavg()[0]:.1f} after; {args.moves} moves x {args.repeat} drags)",
         "",
-        "| image | cage | moves | median ms | p95 ms | max ms | release ms (median) | failed |",
-        "|---|---|---|---|---|---|---|---|",
+        "| image | cage | moves | median ms | p95 ms | max ms | release ms (median) | failed |"
+        + (" within_pair ms (median) |" if args.cut else ""),
+        "|---|---|---|---|---|---|---|---|" + ("---|" if args.cut else ""),
     ]
-    for mp, w, h, name, moves, releases, errors in rows:
+    for mp, w, h, name, moves, releases, errors, cut in rows:
         ms = np.array(moves) * 1000
         lines.append(
             f"| {mp:g} MP ({w}x{h}) | {name} | {len(ms)} | {np.median(ms):.1f} | {np.percentile(ms, 95):.1f} | "
             f"{ms.max():.1f} | {statistics.median(releases) * 1000:.0f} | {len(errors)} |"
+            + (f" {cut * 1000:.1f} |" if args.cut else "")
         )
         if errors:
             lines.append(f"|  | first error: {errors[0]} |")
