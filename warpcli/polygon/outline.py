@@ -722,15 +722,18 @@ def _valid_join(sv: NDArray, dv: NDArray, a: list[int], b: list[int], joined: li
         a, b = b, a
     idx = np.array(joined)
     n = len(idx)
-    verts_b = np.isin(idx, b)
+    in_b = np.zeros(len(sv), dtype=bool)
+    in_b[b] = True
+    verts_b = in_b[idx]
     from_b = verts_b & np.roll(verts_b, -1)  # edges between two of b's vertices (b's, and maybe a chord: tested too)
     vi = np.concatenate([np.repeat(np.arange(n), from_b.sum()), np.repeat(np.flatnonzero(verts_b), n)])
     ei = np.concatenate([np.tile(np.flatnonzero(from_b), n), np.tile(np.arange(n), verts_b.sum())])
     keep = (vi != ei) & (vi != (ei + 1) % n)
     vi, ei = vi[keep], ei[keep]
-    for side in (sv, dv):
-        pts = side[idx]
-        d = point_segment_distance(pts[vi], pts[ei], pts[(ei + 1) % n])
-        if (d < clearance_floor(pts)).any():
-            return False
-    return True
+    # Both sides in one call (the same arithmetic per pair): source pairs first, then target pairs.
+    m = len(vi)
+    pts = (sv[idx], dv[idx])
+    both = np.concatenate(pts)
+    vj, ej, fj = np.r_[vi, vi + n], np.r_[ei, ei + n], np.r_[(ei + 1) % n, (ei + 1) % n + n]
+    d = point_segment_distance(both[vj], both[ej], both[fj])
+    return not ((d[:m] < clearance_floor(pts[0])).any() or (d[m:] < clearance_floor(pts[1])).any())
