@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import PolygonError
 from ..maps.base import ThetaMap
 from ..maps.cage import CageMap
 from ..maps.compose import BijectiveMap, theta_for
@@ -22,6 +23,7 @@ from ..options import MapOptions
 from ..polygon import Polygon, check_pair
 from ..polygon.partition import Partition
 from ..raster.imageio import RasterImage, convert_pixels
+from ..within import WithinPair
 
 __all__ = [
     "PREVIEW_DRAG_TRIANGLES", "PREVIEW_SIDE", "PREVIEW_TRIANGLES", "PreviewImage", "PreviewMapper", "PreviewMesh", "encode_png", "preview_areas",
@@ -174,6 +176,11 @@ class PreviewMapper:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._kept: dict[str, tuple[tuple, ThetaMap]] = {}
+        # The last cage map (its face maps are reused where a face did not move) and its faces' target meshes.
+        self._cage: CageMap | None = None
+        self._face_meshes: dict[int, tuple] = {}
+        # The last within pair, with what it was made from: (key, pair, src, dst).
+        self._within: tuple | None = None
 
     def build(self, src: Polygon, dst: Polygon, options: MapOptions, region: tuple[float, float, float, float]) -> PreviewMesh:
         """The map between ``src`` and ``dst`` at ``options``' density, and its mesh of the target.
@@ -230,9 +237,10 @@ class PreviewMapper:
         itself), which the preview's own scaled copy would only repeat at the
         cost of validating two more meshes.
 
-        The whole cage map is built at every call: the ring of ``--within``
-        (`warpcli.within.within_pair`) is cut anew on both sides whenever
-        either side moves, so no side's faces can be kept.
+        A face's map on a side is kept from the last call where that side of
+        the face did not move (`build_cage_map`'s ``kept``): in a drag within
+        an outline (`within_pair`) only the faces at the dragged vertex
+        change, and the source side does not change at all.
 
         Raises
         ------
@@ -243,14 +251,29 @@ class PreviewMapper:
 
         t0 = time.perf_counter()
         with self._lock:
-            fmap = build_cage_map(src, dst, options, regions=(region, region))
+            before = self._cage
+            fmap = build_cage_map(src, dst, options, regions=(region, region), kept=before)
+            self._cage = fmap
+            old = (set(), set()) if before is None else ({id(m.phi0) for m in before.face_maps}, {id(m.phi1) for m in before.face_maps})
+            rebuilt = tuple(
+                role for role, side, ids in (("source", "phi0", old[0]), ("target", "phi1", old[1]))
+                if any(id(getattr(m, side)) not in ids for m in fmap.face_maps)
+            )  # fmt: skip
             if options.check:
                 fmap.check_bijective()
-            parts, offset = [], 0
+            parts, offset, meshes = [], 0, {}
             for face_map in fmap.face_maps:
-                positions, triangles, tex = _target_mesh(face_map.phi0, face_map.phi1, face_map.dst, options.areas()[1], region)
+                # A face whose two maps were both kept has the same mesh and texture as last time.
+                key = (id(face_map.phi0), id(face_map.phi1), options.areas()[1], region)
+                kept = self._face_meshes.get(key)
+                if kept is None or kept[0] is not face_map.phi0 or kept[1] is not face_map.phi1:
+                    kept = (face_map.phi0, face_map.phi1,
+                            _target_mesh(face_map.phi0, face_map.phi1, face_map.dst, options.areas()[1], region))  # fmt: skip
+                meshes[key] = kept
+                positions, triangles, tex = kept[2]
                 parts.append((positions, np.asarray(triangles) + offset, tex))
                 offset += len(positions)
+            self._face_meshes = meshes
             positions = np.concatenate([p[0] for p in parts])
             triangles = np.concatenate([p[1] for p in parts])
             tex = np.concatenate([p[2] for p in parts])
@@ -258,8 +281,93 @@ class PreviewMapper:
                 positions, tex = positions / factor, tex / factor
         return PreviewMesh(
             positions.astype(np.float32), tex.astype(np.float32), np.asarray(triangles, np.uint32), fmap,
-            options.areas(), ("source", "target"), time.perf_counter() - t0,
+            options.areas(), rebuilt, time.perf_counter() - t0,
         )  # fmt: skip
+
+    def within_pair(
+        self, src: Polygon, dst: Polygon, within: str, image_size: tuple[int, int], drag: str | None = None
+    ) -> WithinPair:
+        """`warpcli.within.within_pair` of two polygons; in a drag, the last call's cut of the ring kept where it still holds.
+
+        While a side is dragged (``drag`` not None), the ring's cut of the
+        last call (its faces, by vertex index) is kept when the outline is
+        the same and the moved polygon's vertices, put in place of the old
+        ones, still leave every face a valid partition on that side: checked
+        exactly, by building the side's `Partition` as `within_pair` does
+        (the same checks, so a cut that no longer holds is never shown). The
+        preview then moves with the cut it had, as a drag moves the polygon:
+        the map is the cage map of a valid cut of the ring. Otherwise, and
+        always when no side is dragged (the pointer released, the export),
+        the ring is cut anew by `within_pair`: the command line's own cut and
+        errors.
+        """
+        from ..within import within_pair
+
+        key = (within, image_size, src.name, dst.name, src.n, dst.n)
+        with self._lock:
+            last = self._within
+        pair = None
+        if drag is not None and last is not None and last[0] == key:
+            pair = _moved_pair(last[1], last[2], last[3], src, dst, within, image_size)
+        if pair is None:
+            pair = within_pair(src, dst, within, image_size)
+        with self._lock:
+            self._within = (key, pair, src, dst)
+        return pair
+
+
+def _moved_pair(
+    pair: WithinPair, old_src: Polygon, old_dst: Polygon, src: Polygon, dst: Polygon, within: str, image_size: tuple[int, int]
+) -> WithinPair | None:
+    """``pair`` (made for ``old_src``, ``old_dst``) with the cage's vertices moved to ``src``'s and ``dst``'s, the ring's
+    faces kept; None unless the outline is the same and both sides are still valid partitions."""
+    from ..polygon.outline import outline_polygon
+
+    n = src.n
+    if pair.cage_faces != 1 or pair.cage_loops[0] != tuple(range(n)):
+        return None  # one polygon cage, its vertices first and in order: as within_pair makes it for one polygon
+    outline = outline_polygon(within, image_size, [src.points, dst.points])
+    stretched = None
+    if not np.array_equal(outline, pair.outline):
+        # A margin's box moved with an outermost vertex: its points (on the box's sides, the same on both
+        # sides) go along with it, stretched as the box was; the corners exactly to the new box's.
+        stretched = _stretched_outline(pair, outline)
+        if stretched is None:
+            return None
+    sides = []
+    for mesh, old, new in ((pair.src, old_src, src), (pair.dst, old_dst, dst)):
+        if np.array_equal(old.points, new.points) and stretched is None:
+            sides.append(mesh)
+            continue
+        vertices = np.array(mesh.vertices)
+        vertices[:n] = new.points
+        if stretched is not None:
+            vertices[stretched[0]] = stretched[1]
+        try:
+            sides.append(mesh.moved(vertices))  # every check of a cage mesh, exactly
+        except PolygonError:
+            return None
+    return dataclasses.replace(pair, src=sides[0], dst=sides[1], outline=outline)
+
+
+def _stretched_outline(pair: WithinPair, outline: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.float64]] | None:
+    """The outline's points of ``pair`` (vertex indices, new positions) moved from its box onto the box ``outline``,
+    or None unless both are boxes (four corners, sides parallel to the axes) and the points are the same on both sides."""
+    old = pair.outline
+    loop = pair.src.loops[0]
+    if len(old) != 4 or len(outline) != 4 or not np.array_equal(pair.src.vertices[loop], pair.dst.vertices[loop]):
+        return None
+    lo, hi, new_lo, new_hi = old.min(axis=0), old.max(axis=0), outline.min(axis=0), outline.max(axis=0)
+    corners = {tuple(p) for p in old.tolist()}
+    if corners != {(x, y) for x in (lo[0], hi[0]) for y in (lo[1], hi[1])} or not (hi > lo).all():
+        return None
+    points = pair.src.vertices[loop]
+    moved = new_lo + (points - lo) * ((new_hi - new_lo) / (hi - lo))
+    # On a side a coordinate is the box's own (lo or hi): it becomes the new box's exactly.
+    for axis in (0, 1):
+        for was, now in ((lo[axis], new_lo[axis]), (hi[axis], new_hi[axis])):
+            moved[points[:, axis] == was, axis] = now
+    return loop, moved
 
 
 def _target_mesh(

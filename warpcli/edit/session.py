@@ -7,6 +7,7 @@ import json
 import math
 import os
 import shlex
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +18,6 @@ from ..options import BOUNDARIES, INTERPOLATIONS, OUTSIDE, MapOptions, WarpOptio
 from ..outputs import atomic_path, check_output_path, write_checked
 from ..polygon import Polygon, check_pair
 from ..raster.imageio import check_image_output, read_image
-from ..within import within_pair
 from .preview import PreviewImage, PreviewMapper, encode_png, preview_image, with_preview_density
 
 #: The editor draws one polygon per side; a cage mesh file is refused with this line.
@@ -337,22 +337,24 @@ class EditSession:
         try:
             src, dst = self.polygons(doc)
             options = self.options_from(doc.get("options"))
-            psrc, pdst = self._scaled("src", src), self._scaled("dst", dst)
             drag = doc.get("drag")
             if drag not in (None, "src", "dst"):
                 raise InputError(f"drag must be 'src', 'dst' or null, got {drag!r}")
             pw, ph = self.preview.preview_size
             region = (0.0, 0.0, float(pw), float(ph))
             if options.within is None:
+                psrc, pdst = self._scaled("src", src), self._scaled("dst", dst)
                 mapping = with_preview_density(options.map, psrc, pdst, drag)
                 mesh = self.mapper.build(psrc, pdst, mapping, region)
             else:
                 # The export's cage mesh (`warp --within`'s, in the image's pixels), mapped at the preview's
                 # density (in the image's pixels: times factor^2) and shown shrunk to the preview.
-                pair = within_pair(src, dst, options.within, self.image_size)
+                t0 = time.perf_counter()
+                pair = self.mapper.within_pair(src, dst, options.within, self.image_size, drag)
                 k = self.preview.factor
                 mapping = with_preview_density(options.map, pair.src.outline, pair.dst.outline, drag)
                 mesh = self.mapper.build_cage(pair.src, pair.dst, mapping, (0.0, 0.0, pw * k, ph * k), k)
+                mesh = dataclasses.replace(mesh, seconds=time.perf_counter() - t0)  # the ring's cut counted too
         except WarpError as err:
             text = json.dumps({"ok": False, "error": str(err), "command": None}).encode()
             text += b" " * (-len(text) % 4)

@@ -160,6 +160,8 @@ class CageMap:
         self.src_mesh = src_mesh
         self.dst_mesh = dst_mesh
         self.face_maps = tuple(face_maps)
+        # (options, regions) when made by build_cage_map: which of its face maps a later build may reuse.
+        self.built_with: tuple | None = None
         self.timings: dict[str, float] = {}
         for fmap in self.face_maps:
             for stage, seconds in fmap.timings.items():
@@ -390,6 +392,7 @@ def build_cage_map(
     options: MapOptions | None = None,
     *,
     regions: tuple[Region | None, Region | None] = (None, None),
+    kept: CageMap | None = None,
 ) -> CageMap:
     """Build the map between two cage meshes: `build_map` for every face.
 
@@ -406,11 +409,21 @@ def build_cage_map(
         sides are refused: the faces of an edge would not meet on it.
     regions : (region, region)
         Where the source and the target map will be evaluated (see `build_map`).
+    kept : CageMap or None
+        A map built before by this function (the editor's last preview): a
+        side's map of a face (phi0 of the source face, phi1 of the target's)
+        is taken from it instead of being built again where it was built
+        from the same polygon (points and name), Theta, options (with that
+        side's ``max_area``) and region, as building it again would make the
+        same map. Only meshes of more
+        than `CONCURRENT_FACES` faces reuse (the others go through
+        `build_map`).
 
     Returns
     -------
     CageMap
-        Its ``timings`` sum the faces'.
+        Its ``timings`` sum the faces'; ``built_with`` holds the options and
+        regions it was built at.
 
     Raises
     ------
@@ -448,8 +461,35 @@ def build_cage_map(
     if len(pairs) <= CONCURRENT_FACES:
         maps = [build_map(a, b, opts, regions=regions) for a, b in pairs]
     else:
-        maps = [_face_map(a, b, opts, regions) for a, b in pairs]
-    return CageMap(src, dst, maps)
+        sides = _kept_sides(kept)
+        maps = [_face_map(a, b, opts, regions, sides) for a, b in pairs]
+    result = CageMap(src, dst, maps)
+    result.built_with = (opts, regions)
+    return result
+
+
+def _side_key(role: str, polygon: Polygon, theta, opts: MapOptions, regions) -> tuple:
+    """What a side's map of a face is built from: its role, polygon, Theta, its own options and region.
+
+    A side's map depends on the other side's ``max_area`` not at all (the
+    methods take their role's): the key holds the side's alone, so that the
+    source's maps are kept when a drag meshes the target more coarsely.
+    """
+    i = 0 if role == "source" else 1
+    own = dataclasses.replace(opts, max_area=opts.areas()[i])
+    return (role, polygon.points.tobytes(), polygon.name, theta.points.tobytes(), theta.name, own, regions[i])
+
+
+def _kept_sides(kept: CageMap | None) -> dict[tuple, object]:
+    """The side maps of ``kept`` by `_side_key`."""
+    if kept is None or kept.built_with is None:
+        return {}
+    opts, regions = kept.built_with
+    sides: dict[tuple, object] = {}
+    for fmap in kept.face_maps:
+        for role, phi in (("source", fmap.phi0), ("target", fmap.phi1)):
+            sides[_side_key(role, phi.polygon, phi.theta, opts, regions)] = phi
+    return sides
 
 
 #: Meshes of at most this many faces build each face with `build_map`, its two
@@ -463,8 +503,10 @@ def build_cage_map(
 CONCURRENT_FACES = 2
 
 
-def _face_map(src: Polygon, dst: Polygon, opts: MapOptions, regions: tuple[Region | None, Region | None]) -> BijectiveMap:
-    """`build_map`'s policy for one face, both maps built on this thread."""
+def _face_map(
+    src: Polygon, dst: Polygon, opts: MapOptions, regions: tuple[Region | None, Region | None], kept: dict | None = None
+) -> BijectiveMap:
+    """`build_map`'s policy for one face, both maps built on this thread (or taken from ``kept``, `_kept_sides`)."""
     from .compose import theta_for
     from .registry import METHODS
 
@@ -472,6 +514,10 @@ def _face_map(src: Polygon, dst: Polygon, opts: MapOptions, regions: tuple[Regio
     method = METHODS[opts.method].load()
     maps = []
     for polygon, role, region, side in ((src, "source", regions[0], "inverse"), (dst, "target", regions[1], "grid")):
+        phi = kept.get(_side_key(role, polygon, theta, opts, regions)) if kept else None
+        if phi is not None:
+            maps.append(phi)  # built from the same polygon, Theta, options and region: the same map
+            continue
         phi = method.build(polygon, theta, opts, role, region)
         if region is not None and hasattr(phi, "precompute"):
             phi.precompute(side)

@@ -48,7 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import PolygonError
 from .messages import format_number, format_point
-from .predicates import orient_sign, point_segment_distance, segments_touch, signed_area
+from .predicates import orient_sign, orient_sign_one, point_segment_distance, segments_touch, signed_area
 from .validate import clearance_floor, validate_points
 
 __all__ = ["cut_ring", "outline_polygon"]
@@ -496,24 +496,42 @@ def _is_ring(outline: NDArray, cages: list[NDArray]) -> bool:
 
 def _repair(sv: NDArray, dv: NDArray, tris: NDArray, seg: NDArray) -> NDArray[np.intp]:
     """Flip interior edges of folded triangles while that lowers the count of folds (on either side)."""
-    tris = [list(t) for t in tris]
+    arr = np.asarray(tris, dtype=np.intp).reshape(-1, 3)
+    tris = arr.tolist()
     fixed = {frozenset((int(a), int(b))) for a, b in seg}
+    # A triangle's folds are tested one at a time, exactly, in Python floats (`orient_sign_one`: a numpy
+    # call per triangle cost 50 times more), and remembered: flips test the same triangles again and again.
+    sides = (sv.tolist(), dv.tolist())
+    memo: dict[tuple[int, int, int], int] = {}
 
     def badness(t) -> int:
-        arr = np.array([t], dtype=np.intp)
-        return int(_signs(sv, arr)[0] <= 0) + int(_signs(dv, arr)[0] <= 0)
+        key = (t[0], t[1], t[2])
+        bad = memo.get(key)
+        if bad is None:
+            bad = memo[key] = sum(orient_sign_one(p[key[0]], p[key[1]], p[key[2]]) <= 0 for p in sides)
+        return bad
 
-    for _ in range(FLIPS_PER_TRIANGLE * len(tris)):
+    def edge_owners() -> dict[tuple[int, int], int]:
         edges: dict[tuple[int, int], int] = {}
         for i, t in enumerate(tris):
             for j in range(3):
                 edges[(t[j], t[(j + 1) % 3])] = i
-        arr = np.array(tris, dtype=np.intp)
-        folded = np.flatnonzero(_folded(sv, dv, arr))
-        if not folded.size:
+        return edges
+
+    # The directed edges and the folded triangles are kept up to date flip by flip (a flip changes two
+    # triangles), not found again over all triangles after each flip; should a flip make an edge that
+    # is there already (a flip across a quadrilateral that is not convex can), they are found again
+    # after every flip, as the last triangle holding an edge owns it.
+    edges = edge_owners()
+    folded = set(np.flatnonzero(_folded(sv, dv, arr)).tolist())  # folded on either side, as badness says
+    rebuild = False
+    for _ in range(FLIPS_PER_TRIANGLE * len(tris)):
+        if rebuild:
+            edges = edge_owners()
+        if not folded:
             break
         flipped = False
-        for i in folded:
+        for i in sorted(folded):
             t = tris[i]
             for j in range(3):
                 a, b, c = t[j], t[(j + 1) % 3], t[(j + 2) % 3]
@@ -526,7 +544,21 @@ def _repair(sv: NDArray, dv: NDArray, tris: NDArray, seg: NDArray) -> NDArray[np
                 before = badness(t) + badness(u)
                 after = badness(new[0]) + badness(new[1])
                 if after < before:
+                    for k, tri in ((i, t), (other, u)):
+                        for m in range(3):
+                            edge = (tri[m], tri[(m + 1) % 3])
+                            if edges.get(edge) == k:
+                                del edges[edge]
+                    rebuild = rebuild or (c, d) in edges or (d, c) in edges
                     tris[i], tris[other] = new
+                    for k in (i, other):
+                        tri = tris[k]
+                        for m in range(3):
+                            edges[(tri[m], tri[(m + 1) % 3])] = k
+                        if badness(tri):
+                            folded.add(k)
+                        else:
+                            folded.discard(k)
                     flipped = True
                     break
             if flipped:
@@ -690,15 +722,18 @@ def _valid_join(sv: NDArray, dv: NDArray, a: list[int], b: list[int], joined: li
         a, b = b, a
     idx = np.array(joined)
     n = len(idx)
-    verts_b = np.isin(idx, b)
+    in_b = np.zeros(len(sv), dtype=bool)
+    in_b[b] = True
+    verts_b = in_b[idx]
     from_b = verts_b & np.roll(verts_b, -1)  # edges between two of b's vertices (b's, and maybe a chord: tested too)
     vi = np.concatenate([np.repeat(np.arange(n), from_b.sum()), np.repeat(np.flatnonzero(verts_b), n)])
     ei = np.concatenate([np.tile(np.flatnonzero(from_b), n), np.tile(np.arange(n), verts_b.sum())])
     keep = (vi != ei) & (vi != (ei + 1) % n)
     vi, ei = vi[keep], ei[keep]
-    for side in (sv, dv):
-        pts = side[idx]
-        d = point_segment_distance(pts[vi], pts[ei], pts[(ei + 1) % n])
-        if (d < clearance_floor(pts)).any():
-            return False
-    return True
+    # Both sides in one call (the same arithmetic per pair): source pairs first, then target pairs.
+    m = len(vi)
+    pts = (sv[idx], dv[idx])
+    both = np.concatenate(pts)
+    vj, ej, fj = np.r_[vi, vi + n], np.r_[ei, ei + n], np.r_[(ei + 1) % n, (ei + 1) % n + n]
+    d = point_segment_distance(both[vj], both[ej], both[fj])
+    return not ((d[:m] < clearance_floor(pts[0])).any() or (d[m:] < clearance_floor(pts[1])).any())

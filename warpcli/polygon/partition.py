@@ -81,7 +81,8 @@ class Partition:
         object.__setattr__(self, "faces", faces)
         loop = _topology(faces, len(verts), self.name)
         object.__setattr__(self, "_loop", loop)
-        _geometry(verts, faces, loop, self.name)
+        # The outline and the faces as the checks made them (checked once: `outline` and `face_polygon` rename them).
+        object.__setattr__(self, "_polygons", _geometry(verts, faces, loop, self.name))
 
     @property
     def points(self) -> NDArray[np.float64]:
@@ -106,7 +107,7 @@ class Partition:
     @cached_property
     def outline(self) -> Polygon:
         """The outer boundary as a `Polygon`, running the faces' way round."""
-        return Polygon(self.vertices[self._loop], name=self.name)  # type: ignore[attr-defined]
+        return self._polygons[0].renamed(self.name)  # type: ignore[attr-defined]
 
     @cached_property
     def outline_edges(self) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -126,7 +127,7 @@ class Partition:
 
     def face_polygon(self, k: int) -> Polygon:
         """Face ``k`` as a `Polygon`, named ``"NAME face k"``."""
-        return Polygon(self.face_points(k), name=f"{self.name} face {k}")
+        return self._polygons[1][k].renamed(f"{self.name} face {k}")  # type: ignore[attr-defined]
 
     def face_polygons(self) -> tuple[Polygon, ...]:
         """Every face as a `Polygon` (see `face_polygon`)."""
@@ -145,8 +146,30 @@ class Partition:
         return self.outline.signed_area
 
     def moved(self, vertices: ArrayLike, name: str | None = None) -> Partition:
-        """The same faces on other vertex positions (validated again)."""
-        return Partition(np.asarray(vertices, dtype=np.float64), self.faces, self.name if name is None else name)
+        """The same faces on other vertex positions (validated again).
+
+        All of `Partition`'s checks, with what cannot have changed taken from
+        this mesh: the faces' combinatorics (the same faces), and a face's own
+        polygon checks where none of its vertices moved (they depend on its
+        points alone). The orientation and angle checks run on every face.
+        A drag in the editor moves the faces at one vertex.
+
+        Raises
+        ------
+        PolygonError
+            As `Partition`, with the same messages.
+        """
+        label = self.name if name is None else name
+        verts = _as_vertices(np.asarray(vertices, dtype=np.float64), label)
+        if verts.shape != self.vertices.shape:
+            return Partition(verts, self.faces, label)
+        verts.setflags(write=False)
+        moved = object.__new__(Partition)
+        for key, value in (("vertices", verts), ("faces", self.faces), ("name", label), ("_loop", self._loop)):  # type: ignore[attr-defined]
+            object.__setattr__(moved, key, value)
+        kept = (self.vertices, self._polygons)  # type: ignore[attr-defined]
+        object.__setattr__(moved, "_polygons", _geometry(verts, self.faces, self._loop, label, kept))  # type: ignore[attr-defined]
+        return moved
 
 
 @dataclass(frozen=True, eq=False)
@@ -429,13 +452,33 @@ def _corner_angles(points: NDArray[np.float64], positive: bool) -> NDArray[np.fl
     return np.mod(ang, 2 * np.pi)
 
 
-def _geometry(verts: NDArray[np.float64], faces: tuple[tuple[int, ...], ...], loop: NDArray[np.intp], name: str) -> None:
-    """The geometric checks of one side (see the module's docstring)."""
-    outline = Polygon(verts[loop], name=f"{name} (the cage mesh's outline)")
+def _geometry(
+    verts: NDArray[np.float64],
+    faces: tuple[tuple[int, ...], ...],
+    loop: NDArray[np.intp],
+    name: str,
+    kept: tuple[NDArray[np.float64], tuple[Polygon, tuple[Polygon, ...]]] | None = None,
+) -> tuple[Polygon, tuple[Polygon, ...]]:
+    """The geometric checks of one side (see the module's docstring); the outline and the faces, checked.
+
+    ``kept``: the vertices and polygons of the same faces checked before; a
+    polygon whose points are the same is taken from there (renamed), not
+    checked again.
+    """
+
+    def polygon(index: NDArray[np.intp] | list[int], label: str, old: Polygon | None) -> Polygon:
+        points = verts[index]
+        if old is not None and kept is not None and np.array_equal(kept[0][index], points):
+            return old.renamed(label)
+        return Polygon(points, name=label)
+
+    outline = polygon(loop, f"{name} (the cage mesh's outline)", kept[1][0] if kept else None)
     positive = outline.signed_area > 0
     total = np.zeros(len(verts))
+    polygons = []
     for k, f in enumerate(faces):
-        poly = Polygon(verts[list(f)], name=f"{name}: face {k}")
+        poly = polygon(list(f), f"{name}: face {k}", kept[1][1][k] if kept else None)
+        polygons.append(poly)
         if (poly.signed_area > 0) != positive:
             raise PolygonError(
                 f"{name}: face {k} runs {_turn(poly.signed_area)} but the mesh's outline runs "
@@ -453,6 +496,7 @@ def _geometry(verts: NDArray[np.float64], faces: tuple[tuple[int, ...], ...], lo
             f"{name}: the faces {where} vertex {v} {format_point(verts[v])} overlap: their angles there sum to "
             f"{math.degrees(total[v]):.6g} degrees, not {math.degrees(expected[v]):.6g}"
         )
+    return outline, tuple(polygons)
 
 
 # ---------------------------------------------------------------- files

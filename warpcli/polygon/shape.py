@@ -50,6 +50,17 @@ class Polygon:
         pts.setflags(write=False)
         object.__setattr__(self, "points", pts)
 
+    def renamed(self, name: str) -> Polygon:
+        """The same polygon under another name, not checked again (its points were; the name is for messages).
+
+        >>> Polygon([[0, 0], [2, 0], [0, 1]], name="a").renamed("b").name
+        'b'
+        """
+        copy = object.__new__(Polygon)
+        object.__setattr__(copy, "points", self.points)
+        object.__setattr__(copy, "name", name)
+        return copy
+
     @property
     def n(self) -> int:
         """Number of vertices."""
