@@ -38,6 +38,27 @@ def pytest_configure(config):
     config.addinivalue_line("markers", "heavy: a long test, run only with WARPCLI_HEAVY=1")
 
 
+@pytest.hookimpl(tryfirst=True, optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """pytest-xdist: ``-n N`` hands out whole test files (in collection order), not single tests.
+
+    Many files build maps or fixtures once per process and share them (`helpers.built_map`,
+    module-scoped fixtures); split test by test (xdist's "load"), both workers built them (the
+    map contract's maps, about 25 s of CPU twice). The files are small beside the whole run
+    (the largest about 100 s of 550), so the two workers still end close together (measured:
+    11 s of worker time apart in a 5-minute run). ``--dist load`` given explicitly is taken
+    the same way (xdist cannot tell it from -n's default); any other ``--dist`` is left alone.
+    Not xdist's loadgroup: under pytest 9 it groups nothing (xdist 3.8 renames tests through
+    ``item._nodeid``, which pytest 9 no longer reads).
+    """
+    if config.getvalue("dist") != "load":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    config.option.loadscopereorder = False  # collection order: the doctests' small files come last
+    return LoadFileScheduling(config, log)
+
+
 def pytest_collection_modifyitems(config, items):
     if HEAVY:
         return
