@@ -14,6 +14,15 @@ Each round runs `warp --out-dir` as a subprocess once per jobs value, in alterna
 the same generated frames (a colour ramp and a checker, different per frame; a 12-vertex star
 onto a rotated one). Prints the median wall time per jobs value, the speed-up against jobs 1
 measured in the same rounds, and whether every output file is byte-identical to jobs 1's.
+
+Two more rows put the speed-up in context, measured in the same rounds:
+
+    python bench/jobs.py --shot animated --frames 24 --size 1280x720 --one-core --checkout /path/to/old/clone
+
+``--one-core`` runs ``--jobs 1`` pinned to one CPU (``sched_setaffinity``), the serial cost of
+the shot (``--jobs 1`` itself is not serial: a forked child builds one of each frame's two maps
+and kernels run on threads); ``--checkout DIR`` runs ``--jobs 1`` with another checkout's
+``warpcli`` first on ``PYTHONPATH`` (e.g. the release an issue was measured on).
 """
 
 from __future__ import annotations
@@ -76,9 +85,17 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--jobs", default="1,2")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--shot", choices=("batch", "animated"), default="batch")
+    parser.add_argument("--one-core", action="store_true", help="add --jobs 1 pinned to one CPU")
+    parser.add_argument("--checkout", metavar="DIR", help="add --jobs 1 run with DIR's warpcli")
     args = parser.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     jobs = [int(j) for j in args.jobs.split(",")]
+    # Rows: (label, jobs value, extra environment, CPUs to pin the process to).
+    rows = [(f"{j}", j, {}, None) for j in jobs]
+    if args.one_core:
+        rows.append(("1, one core", 1, {}, {min(os.sched_getaffinity(0))}))
+    if args.checkout:
+        rows.append((f"1, {os.path.basename(os.path.abspath(args.checkout))}", 1, {"PYTHONPATH": os.path.abspath(args.checkout)}, None))
     warp = os.path.join(os.path.dirname(sys.executable), "warp")
     with tempfile.TemporaryDirectory() as tmp:
         frames = write_frames(tmp, args.frames, w, h, args.format)
@@ -91,12 +108,12 @@ def main(argv: list[str] | None = None) -> None:
         for name, pts in (("src.json", src), ("dst.json", dst)):
             with open(os.path.join(tmp, name), "w") as fh:
                 json.dump(pts, fh)
-        times: dict[int, list[float]] = {j: [] for j in jobs}
-        cpu: dict[int, list[float]] = {j: [] for j in jobs}
-        hashes: dict[int, dict[str, str]] = {}
+        times: dict[str, list[float]] = {row[0]: [] for row in rows}
+        cpu: dict[str, list[float]] = {row[0]: [] for row in rows}
+        hashes: dict[str, dict[str, str]] = {}
         for r in range(args.rounds):
-            for j in (jobs if r % 2 == 0 else jobs[::-1]):
-                out = os.path.join(tmp, f"out{j}")
+            for label, j, env, pin in (rows if r % 2 == 0 else rows[::-1]):
+                out = os.path.join(tmp, f"out{[row[0] for row in rows].index(label)}")
                 os.makedirs(out, exist_ok=True)
                 polys = ["--src", os.path.join(tmp, "src.json"), "--dst", os.path.join(tmp, "dst.json")]
                 if args.shot == "animated":
@@ -104,24 +121,31 @@ def main(argv: list[str] | None = None) -> None:
                     cmd = [warp, ins, os.path.join(out, f"out.#.{args.format}"), "--frames", f"1-{args.frames}", *polys, "--jobs", str(j), "-q"]
                 else:
                     cmd = [warp, *frames, *polys, "--out-dir", out, "--jobs", str(j), "-q"]
+                if env.get("PYTHONPATH"):  # another checkout's code, through the same interpreter
+                    cmd = [sys.executable, "-m", "warpcli", *cmd[1:]]
                 t0, c0 = time.perf_counter(), _children_cpu()
-                subprocess.run(cmd, check=True)
-                times[j].append(time.perf_counter() - t0)
-                cpu[j].append(_children_cpu() - c0)
-                hashes[j] = digest(out)
-                print(f"round {r + 1} jobs {j}: {times[j][-1]:.2f} s, {cpu[j][-1]:.2f} s of CPU", file=sys.stderr, flush=True)
-    base = statistics.median(times[jobs[0]])
+                subprocess.run(cmd, check=True, env={**os.environ, **env}, preexec_fn=(lambda pin=pin: os.sched_setaffinity(0, pin)) if pin else None)
+                times[label].append(time.perf_counter() - t0)
+                cpu[label].append(_children_cpu() - c0)
+                hashes[label] = digest(out)
+                print(f"round {r + 1} jobs {label}: {times[label][-1]:.2f} s, {cpu[label][-1]:.2f} s of CPU", file=sys.stderr, flush=True)
+    first = rows[0][0]
+    base = statistics.median(times[first])
     print(f"{args.shot}: {args.frames} frames of {w}x{h} {args.format.upper()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}; median of {args.rounds}")
     # Cores busy = CPU / wall: jobs 1 is not one core's worth (a forked child builds one of each
     # frame's two maps, kernels run on threads), so on 2 cores the speed-up of jobs 2 is at most
     # about 2 / (jobs 1's cores busy), less the serial start-up.
-    print("| jobs | seconds (median) | per frame | CPU seconds (median) | cores busy | speed-up vs jobs %d | outputs identical to jobs %d |" % (jobs[0], jobs[0]))
-    print("|---:|---:|---:|---:|---:|---:|---|")
-    for j in jobs:
-        m = statistics.median(times[j])
-        c = statistics.median(cpu[j])
-        busy = statistics.median(cj / tj for cj, tj in zip(cpu[j], times[j]))
-        print(f"| {j} | {m:.2f} | {m / args.frames:.3f} | {c:.2f} | {busy:.2f} | {base / m:.2f} | {'yes' if hashes[j] == hashes[jobs[0]] else 'NO'} |")
+    print(f"| jobs | seconds (median) | per frame | CPU seconds (median) | cores busy | speed-up vs jobs {first} | outputs identical to jobs {first} |")
+    print("|---|---:|---:|---:|---:|---:|---|")
+    for label, *_ in rows:
+        m = statistics.median(times[label])
+        c = statistics.median(cpu[label])
+        busy = statistics.median(cj / tj for cj, tj in zip(cpu[label], times[label]))
+        print(f"| {label} | {m:.2f} | {m / args.frames:.3f} | {c:.2f} | {busy:.2f} | {base / m:.2f} | {'yes' if hashes[label] == hashes[first] else 'NO'} |")
+    best = min(statistics.median(times[f"{j}"]) for j in jobs)
+    others = ", ".join(f"x{statistics.median(times[label]) / best:.2f} over jobs {label}" for label, *_ in rows if statistics.median(times[label]) > best)
+    if others:
+        print(f"\nThe fastest jobs value: {others}.")
 
 
 if __name__ == "__main__":

@@ -7,8 +7,10 @@ import os
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
 
-from helpers import l_shape, regular, write_polygon
+from helpers import l_shape, regular, run_cli, write_polygon
 from warpcli import BijectiveMap, MapOptions, Polygon
 from warpcli.cli import main
 
@@ -134,3 +136,96 @@ def test_sizes_beyond_openimageio_are_one_line_exit_2(tmp_path, size):
     with pytest.raises(InputError, match="OpenImageIO"):
         check_size((w, h))
     assert check_size((MAX_SIDE, 1)) == (MAX_SIDE, 1)
+
+
+# --- the image warp's map: every map option, and retouches within an outline -------------------
+
+
+def _ramp(width, height):
+    """An image whose pixel holds its own centre (x, y): bilinear sampling of it at s gives s exactly."""
+    r, c = np.mgrid[0:height, 0:width]
+    return np.stack([c + 0.5, r + 0.5], axis=2).astype(np.float64)
+
+
+def _pulled_back(result, width, height, keep):
+    """Output pixel centres p and the source points s the image warp sampled for them (read off the
+    warped ramp, so through the resampler, not the map's own arrays), where ``keep`` and s lies
+    where bilinear sampling is exact (half a pixel inside the image)."""
+    s = result.pixels
+    r, c = np.nonzero(keep & np.isfinite(s).all(axis=2))
+    p = np.stack([c + 0.5, r + 0.5], axis=1)
+    s = s[r, c]
+    # Strictly inside: a point beyond the outer pixel centres reads as the clamped edge value.
+    ok = (s[:, 0] > 0.501) & (s[:, 0] < width - 0.501) & (s[:, 1] > 0.501) & (s[:, 1] < height - 0.501)
+    return p[ok], s[ok]
+
+
+def _points_cli(tmp, pts, a, b, *options):
+    (tmp / "s.json").write_text(json.dumps(np.asarray(pts).tolist()))
+    assert main(["points", "--src", a, "--dst", b, *options, "-q", str(tmp / "s.json"), str(tmp / "p.json")]) == 0
+    return np.array(json.loads((tmp / "p.json").read_text()))
+
+
+@pytest.mark.parametrize(
+    "options", [dict(method="fem", theta="cyclic"), dict(method="mfs", theta="cyclic", nodes=96), dict(method="fem", dst_boundary="quadratic")]
+)
+def test_points_go_where_the_image_warp_with_the_same_options_puts_them(tmp_path, options):
+    """`warp points` takes every map option of `warp`: a point s that the image warp sampled for the
+    output pixel centre p maps onto p (before, points had --method only, so --theta or --boundary
+    gave points another map than the image's)."""
+    from warpcli.grid import inside_polygon, pixel_centres
+    from warpcli.pipeline import warp_image
+
+    w = h = 120
+    src, dst = SRC * 0.9, regular(6, r=50.0, phase=0.3) + 5.0
+    a, b = write_polygon(tmp_path / "a.json", src), write_polygon(tmp_path / "b.json", dst)
+    result = warp_image(_ramp(w, h), src, dst, interp="linear", antialias=False, **options)
+    inside = inside_polygon(pixel_centres(w, h), dst).reshape(h, w)
+    p, s = _pulled_back(result, w, h, inside)
+    assert len(p) > 2000
+    flags = [x for k, v in options.items() for x in ("--" + k.replace("_", "-"), str(v))]
+    moved = _points_cli(tmp_path, s, a, b, *flags)
+    assert np.abs(moved - p).max() <= 2e-5
+    # A different Theta is a different map: the option really reaches the points.
+    other = _points_cli(tmp_path, s, a, b, "--method", options["method"])
+    assert np.abs(other - p).max() > 0.05
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture], phases=[Phase.explicit, Phase.generate])
+@given(seed=st.integers(0, 10**6), within=st.sampled_from(["image", "6", "9.5"]), move=st.floats(0.05, 0.3))
+def test_points_within_an_outline_follow_the_retouch_and_stay_outside_it(tmp_path, seed, within, move):
+    """`warp points --within` maps points by the retouch's map: inside the outline onto where the
+    image warp puts them, outside it (and anywhere off the image) exactly where they were."""
+    from warpcli.errors import PolygonError
+    from warpcli.grid import inside_polygon, pixel_centres
+    from warpcli.pipeline import warp_image
+
+    rng = np.random.default_rng(seed)
+    w = h = 64
+    angles = np.linspace(0, 2 * np.pi, 6, endpoint=False) + rng.uniform(0, 0.5, 6)
+    radius = 13.0 * rng.uniform(0.6, 1.0, 6)
+    src = np.stack([32 + radius * np.cos(angles), 32 + radius * np.sin(angles)], axis=1)
+    dst = src + rng.uniform(-move, move, src.shape) * 13.0
+    try:
+        result = warp_image(_ramp(w, h), src, dst, within=within, interp="linear", antialias=False, method="fem", max_area=24.0)
+    except PolygonError:
+        return  # no fold-free cut of the ring for this cage: refused alike by both commands
+    a, b = write_polygon(tmp_path / "a.json", src), write_polygon(tmp_path / "b.json", dst)
+    options = ("--within", within, "--image-size", f"{w}x{h}", "--max-area", "24")
+    inside = inside_polygon(pixel_centres(w, h), result.within.outline).reshape(h, w)
+    p, s = _pulled_back(result, w, h, inside)
+    assert np.abs(_points_cli(tmp_path, s, a, b, *options) - p).max() <= 2e-5
+    assert np.abs(_points_cli(tmp_path, p, a, b, *options, "--inverse") - s).max() <= 2e-5
+    # Outside the outline, and off the image: the identity (no warning needed, nothing lost).
+    far = rng.uniform(-20, w + 20, (200, 2)).round(3)
+    out = ~inside_polygon(far, result.within.outline)
+    assert out.any()
+    assert np.array_equal(_points_cli(tmp_path, far[out], a, b, *options), far[out])
+
+
+def test_points_within_need_the_image_size(tmp_path, polys):
+    (tmp_path / "p.json").write_text("[[20, 20]]")
+    a, b = polys
+    code, err = run_cli(["points", "--src", a, "--dst", b, "--within", "image", str(tmp_path / "p.json"), str(tmp_path / "q.json")])
+    assert code == 2 and "--image-size" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "q.json").exists()

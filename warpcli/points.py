@@ -17,6 +17,10 @@ pixel, below the accuracy of every method; ``precision`` changes it, 0 to
 
 Points outside the polygon have no image: they are left as they are with a
 warning (``outside="keep"``), or refused (``outside="error"``).
+
+A retouch (``within``, as ``warp --within``) maps points as it maps the image:
+the cages move, the ring between them and the fixed outline follows, and every
+point outside the outline stays where it is (it has an image: itself).
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from .outputs import PendingOutputs, check_output_path, write_checked
 from .keyframes import read_shape_at
 from .maps.cage import map_between
 from .polygon.partition import check_shapes
+from .within import read_cages, within_pair
 
 log = logging.getLogger("warpcli")
 
@@ -81,6 +86,8 @@ def map_points_file(
     frame: int | None = None,
     precision: int = PRECISION,
     columns: tuple[str, str] | None = None,
+    within: str | None = None,
+    image_size: tuple[int, int] | None = None,
 ) -> PointsResult:
     """Map the points of a JSON, CSV or OBJ file through the map between two polygons.
 
@@ -114,6 +121,14 @@ def map_points_file(
         A table's x and y columns: header names, or 1-based numbers as
         strings (``("2", "3")``). None: the columns a header names ``x`` and
         ``y`` (any case), else the first two.
+    within : str or None
+        A retouch within a fixed outline, as ``warp --within``
+        (`warpcli.within.within_pair`): ``"image"``, a margin in pixels, or a
+        polygon file; the source and target files may hold several cages.
+        Points outside the outline stay as they are.
+    image_size : (width, height) or None
+        The image's size, which ``within`` needs (an OBJ's ``texture_size``
+        when not given).
 
     Returns
     -------
@@ -123,7 +138,8 @@ def map_points_file(
     ------
     InputError
         For unreadable or malformed files, an OBJ without ``texture_size``,
-        or points outside with ``outside="error"``.
+        ``within`` without an image size, or points outside with
+        ``outside="error"``.
 
     References
     ----------
@@ -140,12 +156,25 @@ def map_points_file(
     if os.path.splitext(os.fspath(output_path))[1].lower() != kind:
         raise InputError(f"{os.fspath(output_path)}: the output must have the input's format ({kind})")
     theta_file = (options or MapOptions()).theta_file
-    check_output_path(output_path, inputs=tuple(p for p in (name, src_path, dst_path, theta_file) if p is not None))
+    outline_file = within if within is not None and os.path.splitext(within)[1] else None
+    sources = (name, src_path, dst_path, theta_file, outline_file)
+    check_output_path(output_path, inputs=tuple(p for p in sources if p is not None))
     if kind == ".obj" and texture_size is None:
         raise InputError(f"{name}: an OBJ file's UVs need the texture size (--texture-size WxH)")
+    size = image_size if image_size is not None else texture_size
+    if within is not None and size is None:
+        raise InputError(f"{name}: --within needs the image's size (--image-size WxH)")
     raw = _read(name)
-    src = read_shape_at(src_path, src_label, frame)
-    dst = read_shape_at(dst_path, dst_label, frame)
+    if within is not None:
+        if frame is None:
+            src_cages, dst_cages = read_cages(src_path, src_label), read_cages(dst_path, dst_label)
+        else:
+            src_cages, dst_cages = read_shape_at(src_path, src_label, frame), read_shape_at(dst_path, dst_label, frame)
+        pair = within_pair(src_cages, dst_cages, within, size)  # type: ignore[arg-type]
+        src, dst = pair.src, pair.dst
+    else:
+        src = read_shape_at(src_path, src_label, frame)
+        dst = read_shape_at(dst_path, dst_label, frame)
     check_shapes(src, dst)
     if kind == ".json":
         pts, write = _json_points(raw, name, precision)
@@ -156,6 +185,9 @@ def map_points_file(
     fmap = map_between(src, dst, options or MapOptions())
     moved = fmap.inverse(pts) if inverse else fmap.forward(pts)
     lost = ~np.isfinite(moved).all(axis=1)
+    if within is not None:  # outside the outline the retouch is the identity, as for the image
+        moved[lost] = pts[lost]
+        lost[:] = False
     if lost.any():
         poly = dst if inverse else src
         if outside == "error":
