@@ -124,7 +124,9 @@ def main(argv: list[str] | None = None) -> None:
                 if env.get("PYTHONPATH"):  # another checkout's code, through the same interpreter
                     cmd = [sys.executable, "-m", "warpcli", *cmd[1:]]
                 t0, c0 = time.perf_counter(), _children_cpu()
-                subprocess.run(cmd, check=True, env={**os.environ, **env}, preexec_fn=(lambda pin=pin: os.sched_setaffinity(0, pin)) if pin else None)
+                # -m puts the working directory first on sys.path: run another checkout's code from there.
+                cwd = env.get("PYTHONPATH")
+                subprocess.run(cmd, check=True, cwd=cwd, env={**os.environ, **env}, preexec_fn=(lambda pin=pin: os.sched_setaffinity(0, pin)) if pin else None)
                 times[label].append(time.perf_counter() - t0)
                 cpu[label].append(_children_cpu() - c0)
                 hashes[label] = digest(out)
