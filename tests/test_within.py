@@ -237,6 +237,32 @@ def test_batches_and_keyframed_sequences_within(eyes):
     assert not np.array_equal(read_pixels(seq / "o.0002.png"), read_pixels(image))
 
 
+@pytest.mark.parametrize("run", ["image", "report", "grid", "heatmap", "save-map", "save-forward-map", "batch", "points"])
+def test_no_output_of_any_run_replaces_the_within_outline_file(eyes, run):
+    """The outline file is an input like the polygons: every kind of output naming it is refused
+    in one line, exit 2, the file unchanged and nothing written (the report used to replace it)."""
+    tmp, image, src, dst = eyes
+    outline = write_polygon(tmp / "outline.json", [[4, 6], [52, 4], [50, 40], [6, 42]])
+    before = (tmp / "outline.json").read_bytes()
+    common = ["--src", src, "--dst", dst, "--within", outline, "--max-area", "24"]
+    out = tmp / "o.png"
+    if run == "image":
+        args = [image, outline, *common]
+    elif run in ("report", "grid", "heatmap", "save-map", "save-forward-map"):
+        args = [image, out, *common, f"--{run}", outline]
+    elif run == "batch":
+        args = [image, "--out-dir", tmp, "--out-name", "outline.json", *common]
+    else:  # points
+        (tmp / "p.json").write_text("[[20, 20]]")
+        args = ["points", *common, "--image-size", f"{SIZE}x{SIZE}", tmp / "p.json", outline]
+    before_files = sorted(p.name for p in tmp.iterdir())
+    code, err = run_cli(args)
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, (run, err)
+    assert "outline" in err and "input" in err, (run, err)
+    assert (tmp / "outline.json").read_bytes() == before
+    assert sorted(p.name for p in tmp.iterdir()) == before_files
+
+
 @pytest.mark.parametrize("sequence", [False, True])
 def test_a_within_run_of_images_of_several_sizes_is_refused_before_any_work(eyes, sequence):
     # The outline (the image, a margin clipped to it) is made once, at the first image's size:

@@ -26,7 +26,7 @@ from .errors import ImageInputError, InputError, WarpError, naming
 from .files import check_regular_file
 from .maps.cage import map_between
 from .maps.compose import BijectiveMap
-from .options import WarpOptions, resolve_options
+from .options import WarpOptions, outline_file, resolve_options
 from .outputs import RunInputs
 from .pipeline import read_header_or_none, write_like
 from .plan import SamplingPlan, background_values, check_paste, plan_for
@@ -163,7 +163,7 @@ def warp_batch(
 def prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, dst_label, theta_file=None, within=None):
     """A batch's checks before any work: the (input, output) pairs, and the two polygons.
 
-    ``theta_file`` is the Theta file the map reads, if any (an input too).
+    ``theta_file`` is the Theta file the map reads, if any (an input too, as is ``within``'s outline file).
     ``within``: the polygons are the cages of a retouch within that outline
     (`warpcli.within.within_pair`), made at the first input's size (an
     outline of ``"image"`` is the first input's rectangle for every input).
@@ -179,7 +179,7 @@ def prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, 
         raise InputError(f"{directory}: output directory does not exist")
     outputs = [os.path.join(directory, output_name(p, pattern)) for p in input_paths]
     seen: dict[str, str] = {}
-    inputs = RunInputs(p for p in (*input_paths, src_path, dst_path, theta_file) if p is not None)
+    inputs = RunInputs(p for p in (*input_paths, src_path, dst_path, theta_file, outline_file(within)) if p is not None)
     for inp, out in zip(input_paths, outputs):
         key = os.path.abspath(out)
         if key in seen:
@@ -592,7 +592,9 @@ def warp_sequence(
         raise InputError(hint)
     _warn_about_outputs([output_pattern, *((maps.inverse, maps.forward) if maps is not None else ())], frames)
     # Every output against every input of the run: f.1@.png's frame 1 is f.@.png's frame 11.
-    inputs = RunInputs(p for p in (*(inp for _, inp in ins), src_path, dst_path, opts.map.theta_file) if p is not None)
+    inputs = RunInputs(
+        p for p in (*(inp for _, inp in ins), src_path, dst_path, opts.map.theta_file, opts.within_file) if p is not None
+    )
     for (f, _), (_, out) in zip(ins, outs):
         check_image_output(out, inputs=inputs)
         for extra in maps.paths(f) if maps is not None else ():

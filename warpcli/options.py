@@ -161,6 +161,27 @@ class MapOptions:
         return a if isinstance(a, tuple) else (a, a)  # type: ignore[return-value]
 
 
+def outline_file(within: str | None) -> str | None:
+    """The polygon file a retouch's ``within`` names, else None (no retouch, ``"image"``, or a margin).
+
+    The one reading of ``within`` (`warpcli.polygon.outline.outline_polygon`
+    follows it): the file is an input of the run, which no output may replace.
+
+    >>> outline_file("image"), outline_file(" 12.5 "), outline_file("outline.json")
+    (None, None, 'outline.json')
+    """
+    if within is None:
+        return None
+    text = str(within).strip()
+    if text == "image":
+        return None
+    try:
+        float(text)
+    except ValueError:
+        return str(within)
+    return None
+
+
 @dataclass(frozen=True)
 class WarpOptions:
     """How an image is warped: the map, the resampling, and the output.
@@ -231,6 +252,11 @@ class WarpOptions:
     feather: float = 0.0
     compression: int | None = None
     within: str | None = None
+
+    @property
+    def within_file(self) -> str | None:
+        """The outline file ``within`` names (`outline_file`), else None: an input of the run."""
+        return outline_file(self.within)
 
     def __post_init__(self) -> None:
         if not isinstance(self.map, MapOptions):

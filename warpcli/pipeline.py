@@ -486,7 +486,7 @@ def warp_file(
         raise InputError(f"unknown heatmap measure {heatmap_measure!r}; choose one of {', '.join(HEATMAP_MEASURES)}")
     clock = time.perf_counter
     stage = progress or (lambda name: None)
-    inputs = tuple(p for p in (input_path, src_path, dst_path, opts.map.theta_file) if p is not None)
+    inputs = tuple(p for p in (input_path, src_path, dst_path, opts.map.theta_file, opts.within_file) if p is not None)
     labels = [(label_in, label_out) for label_in, label_out in labels]
     if labels and opts.outside == "input":
         given = "--within" if opts.within is not None else "--outside input"

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
-from .options import MapOptions
+from .options import MapOptions, outline_file
 from .files import read_small_file
 from .outputs import PendingOutputs, check_output_path, write_checked
 from .keyframes import read_shape_at
@@ -156,8 +156,7 @@ def map_points_file(
     if os.path.splitext(os.fspath(output_path))[1].lower() != kind:
         raise InputError(f"{os.fspath(output_path)}: the output must have the input's format ({kind})")
     theta_file = (options or MapOptions()).theta_file
-    outline_file = within if within is not None and os.path.splitext(within)[1] else None
-    sources = (name, src_path, dst_path, theta_file, outline_file)
+    sources = (name, src_path, dst_path, theta_file, outline_file(within))
     check_output_path(output_path, inputs=tuple(p for p in sources if p is not None))
     if kind == ".obj" and texture_size is None:
         raise InputError(f"{name}: an OBJ file's UVs need the texture size (--texture-size WxH)")

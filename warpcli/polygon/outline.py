@@ -47,6 +47,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import PolygonError
+from ..options import outline_file
 from .messages import format_number, format_point
 from .predicates import orient_sign, orient_sign_one, point_segment_distance, segments_touch, signed_area
 from .validate import clearance_floor, validate_points
@@ -107,15 +108,15 @@ def outline_polygon(
     if cages:
         orientation = math.copysign(1.0, signed_area(np.asarray(cages[0], dtype=np.float64)))
     text = str(within).strip()
+    path = outline_file(within)
+    if path is not None:
+        from .formats import read_polygon
+
+        return np.array(read_polygon(os.fspath(path), label).points)
     if text == "image":
         box = (0.0, 0.0, float(width), float(height))
     else:
-        try:
-            margin = float(text)
-        except ValueError:
-            from .formats import read_polygon
-
-            return np.array(read_polygon(os.fspath(within), label).points)
+        margin = float(text)
         if not (margin > 0 and math.isfinite(margin)):
             raise PolygonError(f"--within {within}: the margin must be a positive number of pixels")
         if not cages:
