@@ -94,6 +94,7 @@ from numpy.typing import NDArray
 
 from ..boundary import nearest_edge
 from ..grid import inside_polygon
+from ..polygon.predicates import segments_touch, signed_area
 from .certificate import BAND, BAND_RELATIVE, OUTSIDE
 
 __all__ = ["MAX_PIECES", "MIN_PIECE", "BoundaryCertificate", "certify_boundary", "inner_offset"]
@@ -201,7 +202,7 @@ def inner_offset(vertices: NDArray[np.float64], delta: float) -> NDArray[np.floa
     (k, 2) ndarray of float or None
     """
     v = np.asarray(vertices, dtype=np.float64)
-    if _area2(v) < 0:
+    if signed_area(v) < 0:
         v = v[::-1]
     if delta == 0:
         return v.copy()
@@ -238,49 +239,22 @@ def inner_offset(vertices: NDArray[np.float64], delta: float) -> NDArray[np.floa
     return g
 
 
-def _area2(v: NDArray[np.float64]) -> float:
-    return float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1]))
-
-
 def _crossing(g: NDArray[np.float64], v: NDArray[np.float64]) -> bool:
-    """Whether an edge of the closed polyline g meets (or touches) an edge of the polygon v."""
+    """Whether an edge of the closed polyline g meets (or touches) an edge of the polygon v (exactly)."""
     a, b = g, np.roll(g, -1, axis=0)
-    for i in range(len(v)):  # loop over the polygon's edges, vectorised over g's
-        p, q = v[i], v[(i + 1) % len(v)]
-        d1 = (q[0] - p[0]) * (a[:, 1] - p[1]) - (q[1] - p[1]) * (a[:, 0] - p[0])
-        d2 = (q[0] - p[0]) * (b[:, 1] - p[1]) - (q[1] - p[1]) * (b[:, 0] - p[0])
-        d3 = (b[:, 0] - a[:, 0]) * (p[1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (p[0] - a[:, 0])
-        d4 = (b[:, 0] - a[:, 0]) * (q[1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (q[0] - a[:, 0])
-        if ((d1 * d2 <= 0) & (d3 * d4 <= 0)).any():
+    for p, q in zip(v, np.roll(v, -1, axis=0)):  # loop over the polygon's edges, vectorised over g's
+        if segments_touch(a, b, np.broadcast_to(p, a.shape), np.broadcast_to(q, a.shape)).any():
             return True
     return False
 
 
 def _self_crossing(g: NDArray[np.float64]) -> bool:
-    """Whether two edges of the closed polyline g that do not share a vertex meet (O(n^2), vectorised per edge)."""
+    """Whether two edges of the closed polyline g that do not share a vertex meet (exactly; O(n^2), vectorised per edge)."""
     n = len(g)
     a, b = g, np.roll(g, -1, axis=0)
-    for i in range(n):  # loop over edges, vectorised over the others
-        j = np.arange(i + 2, n)
-        if i == 0:
-            j = j[j != n - 1]
-        if not j.size:
-            continue
-        p, q, c, d = a[i], b[i], a[j], b[j]
-
-        def cross(o, s, t):
-            return (s[..., 0] - o[..., 0]) * (t[..., 1] - o[..., 1]) - (s[..., 1] - o[..., 1]) * (t[..., 0] - o[..., 0])
-
-        d1, d2 = cross(p, q, c), cross(p, q, d)
-        d3, d4 = cross(c, d, p), cross(c, d, q)
-        meet = (d1 * d2 <= 0) & (d3 * d4 <= 0)
-        # collinear edges (all four signs 0) meet only if their projections overlap
-        line = (d1 == 0) & (d2 == 0)
-        if line.any():
-            u = q - p
-            s0, s1 = (c[line] - p) @ u, (d[line] - p) @ u
-            meet[line] = (np.maximum(s0, s1) >= 0) & (np.minimum(s0, s1) <= u @ u)
-        if meet.any():
+    for i in range(n):  # loop over edges, vectorised over the later ones that share no vertex with it
+        j = np.arange(i + 2, n - 1 if i == 0 else n)
+        if j.size and segments_touch(np.broadcast_to(a[i], (j.size, 2)), np.broadcast_to(b[i], (j.size, 2)), a[j], b[j]).any():
             return True
     return False
 
