@@ -24,7 +24,6 @@ import subprocess
 import sys
 import time
 
-import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
@@ -33,17 +32,11 @@ sys.path.insert(0, HERE)
 from methods_table import bench_pairs  # noqa: E402
 
 from warpcli import MapOptions, build_map  # noqa: E402
-from warpcli.maps.certificate import certify_cells, degenerate_vertices, vertex_ball  # noqa: E402
-from warpcli.maps.meshless import ON_BOUNDARY  # noqa: E402
 
 
 def certify(phi, rigorous: bool):
     """`SmoothMap.cell_certificate`'s call, with the chosen cell test."""
-    size = float(np.ptp(phi.polygon.points, axis=0).max())
-    sign = phi.theta.orientation * np.sign(phi.polygon.signed_area)
-    slow = degenerate_vertices(phi.polygon.points, phi.theta.points, phi.boundary_to_theta, phi.conditions == "mixed")
-    balls = np.where(slow, vertex_ball(size), 0.0)
-    return certify_cells(phi.solution, phi.polygon.points, phi.theta, sign, ON_BOUNDARY * size, balls, rigorous=rigorous)
+    return phi.certify_cells_with(rigorous)
 
 
 def timed(fn, repeat: int):

@@ -48,23 +48,18 @@ from methods_table import bench_pairs, test_image, warm_up  # noqa: E402
 from warpcli import MapOptions, build_map, warp_image  # noqa: E402
 from warpcli.errors import FoldOverError  # noqa: E402
 from warpcli.maps import meshless  # noqa: E402
-from warpcli.maps.boundary_certificate import certify_boundary  # noqa: E402
-from warpcli.maps.certificate import band_floor, certify_cells  # noqa: E402
+from warpcli.maps.certificate import band_floor  # noqa: E402
 
 
 def cells(phi, rigorous: bool):
     """`SmoothMap.cell_certificate`'s call (linear data: no ball), with the chosen cell test."""
-    size = float(np.ptp(phi.polygon.points, axis=0).max())
-    sign = phi.theta.orientation * np.sign(phi.polygon.signed_area)
-    return certify_cells(phi.solution, phi.polygon.points, phi.theta, sign, meshless.ON_BOUNDARY * size, None, rigorous=rigorous)
+    return phi.certify_cells_with(rigorous)
 
 
 def boundary(phi):
-    """`SmoothMap.boundary_certificate`'s call."""
+    """`SmoothMap.boundary_certificate`'s first call (MFS on its polygon, BEM 0.01 px inside)."""
     size = float(np.ptp(phi.polygon.points, axis=0).max())
-    sign = phi.theta.orientation * np.sign(phi.polygon.signed_area)
-    offset = 0.0 if phi.method == "mfs" else band_floor(size)
-    return certify_boundary(phi.solution, phi.polygon.points, phi.theta, sign, offset)
+    return phi.certify_boundary_at(0.0 if phi.method == "mfs" else band_floor(size))
 
 
 def timed(fn, repeat: int):

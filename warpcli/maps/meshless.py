@@ -259,29 +259,38 @@ class SmoothMap(ThetaMap):
         """
         if self._degenerate.any():
             return None
-        sign = self.theta.orientation * np.sign(self.polygon.signed_area)
         inner = band_floor(self._size)
         if self.name == "mfs":
-            whole = certify_boundary(self.solution, self.polygon.points, self.theta, sign, 0.0)
+            whole = self.certify_boundary_at(0.0)
             if whole.ok or not MFS_INNER_FALLBACK:
                 return whole
             # MFS folds at the boundary itself next to some reflex vertices (0.0004-0.04 px from the
             # vertex, under 0.001 px deep at 1 MP), at every m: proved deeper than BEM's band instead,
             # the failures on the boundary counted
-            moved = certify_boundary(self.solution, self.polygon.points, self.theta, sign, inner)
+            moved = self.certify_boundary_at(inner)
             return replace(moved, closer=whole.failed) if moved.ok else whole
-        return certify_boundary(self.solution, self.polygon.points, self.theta, sign, inner)
+        return self.certify_boundary_at(inner)
+
+    def certify_boundary_at(self, offset: float) -> BoundaryCertificate:
+        """`warpcli.maps.boundary_certificate.certify_boundary` of this map on Gamma ``offset`` inside its
+        polygon (0: the polygon itself), not cached: `boundary_certificate` chooses the offsets."""
+        sign = self.theta.orientation * np.sign(self.polygon.signed_area)
+        return certify_boundary(self.solution, self.polygon.points, self.theta, sign, offset)
 
     @cached_property
     def cell_certificate(self) -> CellCertificate:
         """`warpcli.maps.certificate.certify_cells`, computed once (the build, the check and the report
         ask), with balls of at most `vertex_ball` left out around the `degenerate_vertices`."""
+        # MFS: the rigorous cell bound (1.2-2.3x the first-order test's time on the bench pairs, median
+        # 1.8; docs/proving.md); BEM's costs 3-5x, so it keeps the first-order test for now.
+        return self.certify_cells_with(rigorous=self.name == "mfs")
+
+    def certify_cells_with(self, rigorous: bool) -> CellCertificate:
+        """`cell_certificate`'s call with the cell test chosen (``rigorous``: the order-4 bound, else the
+        first-order test), not cached: for comparing the two."""
         sign = self.theta.orientation * np.sign(self.polygon.signed_area)
         near = ON_BOUNDARY * self._size
         balls = np.where(self._degenerate, vertex_ball(self._size), 0.0)
-        # MFS: the rigorous cell bound (1.2-2.3x the first-order test's time on the bench pairs, median
-        # 1.8; docs/proving.md); BEM's costs 3-5x, so it keeps the first-order test for now.
-        rigorous = self.name == "mfs"
         return certify_cells(self.solution, self.polygon.points, self.theta, sign, near, balls, rigorous=rigorous)
 
     def describe(self) -> dict:
