@@ -37,8 +37,7 @@ from nasty import SHAPES, dense_check, dense_samples  # noqa: E402
 from warpcli import MapOptions, Polygon  # noqa: E402
 from warpcli.boundary import nearest_edge  # noqa: E402
 from warpcli.grid import inside_polygon  # noqa: E402
-from warpcli.maps.boundary_certificate import certify_boundary  # noqa: E402
-from warpcli.maps.certificate import band_floor, certify_cells  # noqa: E402
+from warpcli.maps.certificate import band_floor  # noqa: E402
 from warpcli.maps.meshless import BEM, MFS  # noqa: E402
 from warpcli.maps.theta import regular as regular_theta  # noqa: E402
 
@@ -83,11 +82,10 @@ def main(argv: list[str] | None = None) -> int:
                     poly = Polygon(v, name=shape)
                     opts = MapOptions(method=method, nodes=nodes, check=False)
                     phi = {"bem": BEM, "mfs": MFS}[method].build(poly, regular_theta(poly, poly, opts), opts)
-                    sign = phi.theta.orientation * np.sign(poly.signed_area)
                     t0 = time.perf_counter()
-                    cells = certify_cells(phi.solution, v, phi.theta, sign, 1e-9 * size, None, rigorous=method == "mfs")
+                    cells = phi.certify_cells_with(rigorous=method == "mfs")  # linear data: no ball
                     t1 = time.perf_counter()
-                    proof = certify_boundary(phi.solution, v, phi.theta, sign, 0.0 if method == "mfs" else band_floor(size))
+                    proof = phi.certify_boundary_at(0.0 if method == "mfs" else band_floor(size))  # no fallback
                     t2 = time.perf_counter()
                     p = np.concatenate([dense_samples(v, grid=60_000, along=0.25, corner_rings=16), near_boundary(v)])
                     deeper = nearest_edge(p, v)[2] > proof.offset
