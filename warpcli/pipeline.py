@@ -46,7 +46,7 @@ from .raster.imageio import (
 from .report import build_report
 from .report.metrics import Distortion, distortion
 from .tiled import TiledResult, check_plausible, in_parts, warp_file_tiled
-from .within import WithinPair, read_cages, within_pair, within_seams
+from .within import WithinPair, read_within_pair, within_pair, within_seams
 
 __all__ = [
     "WarpResult", "apply_map_file", "build_report", "check_output", "read_header_or_none", "warp_file", "warp_image",
@@ -514,12 +514,10 @@ def warp_file(
     if opts.within is not None:
         if save_theta is not None:
             raise InputError(f"{os.fspath(save_theta)}: --save-theta writes one Theta, but --within maps several faces")
-        if frame is None:
-            src_cages, dst_cages = read_cages(src_path, src_label), read_cages(dst_path, dst_label)
-        else:
-            src_cages, dst_cages = read_shape_at(src_path, src_label, frame), read_shape_at(dst_path, dst_label, frame)
         header = read_header(input_path)  # the outline needs the image's size before the map
-        pair = within_pair(src_cages, dst_cages, opts.within, header.displayed_size)
+        pair = read_within_pair(
+            src_path, dst_path, opts.within, header.displayed_size, src_label=src_label, dst_label=dst_label, frame=frame
+        )
         src, dst = pair.src, pair.dst
     else:
         src = read_shape_at(src_path, src_label, frame)

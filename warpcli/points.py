@@ -41,7 +41,7 @@ from .outputs import PendingOutputs, check_output_path, write_checked
 from .keyframes import read_shape_at
 from .maps.cage import map_between
 from .polygon.partition import check_shapes
-from .within import read_cages, within_pair
+from .within import read_within_pair
 
 log = logging.getLogger("warpcli")
 
@@ -165,11 +165,7 @@ def map_points_file(
         raise InputError(f"{name}: --within needs the image's size (--image-size WxH)")
     raw = _read(name)
     if within is not None:
-        if frame is None:
-            src_cages, dst_cages = read_cages(src_path, src_label), read_cages(dst_path, dst_label)
-        else:
-            src_cages, dst_cages = read_shape_at(src_path, src_label, frame), read_shape_at(dst_path, dst_label, frame)
-        pair = within_pair(src_cages, dst_cages, within, size)  # type: ignore[arg-type]
+        pair = read_within_pair(src_path, dst_path, within, size, src_label=src_label, dst_label=dst_label, frame=frame)  # type: ignore[arg-type]
         src, dst = pair.src, pair.dst
     else:
         src = read_shape_at(src_path, src_label, frame)

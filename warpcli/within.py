@@ -39,7 +39,7 @@ from .polygon.outline import cut_ring, outline_polygon
 from .polygon.partition import WELD_TOLERANCE, Cages, Partition, cages_of, welded
 from .report.seam import crossing_pairs
 
-__all__ = ["WithinPair", "read_cages", "within_pair", "within_seams"]
+__all__ = ["WithinPair", "read_cages", "read_within_pair", "within_pair", "within_seams"]
 
 Shape = Polygon | Partition
 
@@ -280,6 +280,33 @@ def within_seams(values: ArrayLike, jacobian: ArrayLike | None, pair: WithinPair
         doc["elsewhere_mean"] = float(r.mean()) if r.size else 0.0
         out[field] = doc
     return out
+
+
+def read_within_pair(
+    src_path: str | os.PathLike[str],
+    dst_path: str | os.PathLike[str],
+    within: str,
+    image_size: tuple[int, int],
+    *,
+    src_label: str | None = None,
+    dst_label: str | None = None,
+    frame: int | None = None,
+) -> WithinPair:
+    """`within_pair` of the cages two files hold: `read_cages`, or at ``frame`` of keyframed files
+    (`warpcli.keyframes.read_shape_at`), as every run from files reads a retouch (the warp and points).
+
+    Raises
+    ------
+    PolygonError
+        As `read_cages`, `read_shape_at` and `within_pair`.
+    """
+    from .keyframes import read_shape_at
+
+    if frame is None:
+        src, dst = read_cages(src_path, src_label), read_cages(dst_path, dst_label)
+    else:
+        src, dst = read_shape_at(src_path, src_label, frame), read_shape_at(dst_path, dst_label, frame)
+    return within_pair(src, dst, within, image_size)
 
 
 def read_cages(path: str | os.PathLike[str], label: str | None = None) -> tuple[Shape, ...]:
