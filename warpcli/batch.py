@@ -187,11 +187,11 @@ def prepare_batch(input_paths, out_dir, src_path, dst_path, pattern, src_label, 
         seen[key] = os.fspath(inp)
         check_image_output(out, inputs=inputs)
     if within is not None and input_paths:
-        from .within import read_cages, within_pair
+        from .within import read_within_pair
 
         size = read_header(input_paths[0]).displayed_size
         check_same_size(input_paths, size)
-        pair = within_pair(read_cages(src_path, src_label), read_cages(dst_path, dst_label), within, size)
+        pair = read_within_pair(src_path, dst_path, within, size, src_label=src_label, dst_label=dst_label)
         src, dst = pair.src, pair.dst
     else:
         src = read_shape(src_path, src_label)
