@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import secrets
 import stat
 import tempfile
 from collections.abc import Iterator
@@ -67,6 +68,27 @@ def final_path(path: str | os.PathLike[str]) -> str:
     """
     name = os.fspath(path)
     return _finals.get(name, name)
+
+
+def _new_temporary(prefix: str, suffix: str, directory: str) -> tuple[int, str]:
+    """``tempfile.mkstemp``, with the name in ``_live`` before the file exists (open, 0600).
+
+    With mkstemp the file existed a few bytecodes before it was registered,
+    and a SIGTERM handled there (`remove_temporaries`) left it behind. Here a
+    signal either finds the name registered (its file then removed, or not
+    created yet: the unlink fails harmlessly) or comes before it is chosen.
+    """
+    for _ in range(tempfile.TMP_MAX):
+        name = os.path.join(directory, f"{prefix}{secrets.token_hex(4)}{suffix}")
+        _live.add(name)
+        try:
+            return os.open(name, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o600), name
+        except FileExistsError:
+            _live.discard(name)  # another file's name: not ours to remove
+        except BaseException:
+            _live.discard(name)
+            raise
+    raise FileExistsError(errno.EEXIST, "no temporary name is free", directory)
 
 
 def remove_temporaries() -> None:
@@ -169,8 +191,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[str]:
     _check_replaceable(path)
     prefix, suffix = _temp_affixes(path, directory)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=directory)
-        _live.add(tmp)
+        fd, tmp = _new_temporary(prefix, suffix, directory)
         os.close(fd)
     except OSError as err:
         raise _write_error(path, err) from err
@@ -560,8 +581,7 @@ class PendingOutputs:
         name = os.path.abspath(os.fspath(final))
         directory, base = os.path.split(name)
         stem, ext = os.path.splitext(base)
-        fd, tmp = tempfile.mkstemp(prefix=f".{stem}{PENDING_MARKER}", suffix=ext, dir=directory)
-        _live.add(tmp)
+        fd, tmp = _new_temporary(f".{stem}{PENDING_MARKER}", ext, directory)
         os.close(fd)
         _finals[tmp] = os.fspath(final)
         self._pending.append((tmp, name))
