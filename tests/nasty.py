@@ -153,6 +153,7 @@ def dense_check(phi, samples: np.ndarray | None = None) -> dict:
     Parameters
     ----------
     phi : warpcli.maps.meshless.SmoothMap
+        Its values and Jacobians as accepted: the collar's in its band.
     samples : (K, 2) ndarray, optional
         The points (default `dense_samples`).
 
@@ -169,8 +170,17 @@ def dense_check(phi, samples: np.ndarray | None = None) -> dict:
     # the closed form is the map only strictly inside (to rounding): what evaluate does
     from warpcli.boundary import nearest_edge
 
-    p = p[nearest_edge(p, v)[2] > 1e-9 * size]
-    val, j = phi.solution.value_and_jacobian(p)
+    p, dist = p[nearest_edge(p, v)[2] > 1e-9 * size], nearest_edge(p, v)[2]
+    dist = dist[dist > 1e-9 * size]
+    # the map as accepted: the closed form, and the collar in its band (`SmoothMap.collar`); the
+    # values unclamped (evaluate clamps onto Theta), to see any excursion
+    j = phi.evaluate(p, jacobian=True).jacobian
+    val = phi.solution.value(p)
+    collar = phi.collar
+    if collar is not None:
+        band = np.flatnonzero(dist <= collar.band_width)
+        band = band[~collar.inside(p[band])]
+        val[band] = collar.evaluate(p[band])[0]
     sign = phi.theta.orientation * np.sign(phi.polygon.signed_area)
     det = sign * (j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0])
     folds = ~(det > 0)

@@ -247,8 +247,10 @@ def test_degenerate_vertices_keep_the_cell_certificate():
 def test_an_mfs_fold_on_the_polygon_itself_is_real_and_the_map_is_proved_inside_instead():
     """A generated zigzag at the default 256 sites folds on its boundary next to a reflex vertex (under 0.001 px
     from it, where the cells never looked): the certificate on the polygon names a point with det J <= 0 by the
-    map's own Jacobian, and the default proves the map 0.01 px inside instead (BEM's Gamma), counting the failure."""
+    map's own Jacobian, and the default proves the map farther inside instead, with the collar in the band, counting
+    the failure."""
     from warpcli.maps.certificate import band_floor
+    from warpcli.maps.meshless import BAND_STEPS
 
     v = SHAPES["zigzag"](np.random.default_rng(11))
     poly = Polygon(v, name="zigzag")
@@ -262,5 +264,8 @@ def test_an_mfs_fold_on_the_polygon_itself_is_real_and_the_map_is_proved_inside_
     edge, _, dist = nearest_edge(np.array([whole.where]), v)
     assert dist[0] < 1e-9 * 300 and np.hypot(*(v - whole.where).T).min() < 0.05  # on an edge, next to a vertex
     cert = phi.boundary_certificate
-    assert cert.ok and cert.offset == band_floor(phi._size) and cert.closer == whole.failed
+    steps = [band_floor(phi._size) * k for k in BAND_STEPS]
+    assert cert.ok and cert.band and cert.offset in steps and cert.closer == whole.failed
+    # proved at the first distance that holds: every nearer one fails
+    assert not any(phi.certify_boundary_at(d).ok for d in steps[: steps.index(cert.offset)])
     assert phi.certify().ok

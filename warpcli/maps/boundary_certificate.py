@@ -87,7 +87,7 @@ with its left-out balls for those maps.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -97,7 +97,7 @@ from ..grid import inside_polygon
 from ..polygon.predicates import segments_touch, signed_area
 from .certificate import BAND, BAND_RELATIVE, OUTSIDE
 
-__all__ = ["MAX_PIECES", "MIN_PIECE", "BoundaryCertificate", "certify_boundary", "inner_offset"]
+__all__ = ["MAX_PIECES", "MIN_PIECE", "BoundaryCertificate", "OffsetBand", "certify_boundary", "inner_offset", "offset_band"]
 
 #: The polygonal arcs around reflex vertices (`inner_offset`) turn by at most this per chord (radians).
 ARC_STEP = math.pi / 32
@@ -157,6 +157,18 @@ class BoundaryCertificate:
         Failures of an attempt with Gamma closer to the boundary, when the
         caller moved it inwards (`SmoothMap.boundary_certificate` for MFS:
         the polygon itself first); 0 otherwise.
+    band : bool
+        Whether the band between the polygon and Gamma was proved too (the
+        collar's conditions, 4 and 5 of the module's docstring): then the
+        map with `warpcli.maps.collar.Collar` in the band is one-to-one on
+        the whole polygon, onto Theta.
+    crossed : int
+        Pieces where the collar's condition 5 fails at the centre (among
+        ``failed``).
+    knots : (K, 4) ndarray of float or None
+        The proved pieces' centres, in Gamma's order: its edge, the
+        parameter along it, and phi's value there (x, y); None unless
+        ``band``. `warpcli.maps.collar.Collar.inverse` brackets with them.
     """
 
     failed: int
@@ -170,6 +182,9 @@ class BoundaryCertificate:
     tangled: int = 0
     where: tuple[float, float] | None = None
     closer: int = 0
+    band: bool = False
+    crossed: int = 0
+    knots: NDArray[np.float64] | None = field(default=None, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
@@ -201,18 +216,86 @@ def inner_offset(vertices: NDArray[np.float64], delta: float) -> NDArray[np.floa
     -------
     (k, 2) ndarray of float or None
     """
-    v = np.asarray(vertices, dtype=np.float64)
-    if signed_area(v) < 0:
-        v = v[::-1]
+    band = offset_band(vertices, delta)
+    return None if band is None else band.gamma
+
+
+@dataclass(frozen=True)
+class OffsetBand:
+    """The band between a polygon and its `inner_offset` Gamma, cut into cells along the segments joining them.
+
+    Cell c is the set of points (1 - t) F(s) + t G(s), s and t in [0, 1],
+    with F(s) = F0 + s (F1 - F0) on the polygon's boundary (on one edge) and
+    G(s) = G0 + s (G1 - G0) on Gamma. Three kinds, in counter-clockwise
+    order round the polygon: a strip along each moved edge (G1 - G0 = F1 -
+    F0: a rectangle of width delta); a fan round each reflex vertex v per
+    chord of its arc (F0 = F1 = v); two triangles at each convex vertex
+    between its mitre point c (G0 = G1 = c) and the two edges (F runs to v,
+    then from it). Neighbouring cells share a segment from the polygon to
+    Gamma; together they tile the band (the parametrisation has a positive
+    Jacobian on every cell and runs once round both curves).
+
+    Attributes
+    ----------
+    gamma : (k, 2) ndarray of float
+        Gamma, counter-clockwise.
+    f0, f1, g0, g1 : (c, 2) ndarray of float
+        The cells' ends on the polygon and on Gamma.
+    edge : (c,) ndarray of int
+        The polygon's edge holding F (in the polygon's own numbering and
+        orientation, as given).
+    t0, t1 : (c,) ndarray of float
+        F0's and F1's parameters on that edge.
+    of_gamma : (k,) ndarray of int
+        The cell of each edge of Gamma (edge i runs from gamma[i] to
+        gamma[i + 1]).
+    """
+
+    gamma: NDArray[np.float64]
+    f0: NDArray[np.float64]
+    f1: NDArray[np.float64]
+    g0: NDArray[np.float64]
+    g1: NDArray[np.float64]
+    edge: NDArray[np.intp]
+    t0: NDArray[np.float64]
+    t1: NDArray[np.float64]
+    of_gamma: NDArray[np.intp]
+
+
+def offset_band(vertices: NDArray[np.float64], delta: float) -> OffsetBand | None:
+    """Gamma (`inner_offset`) and the cells of the band between it and the polygon; None if Gamma is not simple.
+
+    Parameters
+    ----------
+    vertices : (n, 2) ndarray of float
+        The polygon, either orientation.
+    delta : float
+        Gamma's distance inside; 0 gives Gamma = the polygon (counter-clockwise) and no cells.
+
+    Returns
+    -------
+    OffsetBand or None
+    """
+    v0 = np.asarray(vertices, dtype=np.float64)
+    n = len(v0)
+    flipped = signed_area(v0) < 0
+    v = v0[::-1] if flipped else v0
+    none = np.zeros((0, 2))
     if delta == 0:
-        return v.copy()
-    n = len(v)
+        ints = np.zeros(0, dtype=np.intp)
+        return OffsetBand(v.copy(), none, none, none, none, ints, np.zeros(0), np.zeros(0), ints)
     e = np.roll(v, -1, axis=0) - v
-    nrm = np.stack([-e[:, 1], e[:, 0]], axis=1) / np.hypot(e[:, 0], e[:, 1])[:, None]  # inward (left of a ccw edge)
+    e2 = (e * e).sum(axis=1)
+    nrm = np.stack([-e[:, 1], e[:, 0]], axis=1) / np.sqrt(e2)[:, None]  # inward (left of a ccw edge)
     prev = np.roll(nrm, 1, axis=0)
     cos = (prev * nrm).sum(axis=1)
     turn = np.roll(e, 1, axis=0)[:, 0] * e[:, 1] - np.roll(e, 1, axis=0)[:, 1] * e[:, 0]  # < 0: reflex
     pts, first, last = [], np.zeros((n, 2)), np.zeros((n, 2))
+    cells = []  # (f0, f1, g0, g1, ccw edge, t0, t1, on gamma)
+
+    def param(i, p):  # parameter of p's projection on ccw edge i
+        return float((p - v[i]) @ e[i]) / float(e2[i])
+
     for i in range(n):  # loop over vertices: one point (convex) or an arc (reflex)
         if turn[i] >= 0:
             if 1.0 + cos[i] < 1e-12:
@@ -220,6 +303,11 @@ def inner_offset(vertices: NDArray[np.float64], delta: float) -> NDArray[np.floa
             g = v[i] + delta * (prev[i] + nrm[i]) / (1.0 + cos[i])
             pts.append(g[None])
             first[i] = last[i] = g
+            h = (i - 1) % n
+            fa = g - delta * prev[i]
+            fb = g - delta * nrm[i]
+            cells.append((fa, v[i], g, g, h, param(h, fa), 1.0, False))
+            cells.append((v[i], fb, g, g, i, 0.0, param(i, fb), False))
         else:
             a0 = math.atan2(prev[i, 1], prev[i, 0])
             sweep = math.atan2(prev[i, 0] * nrm[i, 1] - prev[i, 1] * nrm[i, 0], float(prev[i] @ nrm[i]))
@@ -229,6 +317,9 @@ def inner_offset(vertices: NDArray[np.float64], delta: float) -> NDArray[np.floa
             arc = v[i] + delta * np.stack([np.cos(ang), np.sin(ang)], axis=1)
             pts.append(arc)
             first[i], last[i] = arc[0], arc[-1]
+            cells.extend((v[i], v[i], arc[j], arc[j + 1], i, 0.0, 0.0, True) for j in range(k))
+        # moved edge i: from vertex i's last point to vertex i + 1's first (filled in below)
+        cells.append((None, None, None, None, i, 0.0, 0.0, True))
     # moved edge i runs from vertex i's last point to vertex i + 1's first
     moved = np.roll(first, -1, axis=0) - last
     if ((moved * e).sum(axis=1) <= 0).any():
@@ -236,7 +327,21 @@ def inner_offset(vertices: NDArray[np.float64], delta: float) -> NDArray[np.floa
     g = np.concatenate(pts)
     if _self_crossing(g) or _crossing(g, v) or not inside_polygon(g[:1], v)[0]:
         return None
-    return g
+    for c, cell in enumerate(cells):  # the strips, now that every vertex's points are known
+        if cell[0] is None:
+            i = cell[4]
+            ga, gb = last[i], first[(i + 1) % n]
+            fa, fb = ga - delta * nrm[i], gb - delta * nrm[i]
+            cells[c] = (fa, fb, ga, gb, i, param(i, fa), param(i, fb), True)
+    f0, f1, g0, g1 = (np.array([cell[k] for cell in cells], dtype=np.float64) for k in range(4))
+    edge = np.array([cell[4] for cell in cells], dtype=np.intp)
+    t0 = np.array([cell[5] for cell in cells])
+    t1 = np.array([cell[6] for cell in cells])
+    of_gamma = np.flatnonzero([cell[7] for cell in cells])
+    if flipped:  # ccw edge i is edge n - 2 - i of the polygon as given, run backwards
+        edge = (n - 2 - edge) % n
+        t0, t1 = 1.0 - t0, 1.0 - t1
+    return OffsetBand(g, f0, f1, g0, g1, edge, np.clip(t0, 0.0, 1.0), np.clip(t1, 0.0, 1.0), of_gamma)
 
 
 def _crossing(g: NDArray[np.float64], v: NDArray[np.float64]) -> bool:
@@ -259,7 +364,7 @@ def _self_crossing(g: NDArray[np.float64]) -> bool:
     return False
 
 
-def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0) -> BoundaryCertificate:
+def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0, boundary=None) -> BoundaryCertificate:
     """Prove det J > 0 and injectivity on the region bounded by a curve `offset` inside the polygon.
 
     See the module's docstring for what is proved and how.
@@ -279,6 +384,10 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
     offset : float
         Gamma's distance inside the polygon (`inner_offset`); 0: the
         polygon's boundary (MFS).
+    boundary : callable or None
+        ``boundary(edge, t)``: the boundary data, Theta's point for the
+        point at parameter t of the polygon's edge, linear along each edge.
+        Given with ``offset`` > 0, the band is proved too (``band``).
 
     Returns
     -------
@@ -287,9 +396,11 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
     v = np.asarray(vertices, dtype=np.float64)
     size = float(np.ptp(v, axis=0).max())
     band = min(BAND, BAND_RELATIVE * size)
-    gamma = inner_offset(v, offset)
-    if gamma is None:  # the offset curve is not simple: nothing proved
+    cells = offset_band(v, offset)
+    if cells is None:  # the offset curve is not simple: nothing proved
         return BoundaryCertificate(1, 0, 0, None, None, offset)
+    gamma = cells.gamma
+    collar = boundary is not None and offset > 0
     w = theta.points
     tsize = float(np.ptp(w, axis=0).max())
     centre = w.mean(axis=0)
@@ -309,9 +420,13 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
     nd = nd / np.hypot(nd[:, 0], nd[:, 1])[:, None]
     slack = OUTSIDE * tsize
     noise = VALUE_ERROR * tsize
+    if collar:  # the boundary data at the ends of each Gamma edge's cell (a strip or a reflex fan)
+        cg = cells.of_gamma
+        gf0 = boundary(cells.edge[cg], cells.t0[cg]) @ np.array([1.0, 1j])
+        gf1 = boundary(cells.edge[cg], cells.t1[cg]) @ np.array([1.0, 1j])
     # the pieces kept so far (proved one by one), column-wise
     keep = {k: [] for k in ("edge", "t0", "t1", "p0", "w0", "d0", "dd", "r")}
-    failed = folds = outside = checked = tangled = 0
+    failed = folds = outside = checked = tangled = crossed = 0
     winding = where = None
     for _ in range(MAX_ROUNDS):
         while len(edge):  # condition 1 (and the tangent's direction), splitting what is not proved
@@ -341,8 +456,17 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
                 dd = (a1 + b1) * r + rho_a + rho_b + 2.0 * eta
                 proved = (low > high) & (dd < np.abs(d0))  # condition 1; the tangent's direction known
             fold = ~(np.abs(p0) > np.abs(q0))
-            far = _outside(val, j, x0, v, w, nd, theta.orientation, slack, band)
-            bad = fold | far
+            if collar:  # conditions 4 and 5: the band's collar
+                mid = 0.5 * (t0 + t1)
+                gc = gf0[edge] + mid * (gf1 - gf0)[edge]
+                gp = (gf1 - gf0)[edge] / length[edge]
+                inset, transverse, far, cross = _collar(val, d0, dd, r, gc, gp, w, nd, theta.orientation, sign, noise)
+                proved &= (inset > 0) & (transverse > 0)
+                crossed += int((cross & ~fold & ~far).sum())
+            else:
+                far = _outside(val, j, x0, v, w, nd, theta.orientation, slack, band)
+                cross = np.zeros(len(x0), dtype=bool)
+            bad = fold | far | cross
             proved &= ~bad
             lost = ~proved & ~bad & (2.0 * r <= floor)
             folds += int(fold.sum())
@@ -395,13 +519,17 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
     else:
         failed += 1  # MAX_ROUNDS of splitting did not tell the capsules apart
     if failed:
-        return BoundaryCertificate(failed, checked, 0, winding, None, offset, folds, outside, tangled, where)
+        return BoundaryCertificate(failed, checked, 0, winding, None, offset, folds, outside, tangled, where, crossed=crossed)
     wv = col["w0"] - c0
     reach = np.abs(col["d0"]) * col["r"] + col["dd"] * col["r"] + noise
     turns = None
     if (reach < np.abs(wv)).all():  # every piece's image keeps off Theta's centre: its turns, for the record
         turns = int(round(sign * float(np.angle(np.roll(wv, -1) / wv).sum()) / (2 * math.pi)))
-    return BoundaryCertificate(0, checked, len(wv), winding, turns, offset, 0, 0, 0)
+    knots = None
+    if collar:
+        mid = 0.5 * (col["t0"] + col["t1"])
+        knots = np.stack([col["edge"].astype(np.float64), mid, col["w0"].real, col["w0"].imag], axis=1)
+    return BoundaryCertificate(0, checked, len(wv), winding, turns, offset, 0, 0, 0, band=collar, knots=knots)
 
 
 def _halves(edge, t0, t1):
@@ -542,6 +670,46 @@ def _segment_distance(a, b, c, d) -> NDArray[np.float64]:
     crossing = (d1 * d2 < 0) & (d3 * d4 < 0)
     near = np.minimum(np.minimum(to_segment(a, c, d), to_segment(b, c, d)), np.minimum(to_segment(c, a, b), to_segment(d, a, b)))
     return np.where(crossing, 0.0, near)
+
+
+def _collar(val, d0, dd, r, gc, gp, w, nd, orientation, sign, noise):
+    """Conditions 4 and 5 on each piece: margins (> 0: proved on the whole piece) and failures at its centre.
+
+    Piece: centre value w0 = phi(x0), tangent D0 of phi along Gamma (per unit
+    length), dD, half-length r; gc and gp the boundary data at the foot of
+    x0 and their derivative along the piece (0 on a reflex fan). On the
+    piece phi = w0 + s D0 + E1 with |E1| <= dD |s|, D = D0 + E2 with |E2|
+    <= dD, and V = phi - g = V0 + s (D0 - gp) + E1, so
+
+        sign det(D, V) >= sign det(D0, V0) - r |det(D0, gp)| - |D0| dD r
+                          - dD (|V0| + r |D0 - gp| + dD r) - (|D0| + dD) noise
+
+    (condition 5), and phi stays in the capsule w0 +- r D0 thickened by dD r
+    + noise, strictly inside every edge line of Theta (condition 4).
+
+    Returns
+    -------
+    inset, transverse : (K,) ndarray of float
+        The margins of conditions 4 and 5 over the piece.
+    outside, crossed : (K,) ndarray of bool
+        The centre's value on or beyond an edge line of Theta; sign
+        det(D0, V0) <= 0 at the centre: failures no split can mend.
+    """
+    w0 = val[:, 0] + 1j * val[:, 1]
+    inset = np.full(len(w0), np.inf)
+    depth = np.full(len(w0), np.inf)
+    for i in range(len(w)):  # loop over Theta's edges (convex: inside every edge line)
+        u = nd[i, 0] + 1j * nd[i, 1]
+        inner = (np.conj(u) * (w0 - complex(w[i, 0], w[i, 1]))).imag * orientation  # distance inside edge line i
+        depth = np.minimum(depth, inner)
+        reach = r * np.abs((np.conj(u) * d0).imag) + dd * r + noise
+        inset = np.minimum(inset, inner - reach)
+    v0 = w0 - gc
+    det0 = sign * (np.conj(d0) * v0).imag
+    loss = r * np.abs((np.conj(d0) * gp).imag) + np.abs(d0) * dd * r
+    loss = loss + dd * (np.abs(v0) + r * np.abs(d0 - gp) + dd * r) + (np.abs(d0) + dd) * noise
+    with np.errstate(invalid="ignore"):
+        return inset, det0 - loss, ~(depth > noise), ~(det0 > 0)
 
 
 def _outside(val, j, x0, v, w, nd, orientation, slack, band) -> NDArray[np.bool_]:

@@ -43,7 +43,8 @@ from ..files import format_bytes
 from ..grid import inside_polygon
 from ..polygon import Polygon
 from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, slide, sliding_tables
-from .boundary_certificate import BoundaryCertificate, certify_boundary
+from .boundary_certificate import BoundaryCertificate, certify_boundary, offset_band
+from .collar import Collar
 from .certificate import CellCertificate, band_floor, certify_cells, degenerate_vertices, vertex_ball
 from .theta import Theta
 
@@ -70,8 +71,11 @@ FIT_BYTES_PER_NODE2 = {"bem": 220, "mfs": 300}
 #: degenerate; the others by the cell certificate (`certify_cells`).
 BOUNDARY_CERTIFIED = frozenset({"bem", "mfs"})
 #: An MFS map whose boundary certificate fails with Gamma the polygon itself is certified again with
-#: Gamma `band_floor` inside (BEM's), and accepted if that holds (the band is then not proved).
+#: Gamma inside (BEM's `_band_widths`), and accepted if that holds, the collar in the band.
 MFS_INNER_FALLBACK = True
+#: Gamma's distances inside the polygon, in units of `band_floor` (0.01 px at 1 MP): the first that
+#: proves the map with its band is taken (`SmoothMap.boundary_certificate`).
+BAND_STEPS = (1.0, 4.0, 16.0, 64.0, 256.0)
 
 log = logging.getLogger("warpcli")
 
@@ -110,18 +114,45 @@ class SmoothMap(ThetaMap):
 
     def _split(self, p: NDArray[np.float64]):
         """Indices of the points strictly inside (the closed form's domain), and of those on the
-        boundary (to ON_BOUNDARY) with their edge and parameter."""
+        boundary (to ON_BOUNDARY) with their edge and parameter; then those of the first in the
+        collar's band (`collar`), which are no longer among them."""
         finite = np.flatnonzero(np.isfinite(p).all(axis=1))
-        near, edge, t = on_boundary(p[finite], self.polygon.points, ON_BOUNDARY * self._size)
+        edge, t, dist = nearest_edge(p[finite], self.polygon.points)
+        near = np.flatnonzero(dist <= ON_BOUNDARY * self._size)
         inside = inside_polygon(p[finite], self.polygon.points)
         inside[near] = False
-        return finite[inside], finite[near], edge, t
+        k = finite[inside]
+        band = np.zeros(0, dtype=np.intp)
+        close = inside & (dist <= self._band_width)
+        if close.any() and self.collar is not None:
+            in_band = ~self.collar.inside(p[finite[close]])
+            band = finite[close][in_band]
+            keep = np.ones(len(finite), dtype=bool)
+            keep[np.flatnonzero(close)[in_band]] = False
+            k = finite[inside & keep]
+        return k, finite[near], edge[near], t[near], band
+
+    @cached_property
+    def _band_width(self) -> float:
+        """How far from the boundary a point may be in the collar's band (0: no band)."""
+        return 1.0001 * max(self._band_widths) if self.name in BOUNDARY_CERTIFIED else 0.0
+
+    @cached_property
+    def collar(self) -> Collar | None:
+        """The map in the band between the polygon and the curve the certificate proved it on
+        (`warpcli.maps.collar`); None when there is no band (MFS proved on its polygon) or the band
+        was not proved (boundary data other than linear, a map that failed)."""
+        proof = self.boundary_certificate if self.name in BOUNDARY_CERTIFIED else None
+        if proof is None or not proof.ok or not proof.band:
+            return None
+        band = offset_band(self.polygon.points, proof.offset)
+        return Collar(band, self.solution, self.boundary_to_theta, proof.knots)
 
     def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
         p = as_points(points)
         out = np.full(p.shape, np.nan)
         jac = np.full((len(p), 2, 2), np.nan) if jacobian else None
-        k, on, edge, t = self._split(p)
+        k, on, edge, t, band = self._split(p)
         if k.size:
             v, j = self.solution.value_and_jacobian(p[k])
             self.theta.clamp(v)
@@ -129,6 +160,10 @@ class SmoothMap(ThetaMap):
             if jac is not None:
                 jac[k] = j
         out[on] = self.boundary_to_theta(edge, t)
+        if band.size:
+            out[band], jb = self.collar.evaluate(p[band], jacobian=jac is not None)
+            if jac is not None:
+                jac[band] = jb
         return Mapped(out, jac)
 
     def hessian(self, points: ArrayLike) -> NDArray[np.float64]:
@@ -142,11 +177,11 @@ class SmoothMap(ThetaMap):
         -------
         (K, 2, 2, 2) ndarray of float
             ``H[k, a, b, c]`` = d^2 phi_a / dx_b dx_c; NaN outside the polygon
-            and on its boundary.
+            and on its boundary, and in the collar's band (`collar`).
         """
         p = as_points(points)
         out = np.full((len(p), 2, 2, 2), np.nan)
-        k = self._split(p)[0]
+        k = self._split(p)[0]  # not in the collar's band: NaN there too
         if k.size:
             out[k] = self.solution.hessian(p[k])
         return out
@@ -210,20 +245,74 @@ class SmoothMap(ThetaMap):
                         fun_jac=fused, jacobian=jacobian,
                     )  # fmt: skip
                 y[~ok] = np.nan
+                jac_k = jy[0] if jacobian else None
+                redo = self._in_band(y)
+                if redo.size:
+                    self._band_inverse(q[k[redo]], guess[redo], y, jac_k, redo, tol, mesh)
+                ok = np.isfinite(y).all(axis=1)
                 out[k] = y
                 if jacobian:
                     # phi's Jacobian at the pre-images Newton found (it
                     # evaluated them there), not a pass of its own; NaN within
                     # ON_BOUNDARY of the polygon's edges, as `evaluate` gives.
-                    jac_k = jy[0]
                     near_y, _, _ = on_boundary(y[ok], self.polygon.points, ON_BOUNDARY * self._size)
                     jac_k[np.flatnonzero(ok)[near_y]] = np.nan
+                    jac_k[~ok] = np.nan
         jac = None
         if jacobian:
             jac = np.full((len(q), 2, 2), np.nan)
             if jac_k is not None:
                 jac[k] = inv2(jac_k)
         return Mapped(out, jac)
+
+    def _band_inverse(self, q, guess, y, jac_k, redo, tol, mesh) -> None:
+        """Pre-images of values q whose Newton pre-image lies in the collar's band (or was not found):
+        the collar's (`Collar.inverse`), else the closed form's in R, by Newton kept inside Gamma;
+        written into ``y[redo]`` and ``jac_k[redo]`` (phi's Jacobian; ``jac_k`` may be None), NaN where
+        neither has one."""
+        from .newton import invert
+
+        collar = self.collar
+        y[redo] = np.nan
+        got = collar.inverse(q)
+        found = np.isfinite(got).all(axis=1)
+        y[redo[found]] = got[found]
+        if jac_k is not None and found.any():
+            jac_k[redo[found]] = collar.evaluate(got[found], jacobian=True)[1]
+        rest = np.flatnonzero(~found)
+        if not rest.size:
+            return
+        # not in the collar's image, so in phi(R): Newton again, its iterates kept inside Gamma
+        start = guess[rest].copy()
+        out = ~collar.inside(start)
+        if out.any():
+            start[out] = mesh.vertices[mesh.triangles[_nearest_triangles(mesh, start[out])]].mean(axis=1)
+        fused = self.solution.value_and_jacobian if self.name == "bem" else None
+        y2, ok2, *j2 = invert(
+            self.solution.value, self.solution.jacobian, q[rest], start, tol=tol, inside=collar.inside,
+            floor=NEWTON_FLOOR, fun_jac=fused, jacobian=jac_k is not None,
+        )  # fmt: skip
+        ok2 &= collar.inside(np.where(np.isfinite(y2), y2, 0.0))
+        y[redo[rest[ok2]]] = y2[ok2]
+        if jac_k is not None:
+            jac_k[redo[rest[ok2]]] = j2[0][ok2]
+
+    def _in_band(self, y: NDArray[np.float64]) -> NDArray[np.intp]:
+        """Newton's pre-images (NaN: none found) that the collar must give instead: those in its
+        band, and those not found within its width of the boundary (their value may be the
+        collar's); none without a collar."""
+        if not self._band_width:
+            return np.zeros(0, dtype=np.intp)
+        found = np.isfinite(y).all(axis=1)
+        close = np.zeros(len(y), dtype=bool)
+        if found.any():
+            dist = nearest_edge(y[found], self.polygon.points)[2]
+            close[np.flatnonzero(found)[dist <= self._band_width]] = True
+        if not (close.any() or (~found).any()) or self.collar is None:
+            return np.zeros(0, dtype=np.intp)
+        c = np.flatnonzero(close)
+        c = c[~self.collar.inside(y[c])]
+        return np.sort(np.concatenate([c, np.flatnonzero(~found)]))
 
     @cached_property
     def _guess_mesh(self):
@@ -259,23 +348,42 @@ class SmoothMap(ThetaMap):
         """
         if self._degenerate.any():
             return None
-        inner = band_floor(self._size)
+        whole = None
         if self.name == "mfs":
             whole = self.certify_boundary_at(0.0)
             if whole.ok or not MFS_INNER_FALLBACK:
                 return whole
             # MFS folds at the boundary itself next to some reflex vertices (0.0004-0.04 px from the
-            # vertex, under 0.001 px deep at 1 MP), at every m: proved deeper than BEM's band instead,
-            # the failures on the boundary counted
-            moved = self.certify_boundary_at(inner)
-            return replace(moved, closer=whole.failed) if moved.ok else whole
-        return self.certify_boundary_at(inner)
+            # vertex, under 0.001 px deep at 1 MP), at every m: proved deeper instead, with the collar
+            # in the band, the failures on the boundary counted
+        first = None
+        for width in self._band_widths:
+            moved = self.certify_boundary_at(width)
+            if moved.ok:
+                return moved if whole is None else replace(moved, closer=whole.failed)
+            first = first or moved
+        return whole or first
+
+    @cached_property
+    def _band_widths(self) -> tuple[float, ...]:
+        """Gamma's distances inside the polygon tried in turn (`BAND_STEPS` times `band_floor`): a
+        closed form whose values 0.01 px inside still leave Theta (MFS's fit, BEM next to a node) is
+        proved farther in, with the collar between. One only where the band cannot be proved (boundary
+        data other than linear): a wider band left unproved would be no gain."""
+        inner = band_floor(self._size)
+        if not (self.solution.trace is None and self.boundary == "linear"):
+            return (inner,)
+        return tuple(inner * k for k in BAND_STEPS)
 
     def certify_boundary_at(self, offset: float) -> BoundaryCertificate:
         """`warpcli.maps.boundary_certificate.certify_boundary` of this map on Gamma ``offset`` inside its
         polygon (0: the polygon itself), not cached: `boundary_certificate` chooses the offsets."""
         sign = self.theta.orientation * np.sign(self.polygon.signed_area)
-        return certify_boundary(self.solution, self.polygon.points, self.theta, sign, offset)
+        # the band is proved for boundary data linear along the edges (not for natural conditions'
+        # sliding correspondence nor t^2, whose vertices keep the cell certificate anyway)
+        linear = self.solution.trace is None and self.boundary == "linear"
+        boundary = self.boundary_to_theta if linear and offset > 0 else None
+        return certify_boundary(self.solution, self.polygon.points, self.theta, sign, offset, boundary)
 
     @cached_property
     def cell_certificate(self) -> CellCertificate:
