@@ -9,14 +9,16 @@ at its default m), 300 px, the regular Theta, linear boundaries, the source
 map only (phi0), at the default m (no refit), 128 and 64 nodes (when at
 least the vertices + 8). Per map: the cell certificate as the former
 defaults ran it (MFS: the rigorous bound; BEM: the first-order test) and
-the boundary certificate (Gamma the polygon for MFS, 0.01 px inside for
-BEM; without MFS's fallback, to see the polygon itself), verdict and
-seconds; then the dense check of tests/nasty.py (a 60,000-point grid,
-bands 0.01-3 px inside every edge every 0.25 px, polar grids of 16 radii
-at every vertex) plus samples 1e-6..0.01 px inside every edge every 0.25
-px and around every vertex: folds (det J <= 0) and deep excursions out of
-Theta at the samples deeper than the boundary certificate's Gamma, and
-within its band. The table goes to stdout (markdown).
+the boundary certificate as the map runs it (`SmoothMap.boundary_certificate`:
+MFS on its polygon, else, like BEM, Gamma the first distance inside that
+proves the map with its band, the collar), verdict, Gamma's distance,
+whether the band is proved, seconds; then the dense check of
+tests/nasty.py on the map as accepted (the collar in its band: a
+60,000-point grid, bands 0.01-3 px inside every edge every 0.25 px, polar
+grids of 16 radii at every vertex) plus samples 1e-6..0.01 px inside every
+edge every 0.25 px and around every vertex: folds (det J <= 0) and deep
+excursions out of Theta at the samples deeper than Gamma, and within the
+band. The table goes to stdout (markdown).
 """
 
 from __future__ import annotations
@@ -37,7 +39,6 @@ from nasty import SHAPES, dense_check, dense_samples  # noqa: E402
 from warpcli import MapOptions, Polygon  # noqa: E402
 from warpcli.boundary import nearest_edge  # noqa: E402
 from warpcli.grid import inside_polygon  # noqa: E402
-from warpcli.maps.certificate import band_floor  # noqa: E402
 from warpcli.maps.meshless import BEM, MFS  # noqa: E402
 from warpcli.maps.theta import regular as regular_theta  # noqa: E402
 
@@ -66,15 +67,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="11,5", help="comma-separated seeds of the generators")
     args = ap.parse_args(argv)
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start\n")
-    print("| shape | seed | method | m | cells ok | cells s | boundary ok | boundary s | boundary evaluations | "
-          "folds deeper than Gamma | deep deeper than Gamma | folds in the band | deep in the band |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| shape | seed | method | m | cells ok | cells s | boundary ok | Gamma px | band proved | boundary s | "
+          "boundary evaluations | folds deeper than Gamma | deep deeper than Gamma | folds in the band | deep in the band |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for shape in sorted(SHAPES):
         if shape == "wavy":
             continue
         for seed in (int(s) for s in args.seeds.split(",")):
             v = SHAPES[shape](np.random.default_rng(seed))
-            size = float(np.ptp(v, axis=0).max())
             for method in ("mfs", "bem"):
                 for nodes in (None, 128, 64):
                     if nodes is not None and nodes < len(v) + 8:
@@ -85,14 +85,15 @@ def main(argv: list[str] | None = None) -> int:
                     t0 = time.perf_counter()
                     cells = phi.certify_cells_with(rigorous=method == "mfs")  # linear data: no ball
                     t1 = time.perf_counter()
-                    proof = phi.certify_boundary_at(0.0 if method == "mfs" else band_floor(size))  # no fallback
+                    proof = phi.boundary_certificate  # the default: MFS's fallback, the first band that holds
                     t2 = time.perf_counter()
                     p = np.concatenate([dense_samples(v, grid=60_000, along=0.25, corner_rings=16), near_boundary(v)])
                     deeper = nearest_edge(p, v)[2] > proof.offset
                     d = dense_check(phi, p[deeper])
                     b = dense_check(phi, p[~deeper]) if (~deeper).any() else {"folds": 0, "deep": 0}
                     print(f"| {shape} | {seed} | {method} | {phi.solution.m} | {cells.failed == 0} | {t1 - t0:.2f} | "
-                          f"{proof.failed == 0} | {t2 - t1:.2f} | {proof.checked} | {d['folds']} | {d['deep']} | "
+                          f"{proof.failed == 0} | {proof.offset:.4f} | {proof.band} | {t2 - t1:.2f} | {proof.checked} | "
+                          f"{d['folds']} | {d['deep']} | "
                           f"{b['folds']} | {b['deep']} |", flush=True)  # fmt: skip
     print(f"\nload average {os.getloadavg()[0]:.1f} at the end")
     return 0

@@ -69,19 +69,32 @@ proves the map or refuses it, nothing is left "unproved". A piece whose
 centre has sign * det J <= 0 fails at once (a fold of the closed form, not
 a weakness of the bound).
 
-Values outside Theta: phi maps R onto the inside of phi(Gamma), so a value
-outside Theta comes from near Gamma; at every piece's centre the cell
-certificate's measure (the distance to the polygon's boundary plus how
+Values outside Theta (without the band's conditions below): phi maps R onto
+the inside of phi(Gamma), so a value outside Theta comes from near Gamma;
+at every piece's centre the cell certificate's measure (the distance to the polygon's boundary plus how
 far, to first order, the point must move for its value to come back onto
 Theta's edge line) must stay within the band (`BAND`): sampled, not
 proved, as there.
 
-Left to other arguments: the band between the polygon's boundary and Gamma
-(BEM: `offset`; MFS: nothing, unless the caller moves Gamma inwards after a
-failure on the polygon itself, as `SmoothMap.boundary_certificate` does),
-and vertices where the boundary data force
-det J -> 0 (`degenerate_vertices`): the caller keeps the cell certificate
-with its left-out balls for those maps.
+The band between the polygon and Gamma (``offset`` > 0, with the boundary
+data ``boundary`` given): there the map is the collar of
+`warpcli.maps.collar`, (1 - t) g(F(s)) + t phi(G(s)) on the cells of
+`offset_band`, and two more conditions on every piece make it one-to-one
+from the band onto the ring between Theta's boundary and phi(Gamma):
+
+4. the piece's capsule lies strictly inside every edge line of Theta (so
+   phi(Gamma), and phi(R) inside it, are inside Theta: this replaces the
+   sampled check of values outside Theta);
+5. sign det(D, V) > 0 over the piece, V = phi - g(F) the collar's segment
+   (`_collar` gives the bound): the segments cross phi(Gamma) the right
+   way round.
+
+The collar's Jacobian determinant is linear in t between det(g', V) (> 0 by
+4) and det(D, V) (> 0 by 5), and the degree argument for the ring does the
+rest (docs/proving.md). Without ``boundary`` the band is left to the
+caller, as are vertices where the boundary data force det J -> 0
+(`degenerate_vertices`): the caller keeps the cell certificate with its
+left-out balls for those maps.
 """
 
 from __future__ import annotations

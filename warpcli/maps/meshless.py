@@ -70,8 +70,8 @@ FIT_BYTES_PER_NODE2 = {"bem": 220, "mfs": 300}
 #: 0.02-0.15x the rigorous cells' for MFS on the bench pairs; docs/proving.md), unless a vertex is
 #: degenerate; the others by the cell certificate (`certify_cells`).
 BOUNDARY_CERTIFIED = frozenset({"bem", "mfs"})
-#: An MFS map whose boundary certificate fails with Gamma the polygon itself is certified again with
-#: Gamma inside (BEM's `_band_widths`), and accepted if that holds, the collar in the band.
+#: Boundary data other than linear (no collar): an MFS map whose boundary certificate fails with
+#: Gamma the polygon itself is certified again with Gamma `band_floor` inside, the band not proved.
 MFS_INNER_FALLBACK = True
 #: Gamma's distances inside the polygon, in units of `band_floor` (0.01 px at 1 MP): the first that
 #: proves the map with its band is taken (`SmoothMap.boundary_certificate`).
@@ -342,38 +342,45 @@ class SmoothMap(ThetaMap):
         """`warpcli.maps.boundary_certificate.certify_boundary`, computed once; None where the boundary data
         force det J -> 0 at a vertex (`degenerate_vertices`: those maps keep the cell certificate and its balls).
 
-        Gamma is the polygon's boundary for MFS (its sites lie outside: the closed form is analytic on the
-        closed polygon) and a curve `band_floor` inside for BEM (singular at its boundary nodes); an MFS map
-        that fails on its polygon is tried again with BEM's Gamma (`MFS_INNER_FALLBACK`).
+        Linear boundary data (the default): Gamma is the polygon moved inwards by the first of `_band_widths`
+        that proves the map with its band (the collar, `collar`), for BEM (its closed form is singular at its
+        boundary nodes, and folds next to them) and MFS alike (its fit leaves Theta along the boundary, and
+        folds there next to some reflex vertices); ``closer`` counts the first width's failures when a later
+        one holds. Other data (no collar): MFS on its polygon itself (its sites lie outside), else, like BEM,
+        `band_floor` inside (`MFS_INNER_FALLBACK`), the band not proved.
         """
         if self._degenerate.any():
             return None
-        whole = None
-        if self.name == "mfs":
-            whole = self.certify_boundary_at(0.0)
-            if whole.ok or not MFS_INNER_FALLBACK:
-                return whole
-            # MFS folds at the boundary itself next to some reflex vertices (0.0004-0.04 px from the
-            # vertex, under 0.001 px deep at 1 MP), at every m: proved deeper instead, with the collar
-            # in the band, the failures on the boundary counted
+        if not self._linear_data:
+            whole = None
+            if self.name == "mfs":
+                whole = self.certify_boundary_at(0.0)
+                if whole.ok or not MFS_INNER_FALLBACK:
+                    return whole
+            moved = self.certify_boundary_at(band_floor(self._size))
+            if whole is None:
+                return moved
+            return replace(moved, closer=whole.failed) if moved.ok else whole
         first = None
         for width in self._band_widths:
             moved = self.certify_boundary_at(width)
             if moved.ok:
-                return moved if whole is None else replace(moved, closer=whole.failed)
+                return moved if first is None else replace(moved, closer=first.failed)
             first = first or moved
-        return whole or first
+        return first
+
+    @property
+    def _linear_data(self) -> bool:
+        """Whether the boundary data are linear along each edge (Dirichlet, linear behaviour): the collar's case."""
+        return self.solution.trace is None and self.boundary == "linear"
 
     @cached_property
     def _band_widths(self) -> tuple[float, ...]:
         """Gamma's distances inside the polygon tried in turn (`BAND_STEPS` times `band_floor`): a
         closed form whose values 0.01 px inside still leave Theta (MFS's fit, BEM next to a node) is
-        proved farther in, with the collar between. One only where the band cannot be proved (boundary
-        data other than linear): a wider band left unproved would be no gain."""
+        proved farther in, with the collar between (none for data other than linear: `band_floor`)."""
         inner = band_floor(self._size)
-        if not (self.solution.trace is None and self.boundary == "linear"):
-            return (inner,)
-        return tuple(inner * k for k in BAND_STEPS)
+        return tuple(inner * k for k in BAND_STEPS) if self._linear_data else (inner,)
 
     def certify_boundary_at(self, offset: float) -> BoundaryCertificate:
         """`warpcli.maps.boundary_certificate.certify_boundary` of this map on Gamma ``offset`` inside its
@@ -381,8 +388,7 @@ class SmoothMap(ThetaMap):
         sign = self.theta.orientation * np.sign(self.polygon.signed_area)
         # the band is proved for boundary data linear along the edges (not for natural conditions'
         # sliding correspondence nor t^2, whose vertices keep the cell certificate anyway)
-        linear = self.solution.trace is None and self.boundary == "linear"
-        boundary = self.boundary_to_theta if linear and offset > 0 else None
+        boundary = self.boundary_to_theta if self._linear_data and offset > 0 else None
         return certify_boundary(self.solution, self.polygon.points, self.theta, sign, offset, boundary)
 
     @cached_property
