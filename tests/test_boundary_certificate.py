@@ -233,14 +233,20 @@ def test_the_sample_pairs_are_accepted(src, dst, method):
         assert cert.offset in [min(0.01, 1e-5 * phi._size) * k for k in BAND_STEPS]
 
 
-def test_degenerate_vertices_keep_the_cell_certificate():
-    """t^2 data force det J -> 0 at every vertex: no boundary certificate, the cells and their balls decide."""
+def test_mixed_conditions_keep_the_cell_certificate():
+    """Mixed conditions slide along Theta's edges (no collar) and force det J -> 0 at sharp corners: the cells and
+    their balls decide. t^2 data, also degenerate at every vertex, are proved from one curve with the collar."""
+    dart = Polygon(np.array([[10, 10], [120, 20], [60, 50], [20, 110]], dtype=float), name="dart")
+    unit = Theta(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]))
+    opts = MapOptions(method="mfs", check=False, conditions="mixed")
+    phi = MFS.build(dart, unit, opts)
+    assert phi._degenerate.any() and phi.boundary_certificate is None
+    assert phi.certify().checked == phi.cell_certificate.checked
     v = SHAPES["star_like"](np.random.default_rng(0))
     poly = Polygon(v, name="star")
     opts = MapOptions(method="mfs", nodes=64, check=False, src_boundary="quadratic")
     phi = MFS.build(poly, regular_theta(poly, poly, opts), opts)
-    assert phi.boundary_certificate is None
-    assert phi.certify().checked == phi.cell_certificate.checked
+    assert phi._degenerate.all() and phi.boundary_certificate is not None
 
 
 def test_an_mfs_fold_on_the_polygon_itself_is_real_and_the_map_is_proved_inside_instead():

@@ -23,7 +23,7 @@ from nasty import SHAPES
 from test_boundary_certificate import Harmonic as _Harmonic
 
 from warpcli import MapOptions, Polygon
-from warpcli.boundary import edge_points
+from warpcli.boundary import BoundaryData
 from warpcli.maps.boundary_certificate import certify_boundary, offset_band
 from warpcli.maps.collar import Collar
 from warpcli.maps.meshless import BEM, MFS
@@ -80,8 +80,7 @@ def test_the_collar_of_an_affine_map_is_the_map(seed):
     theta = Theta(affine(v))
     sign = theta.orientation * float(np.sign(_area(v)))
 
-    def boundary(edge, t):
-        return affine(edge_points(v, edge, t))
+    boundary = BoundaryData(affine(v))  # g(e, t) = phi of the point at t on edge e: phi is affine
 
     delta = 0.01
     cert = certify_boundary(phi, v, theta, sign, delta, boundary)
@@ -106,10 +105,10 @@ def test_a_map_whose_curve_leaves_theta_is_refused_with_its_band(seed):
     w = v.mean(axis=0) + 0.95 * (v - v.mean(axis=0))
     theta = Theta(w)
     sign = theta.orientation * float(np.sign(_area(v)))
-    cert = certify_boundary(phi, v, theta, sign, 0.01, lambda edge, t: edge_points(w, edge, t))
+    cert = certify_boundary(phi, v, theta, sign, 0.01, BoundaryData(w))
     assert not cert.ok and cert.outside > 0 and not cert.band
     # the control: onto the polygon itself (Theta = P, the identity) the band is proved
-    same = certify_boundary(phi, v, Theta(v), sign * Theta(v).orientation * theta.orientation, 0.01, lambda e, t: edge_points(v, e, t))
+    same = certify_boundary(phi, v, Theta(v), sign * Theta(v).orientation * theta.orientation, 0.01, BoundaryData(v))
     assert same.ok and same.band
 
 
@@ -160,7 +159,7 @@ def test_every_point_of_an_accepted_band_is_mapped_one_to_one_into_theta(shape, 
     assert np.allclose(at_gamma, phi.solution.value(ga), rtol=0, atol=1e-9)
     fa = band.f0[cell] + s[:, None] * (band.f1 - band.f0)[cell]
     near_f = fa + 1e-9 * (ga - fa)
-    gdata = phi.boundary_to_theta(band.edge[cell], band.t0[cell] + s * (band.t1 - band.t0)[cell])
+    gdata = phi.boundary_to_theta(band.edge[cell], band.t0[cell] + s * (band.t1 - band.t0)[cell])  # the map's own
     assert np.allclose(collar.evaluate(near_f)[0], gdata, rtol=0, atol=1e-6)
 
 

@@ -8,6 +8,8 @@ are the one place that computes it.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -116,3 +118,53 @@ def on_boundary(
     edge, t, dist = nearest_edge(points, vertices)
     index = np.flatnonzero(dist <= tolerance)
     return index, edge[index], t[index]
+
+
+@dataclass(frozen=True)
+class BoundaryData:
+    """Dirichlet boundary data onto Theta, edge by edge: g(i, t) = W_i + u(t) (W_{i+1} - W_i), u the behaviour.
+
+    With its first derivative and a bound on its second, for the collar of a
+    smooth map (`warpcli.maps.collar`) and its certificate.
+
+    Parameters
+    ----------
+    theta : (n, 2) ndarray of float
+        Theta's vertices W.
+    behaviour : str
+        ``"linear"`` (u = t) or ``"quadratic"`` (u = t^2), `to_theta_parameter`.
+
+    Examples
+    --------
+    >>> g = BoundaryData(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0]]), "quadratic")
+    >>> g.points([0], [0.5]).tolist(), g.tangent([0], [0.5]).tolist(), g.bend([0]).tolist()
+    ([[1.0, 0.0]], [[4.0, 0.0]], [8.0])
+    """
+
+    theta: NDArray[np.float64]
+    behaviour: str = "linear"
+
+    def _edge(self, edge: ArrayLike) -> NDArray[np.float64]:
+        e = np.asarray(edge, dtype=np.intp)
+        return self.theta[(e + 1) % len(self.theta)] - self.theta[e]
+
+    def points(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
+        """g(edge, t), (K, 2): Theta's points (as `edge_points` of `to_theta_parameter`)."""
+        return edge_points(self.theta, edge, to_theta_parameter(t, self.behaviour))
+
+    def tangent(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
+        """dg/dt, (K, 2)."""
+        s = np.asarray(t, dtype=np.float64)
+        slope = 2.0 * s if self.behaviour == "quadratic" else np.ones_like(s)
+        return slope[:, None] * self._edge(edge)
+
+    def bend(self, edge: ArrayLike) -> NDArray[np.float64]:
+        """|d^2 g / dt^2| on the whole edge, (K,): 0 (linear) or 2 |W_{i+1} - W_i| (quadratic)."""
+        k = 2.0 if self.behaviour == "quadratic" else 0.0
+        return k * np.hypot(*self._edge(edge).T)
+
+    def parameter(self, edge: ArrayLike, t_from: ArrayLike, t_to: ArrayLike, fraction: ArrayLike) -> NDArray[np.float64]:
+        """The t between t_from and t_to whose point lies ``fraction`` of the way from g(t_from) to g(t_to)."""
+        a = to_theta_parameter(t_from, self.behaviour)
+        b = to_theta_parameter(t_to, self.behaviour)
+        return from_theta_parameter(a + np.asarray(fraction, dtype=np.float64) * (b - a), self.behaviour)

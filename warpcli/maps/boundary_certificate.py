@@ -239,14 +239,16 @@ class OffsetBand:
 
     Cell c is the set of points (1 - t) F(s) + t G(s), s and t in [0, 1],
     with F(s) = F0 + s (F1 - F0) on the polygon's boundary (on one edge) and
-    G(s) = G0 + s (G1 - G0) on Gamma. Three kinds, in counter-clockwise
-    order round the polygon: a strip along each moved edge (G1 - G0 = F1 -
-    F0: a rectangle of width delta); a fan round each reflex vertex v per
-    chord of its arc (F0 = F1 = v); two triangles at each convex vertex
-    between its mitre point c (G0 = G1 = c) and the two edges (F runs to v,
-    then from it). Neighbouring cells share a segment from the polygon to
-    Gamma; together they tile the band (the parametrisation has a positive
-    Jacobian on every cell and runs once round both curves).
+    G(s) = G0 + s (G1 - G0) on Gamma, F1 - F0 and G1 - G0 parallel or one
+    of them 0. Three kinds, in counter-clockwise order round the polygon: a
+    strip along each moved edge (G1 - G0 = F1 - F0: a rectangle of width
+    delta); a fan round each reflex vertex v per chord of its arc (F0 = F1
+    = v); two trapezoids at each convex vertex v, where Gamma has its mitre
+    point c and a point on each moved edge a little before and after it (F
+    runs along the edge to v while G runs to c, then both on from there).
+    Neighbouring cells share a segment from the polygon to Gamma; together
+    they tile the band (the parametrisation has a positive Jacobian on every
+    cell and runs once round both curves), and G moves in every cell.
 
     Attributes
     ----------
@@ -261,7 +263,7 @@ class OffsetBand:
         F0's and F1's parameters on that edge.
     of_gamma : (k,) ndarray of int
         The cell of each edge of Gamma (edge i runs from gamma[i] to
-        gamma[i + 1]).
+        gamma[i + 1]): cell i.
     """
 
     gamma: NDArray[np.float64]
@@ -303,54 +305,67 @@ def offset_band(vertices: NDArray[np.float64], delta: float) -> OffsetBand | Non
     prev = np.roll(nrm, 1, axis=0)
     cos = (prev * nrm).sum(axis=1)
     turn = np.roll(e, 1, axis=0)[:, 0] * e[:, 1] - np.roll(e, 1, axis=0)[:, 1] * e[:, 0]  # < 0: reflex
-    pts, first, last = [], np.zeros((n, 2)), np.zeros((n, 2))
-    cells = []  # (f0, f1, g0, g1, ccw edge, t0, t1, on gamma)
-
-    def param(i, p):  # parameter of p's projection on ccw edge i
-        return float((p - v[i]) @ e[i]) / float(e2[i])
-
-    for i in range(n):  # loop over vertices: one point (convex) or an arc (reflex)
+    first, last = np.zeros((n, 2)), np.zeros((n, 2))
+    mitre, arcs = {}, {}
+    for i in range(n):  # loop over vertices: a mitre point (convex) or an arc (reflex)
         if turn[i] >= 0:
             if 1.0 + cos[i] < 1e-12:
                 return None
-            g = v[i] + delta * (prev[i] + nrm[i]) / (1.0 + cos[i])
-            pts.append(g[None])
-            first[i] = last[i] = g
-            h = (i - 1) % n
-            fa = g - delta * prev[i]
-            fb = g - delta * nrm[i]
-            cells.append((fa, v[i], g, g, h, param(h, fa), 1.0, False))
-            cells.append((v[i], fb, g, g, i, 0.0, param(i, fb), False))
+            mitre[i] = first[i] = last[i] = v[i] + delta * (prev[i] + nrm[i]) / (1.0 + cos[i])
         else:
             a0 = math.atan2(prev[i, 1], prev[i, 0])
             sweep = math.atan2(prev[i, 0] * nrm[i, 1] - prev[i, 1] * nrm[i, 0], float(prev[i] @ nrm[i]))
             sweep = sweep if sweep < 0 else sweep - 2 * math.pi  # clockwise, from n_prev to n
             k = max(1, math.ceil(abs(sweep) / ARC_STEP))
             ang = a0 + sweep * np.arange(k + 1) / k
-            arc = v[i] + delta * np.stack([np.cos(ang), np.sin(ang)], axis=1)
-            pts.append(arc)
-            first[i], last[i] = arc[0], arc[-1]
-            cells.extend((v[i], v[i], arc[j], arc[j + 1], i, 0.0, 0.0, True) for j in range(k))
-        # moved edge i: from vertex i's last point to vertex i + 1's first (filled in below)
-        cells.append((None, None, None, None, i, 0.0, 0.0, True))
+            arcs[i] = v[i] + delta * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+            first[i], last[i] = arcs[i][0], arcs[i][-1]
     # moved edge i runs from vertex i's last point to vertex i + 1's first
     moved = np.roll(first, -1, axis=0) - last
-    if ((moved * e).sum(axis=1) <= 0).any():
+    along = (moved * e).sum(axis=1) / np.sqrt(e2)
+    if (along <= 0).any():
         return None
+    unit = e / np.sqrt(e2)[:, None]
+    pts = []
+    cells = []  # (f0, f1, g0, g1, ccw edge, t0, t1)
+
+    def param(i, p):  # parameter of p's projection on ccw edge i
+        return float((p - v[i]) @ e[i]) / float(e2[i])
+
+    for i in range(n):  # loop over vertices, then the moved edge after each
+        h = (i - 1) % n
+        if i in mitre:
+            # Gamma gets a point a little before and after the mitre point c on the moved edges, and
+            # the corner two trapezoids: F runs along an edge to v while G runs to c (then from them),
+            # so that G moves in every cell (with t^2 data g stands still at v: a cell with G fixed
+            # would have det J = 0 along the whole segment from v to c)
+            c = mitre[i]
+            ch = c - min(delta, 0.25 * along[h]) * unit[h]
+            ci = c + min(delta, 0.25 * along[i]) * unit[i]
+            pts.append(np.stack([ch, c, ci]))
+            first[i], last[i] = ch, ci
+            fh, fi = ch - delta * nrm[h], ci - delta * nrm[i]
+            cells.append((fh, v[i], ch, c, h, param(h, fh), 1.0))
+            cells.append((v[i], fi, c, ci, i, 0.0, param(i, fi)))
+        else:
+            arc = arcs[i]
+            pts.append(arc)
+            cells.extend((v[i], v[i], arc[j], arc[j + 1], i, 0.0, 0.0) for j in range(len(arc) - 1))
+        cells.append((i,))  # moved edge i (a strip), once every vertex's points are known
+    for c, cell in enumerate(cells):
+        if len(cell) == 1:
+            i = cell[0]
+            ga, gb = last[i], first[(i + 1) % n]
+            fa, fb = ga - delta * nrm[i], gb - delta * nrm[i]
+            cells[c] = (fa, fb, ga, gb, i, param(i, fa), param(i, fb))
     g = np.concatenate(pts)
     if _self_crossing(g) or _crossing(g, v) or not inside_polygon(g[:1], v)[0]:
         return None
-    for c, cell in enumerate(cells):  # the strips, now that every vertex's points are known
-        if cell[0] is None:
-            i = cell[4]
-            ga, gb = last[i], first[(i + 1) % n]
-            fa, fb = ga - delta * nrm[i], gb - delta * nrm[i]
-            cells[c] = (fa, fb, ga, gb, i, param(i, fa), param(i, fb), True)
     f0, f1, g0, g1 = (np.array([cell[k] for cell in cells], dtype=np.float64) for k in range(4))
     edge = np.array([cell[4] for cell in cells], dtype=np.intp)
     t0 = np.array([cell[5] for cell in cells])
     t1 = np.array([cell[6] for cell in cells])
-    of_gamma = np.flatnonzero([cell[7] for cell in cells])
+    of_gamma = np.arange(len(cells))  # every cell has its edge of Gamma, in order
     if flipped:  # ccw edge i is edge n - 2 - i of the polygon as given, run backwards
         edge = (n - 2 - edge) % n
         t0, t1 = 1.0 - t0, 1.0 - t1
@@ -397,10 +412,10 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
     offset : float
         Gamma's distance inside the polygon (`inner_offset`); 0: the
         polygon's boundary (MFS).
-    boundary : callable or None
-        ``boundary(edge, t)``: the boundary data, Theta's point for the
-        point at parameter t of the polygon's edge, linear along each edge.
-        Given with ``offset`` > 0, the band is proved too (``band``).
+    boundary : BoundaryData or None
+        The boundary data (Theta's point for the point at parameter t of
+        the polygon's edge: linear or t^2 along each edge). Given with
+        ``offset`` > 0, the band is proved too (``band``).
 
     Returns
     -------
@@ -433,10 +448,9 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
     nd = nd / np.hypot(nd[:, 0], nd[:, 1])[:, None]
     slack = OUTSIDE * tsize
     noise = VALUE_ERROR * tsize
-    if collar:  # the boundary data at the ends of each Gamma edge's cell (a strip or a reflex fan)
+    if collar:  # the cell of each Gamma edge (a strip or a reflex fan): its polygon edge and parameters
         cg = cells.of_gamma
-        gf0 = boundary(cells.edge[cg], cells.t0[cg]) @ np.array([1.0, 1j])
-        gf1 = boundary(cells.edge[cg], cells.t1[cg]) @ np.array([1.0, 1j])
+        c_edge, c_t0, c_dt = cells.edge[cg], cells.t0[cg], cells.t1[cg] - cells.t0[cg]
     # the pieces kept so far (proved one by one), column-wise
     keep = {k: [] for k in ("edge", "t0", "t1", "p0", "w0", "d0", "dd", "r")}
     failed = folds = outside = checked = tangled = crossed = 0
@@ -470,10 +484,13 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
                 proved = (low > high) & (dd < np.abs(d0))  # condition 1; the tangent's direction known
             fold = ~(np.abs(p0) > np.abs(q0))
             if collar:  # conditions 4 and 5: the band's collar
-                mid = 0.5 * (t0 + t1)
-                gc = gf0[edge] + mid * (gf1 - gf0)[edge]
-                gp = (gf1 - gf0)[edge] / length[edge]
-                inset, transverse, far, cross = _collar(val, d0, dd, r, gc, gp, w, nd, theta.orientation, sign, noise)
+                # the data at the foot of x0 and their first and second derivatives along Gamma
+                rate = c_dt[edge] / length[edge]
+                tm = c_t0[edge] + 0.5 * (t0 + t1) * c_dt[edge]
+                gc = boundary.points(c_edge[edge], tm) @ np.array([1.0, 1j])
+                gp = boundary.tangent(c_edge[edge], tm) @ np.array([1.0, 1j]) * rate
+                gpp = boundary.bend(c_edge[edge]) * rate * rate
+                inset, transverse, far, cross = _collar(val, d0, dd, r, gc, gp, gpp, w, nd, theta.orientation, sign, noise)
                 proved &= (inset > 0) & (transverse > 0)
                 crossed += int((cross & ~fold & ~far).sum())
             else:
@@ -685,17 +702,19 @@ def _segment_distance(a, b, c, d) -> NDArray[np.float64]:
     return np.where(crossing, 0.0, near)
 
 
-def _collar(val, d0, dd, r, gc, gp, w, nd, orientation, sign, noise):
+def _collar(val, d0, dd, r, gc, gp, gpp, w, nd, orientation, sign, noise):
     """Conditions 4 and 5 on each piece: margins (> 0: proved on the whole piece) and failures at its centre.
 
     Piece: centre value w0 = phi(x0), tangent D0 of phi along Gamma (per unit
     length), dD, half-length r; gc and gp the boundary data at the foot of
-    x0 and their derivative along the piece (0 on a reflex fan). On the
-    piece phi = w0 + s D0 + E1 with |E1| <= dD |s|, D = D0 + E2 with |E2|
-    <= dD, and V = phi - g = V0 + s (D0 - gp) + E1, so
+    x0 and their derivative along the piece (0 on a reflex fan), gpp a bound
+    on their second derivative. On the piece phi = w0 + s D0 + E1 with |E1|
+    <= dD |s|, D = D0 + E2 with |E2| <= dD, g = gc + s gp + Eg with |Eg| <=
+    gpp s^2 / 2, and V = phi - g = V0 + s (D0 - gp) + E1 - Eg, so
 
         sign det(D, V) >= sign det(D0, V0) - r |det(D0, gp)| - |D0| dD r
-                          - dD (|V0| + r |D0 - gp| + dD r) - (|D0| + dD) noise
+                          - dD (|V0| + r |D0 - gp| + dD r + gpp r^2 / 2)
+                          - |D0| gpp r^2 / 2 - (|D0| + dD) noise
 
     (condition 5), and phi stays in the capsule w0 +- r D0 thickened by dD r
     + noise, strictly inside every edge line of Theta (condition 4).
@@ -720,7 +739,8 @@ def _collar(val, d0, dd, r, gc, gp, w, nd, orientation, sign, noise):
     v0 = w0 - gc
     det0 = sign * (np.conj(d0) * v0).imag
     loss = r * np.abs((np.conj(d0) * gp).imag) + np.abs(d0) * dd * r
-    loss = loss + dd * (np.abs(v0) + r * np.abs(d0 - gp) + dd * r) + (np.abs(d0) + dd) * noise
+    bent = 0.5 * gpp * r * r
+    loss = loss + dd * (np.abs(v0) + r * np.abs(d0 - gp) + dd * r + bent) + np.abs(d0) * bent + (np.abs(d0) + dd) * noise
     with np.errstate(invalid="ignore"):
         return inset, det0 - loss, ~(depth > noise), ~(det0 > 0)
 

@@ -10,8 +10,8 @@ points (1 - t) F(s) + t G(s), F on the polygon's edge, G on Gamma),
 
     phi_c((1 - t) F(s) + t G(s)) = (1 - t) g(F(s)) + t phi(G(s)),
 
-g the boundary data (linear along each edge onto Theta's edge), phi the
-closed form. It is continuous, equal to phi on Gamma and to g on the
+g the boundary data (linear or t^2 along each edge onto Theta's edge), phi
+the closed form. It is continuous, equal to phi on Gamma and to g on the
 polygon, and the certificate's conditions 4 and 5 (phi(Gamma) strictly
 inside Theta; each segment from g(F(s)) to phi(G(s)) crossing phi(Gamma)
 the right way round) make it one-to-one from the band onto the ring
@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..boundary import BoundaryData
 from ..grid import inside_polygon
 from .boundary_certificate import OffsetBand
 
@@ -56,9 +57,8 @@ class Collar:
         The cells, in the polygon's coordinates.
     solution : ClosedForm
         ``value_and_jacobian`` of the closed form (valid on Gamma).
-    boundary : callable
-        ``boundary(edge, t)``: Theta's point for parameter t of the
-        polygon's edge (linear along the edge).
+    data : BoundaryData
+        The boundary data.
     knots : (K, 4) ndarray of float
         The certificate's piece centres: Gamma's edge, parameter, value
         (`BoundaryCertificate.knots`).
@@ -66,7 +66,7 @@ class Collar:
 
     band: OffsetBand
     solution: object = field(repr=False)
-    boundary: object = field(repr=False)
+    data: BoundaryData = field(repr=False)
     knots: NDArray[np.float64] = field(repr=False)
 
     @property
@@ -78,10 +78,12 @@ class Collar:
         """Whether each point (known to be inside the polygon) lies in R, inside Gamma (else in the band)."""
         return inside_polygon(points, self.band.gamma)
 
-    def _ends(self):
-        """Boundary data at each cell's F0 and F1, (c, 2) each."""
+    def _data(self, c: NDArray[np.intp], s: NDArray[np.float64]):
+        """g(F(s)) on cells c, and its derivative in s: (K, 2) each."""
         b = self.band
-        return self.boundary(b.edge, b.t0), self.boundary(b.edge, b.t1)
+        dt = (b.t1 - b.t0)[c]
+        t = b.t0[c] + s * dt
+        return self.data.points(b.edge[c], t), self.data.tangent(b.edge[c], t) * dt[:, None]
 
     def locate(self, points: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
         """The cell and its parameters (s, t) of each point of the band; cell -1 where none holds it.
@@ -134,14 +136,13 @@ class Collar:
         if not k.size:
             return out, jac
         c, s, t = cell[k], s[k][:, None], t[k][:, None]
-        ga, gb = self._ends()
         f = b.f0[c] + s * (b.f1 - b.f0)[c]
         g = b.g0[c] + s * (b.g1 - b.g0)[c]
-        gf = ga[c] + s * (gb - ga)[c]
+        gf, dgf = self._data(c, s[:, 0])
         val, j = self.solution.value_and_jacobian(g)
         out[k] = (1.0 - t) * gf + t * val
         if jac is not None:
-            img_s = (1.0 - t) * (gb - ga)[c] + t * np.einsum("kab,kb->ka", j, (b.g1 - b.g0)[c])
+            img_s = (1.0 - t) * dgf + t * np.einsum("kab,kb->ka", j, (b.g1 - b.g0)[c])
             img_t = val - gf
             dom_s = (1.0 - t) * (b.f1 - b.f0)[c] + t * (b.g1 - b.g0)[c]
             dom_t = g - f
@@ -168,24 +169,25 @@ class Collar:
         out = np.full(w.shape, np.nan)
         if not len(w):
             return out
-        ga, gb = self._ends()
         knots = self._knots
         for c in range(len(b.f0)):  # loop over cells, vectorised over the values still looking
             todo = np.flatnonzero(np.isnan(out[:, 0]))
             if not todo.size:
                 break
-            s_k, v_k = knots[c]
-            corners = np.concatenate([ga[c][None], gb[c][None], v_k])
+            s_k, v_k, g_k = knots[c]
+            corners = np.concatenate([g_k, v_k])
             lo, hi = corners.min(axis=0), corners.max(axis=0)
             pad = 0.5 * (hi - lo).max() + 1e-12 * (1.0 + np.abs(corners).max())
             todo = todo[((w[todo] >= lo - pad) & (w[todo] <= hi + pad)).all(axis=1)]  # near this cell's image
             if not todo.size:
                 continue
             fixed = len(s_k) == 1  # a convex fan: G is one point
-            if fixed:  # the image is the triangle g(F0), g(F1), phi(c): linear, like `locate`
-                hit, s, t = _fan(w[todo], ga[c], gb[c], v_k[0])
+            if fixed:  # the image is the triangle g(F0), g(F1), phi(c): linear in g's fraction along its edge
+                hit, lam, t = _fan(w[todo], g_k[0], g_k[-1], v_k[0])
+                dt = b.t1[c] - b.t0[c]
+                tt = self.data.parameter(np.full(todo.size, b.edge[c]), np.full(todo.size, b.t0[c]), np.full(todo.size, b.t1[c]), lam)
+                s = np.clip((tt - b.t0[c]) / dt, 0.0, 1.0) if dt != 0 else lam
             else:
-                g_k = ga[c] + s_k[:, None] * (gb[c] - ga[c])
                 d_k = v_k - g_k
                 rel = w[todo][:, None, :] - g_k[None]
                 hs = _cross(rel, d_k[None])
@@ -209,7 +211,7 @@ class Collar:
                         pick = rows[change[rows, col] & np.isnan(s[rows])]
                         if not pick.size:
                             continue
-                        ss, tt = self._root(w[todo[pick]], c, ga[c], gb[c], s_k[col], s_k[col + 1], hs[pick, col], hs[pick, col + 1])
+                        ss, tt = self._root(w[todo[pick]], c, s_k[col], s_k[col + 1], hs[pick, col], hs[pick, col + 1])
                         good = (tt >= -EDGE_SLACK) & (tt <= 1.0 + EDGE_SLACK)
                         s[pick[good]] = ss[good]
                         t[pick[good]] = tt[good]
@@ -222,7 +224,7 @@ class Collar:
                 out[idx] = f + th * (g - f)
         return out
 
-    def _root(self, w, c, ga, gb, s0, s1, h0, h1):
+    def _root(self, w, c, s0, s1, h0, h1):
         """s in [s0, s1] where h changes sign (Illinois), and t there, for values w in cell c."""
         b = self.band
         a, z = np.full(len(w), s0), np.full(len(w), s1)
@@ -235,7 +237,7 @@ class Collar:
                 s = np.where(fz != fa, z - fz * (z - a) / (fz - fa), 0.5 * (a + z))
             s = np.where((s > a) & (s < z) | (s < a) & (s > z), s, 0.5 * (a + z))
             g = b.g0[c] + s[:, None] * (b.g1 - b.g0)[c]
-            gf = ga + s[:, None] * (gb - ga)
+            gf = self._data(np.full(len(s), c), s)[0]
             val = self.solution.value_and_jacobian(g)[0]
             h = _cross(w - gf, val - gf)
             left = np.sign(h) == np.sign(fa)
@@ -248,7 +250,7 @@ class Collar:
             if ((s == before) | (h == 0) | (np.abs(z - a) <= 4e-16)).all():
                 break
         g = b.g0[c] + s[:, None] * (b.g1 - b.g0)[c]
-        gf = ga + s[:, None] * (gb - ga)
+        gf = self._data(np.full(len(s), c), s)[0]
         val = self.solution.value_and_jacobian(g)[0]
         d = val - gf
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -260,7 +262,7 @@ class Collar:
 
     @property
     def _knots(self):
-        """Per cell: the parameters s where phi(G(s)) is known, and its values there (ends included)."""
+        """Per cell: the parameters s where phi(G(s)) is known, its values there (ends included), and g(F(s))."""
         cached = self.__dict__.get("_knots_cache")
         if cached is not None:
             return cached
@@ -274,20 +276,20 @@ class Collar:
         kg = self.knots[:, 0].astype(np.intp)
         out = []
         for c in range(n):  # loop over cells: knots of its Gamma edge, between the two ends
-            if on_gamma[c] < 0:
-                out.append((np.zeros(1), v0[c][None]))
+            if on_gamma[c] < 0:  # a convex fan: G fixed, g at its two ends
+                out.append((np.zeros(1), v0[c][None], self._data(np.full(2, c), np.array([0.0, 1.0]))[0]))
                 continue
             mine = np.flatnonzero(kg == on_gamma[c])
             order = np.argsort(self.knots[mine, 1], kind="stable")
             s_k = np.concatenate([[0.0], self.knots[mine[order], 1], [1.0]])
             v_k = np.concatenate([v0[c][None], self.knots[mine[order], 2:4], v1[c][None]])
-            out.append((s_k, v_k))
+            out.append((s_k, v_k, self._data(np.full(len(s_k), c), s_k)[0]))
         object.__setattr__(self, "_knots_cache", out)
         return out
 
 
 def _fan(w, ga, gb, p):
-    """w = (1 - t) (ga + s (gb - ga)) + t p, a fixed apex p: (found, s, t), found where both lie in [0, 1]."""
+    """w = (1 - t) (ga + lam (gb - ga)) + t p, a fixed apex p: (found, lam, t), found where both lie in [0, 1]."""
     a = w - ga
     base = p - ga
     df = gb - ga

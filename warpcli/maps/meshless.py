@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..boundary import nearest_edge, on_boundary
+from ..boundary import BoundaryData, nearest_edge, on_boundary
 from ..budget import MAX_IMAGE_BYTES_ENV, max_image_bytes
 from ..errors import InputError, MeshingError
 from ..files import format_bytes
@@ -146,7 +146,7 @@ class SmoothMap(ThetaMap):
         if proof is None or not proof.ok or not proof.band:
             return None
         band = offset_band(self.polygon.points, proof.offset)
-        return Collar(band, self.solution, self.boundary_to_theta, proof.knots)
+        return Collar(band, self.solution, self._collar_data, proof.knots)
 
     def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
         p = as_points(points)
@@ -339,19 +339,21 @@ class SmoothMap(ThetaMap):
 
     @cached_property
     def boundary_certificate(self) -> BoundaryCertificate | None:
-        """`warpcli.maps.boundary_certificate.certify_boundary`, computed once; None where the boundary data
-        force det J -> 0 at a vertex (`degenerate_vertices`: those maps keep the cell certificate and its balls).
+        """`warpcli.maps.boundary_certificate.certify_boundary`, computed once; None for natural or mixed
+        conditions that force det J -> 0 at a vertex (`degenerate_vertices`: those maps keep the cell
+        certificate and its balls).
 
-        Linear boundary data (the default): Gamma is the polygon moved inwards by the first of `_band_widths`
+        Dirichlet data (linear, the default, or t^2): Gamma is the polygon moved inwards by the first of `_band_widths`
         that proves the map with its band (the collar, `collar`), for BEM (its closed form is singular at its
         boundary nodes, and folds next to them) and MFS alike (its fit leaves Theta along the boundary, and
         folds there next to some reflex vertices); ``closer`` counts the first width's failures when a later
-        one holds. Other data (no collar): MFS on its polygon itself (its sites lie outside), else, like BEM,
+        one holds; a vertex where the data force det J -> 0 (t^2) lies in the band, which the collar covers.
+        Other conditions (no collar): MFS on its polygon itself (its sites lie outside), else, like BEM,
         `band_floor` inside (`MFS_INNER_FALLBACK`), the band not proved.
         """
-        if self._degenerate.any():
+        if self._collar_data is None and self._degenerate.any():
             return None
-        if not self._linear_data:
+        if self._collar_data is None:
             whole = None
             if self.name == "mfs":
                 whole = self.certify_boundary_at(0.0)
@@ -369,10 +371,13 @@ class SmoothMap(ThetaMap):
             first = first or moved
         return first
 
-    @property
-    def _linear_data(self) -> bool:
-        """Whether the boundary data are linear along each edge (Dirichlet, linear behaviour): the collar's case."""
-        return self.solution.trace is None and self.boundary == "linear"
+    @cached_property
+    def _collar_data(self) -> BoundaryData | None:
+        """The boundary data as the collar takes them (Dirichlet data, linear or t^2 along each edge); None for
+        natural and mixed conditions (the boundary slides as the solution says: no collar)."""
+        if self.solution.trace is not None or self.conditions != "dirichlet" or self.boundary not in ("linear", "quadratic"):
+            return None
+        return BoundaryData(self.theta.points, self.boundary)
 
     @cached_property
     def _band_widths(self) -> tuple[float, ...]:
@@ -380,15 +385,15 @@ class SmoothMap(ThetaMap):
         closed form whose values 0.01 px inside still leave Theta (MFS's fit, BEM next to a node) is
         proved farther in, with the collar between (none for data other than linear: `band_floor`)."""
         inner = band_floor(self._size)
-        return tuple(inner * k for k in BAND_STEPS) if self._linear_data else (inner,)
+        return tuple(inner * k for k in BAND_STEPS) if self._collar_data is not None else (inner,)
 
     def certify_boundary_at(self, offset: float) -> BoundaryCertificate:
         """`warpcli.maps.boundary_certificate.certify_boundary` of this map on Gamma ``offset`` inside its
         polygon (0: the polygon itself), not cached: `boundary_certificate` chooses the offsets."""
         sign = self.theta.orientation * np.sign(self.polygon.signed_area)
-        # the band is proved for boundary data linear along the edges (not for natural conditions'
-        # sliding correspondence nor t^2, whose vertices keep the cell certificate anyway)
-        boundary = self.boundary_to_theta if self._linear_data and offset > 0 else None
+        # the band is proved for Dirichlet data (linear or t^2), not for natural or mixed
+        # conditions, whose boundary slides as the solution says
+        boundary = self._collar_data if offset > 0 else None
         return certify_boundary(self.solution, self.polygon.points, self.theta, sign, offset, boundary)
 
     @cached_property
