@@ -122,49 +122,92 @@ def on_boundary(
 
 @dataclass(frozen=True)
 class BoundaryData:
-    """Dirichlet boundary data onto Theta, edge by edge: g(i, t) = W_i + u(t) (W_{i+1} - W_i), u the behaviour.
+    """Boundary data onto Theta, edge by edge: g(i, t) = W_i + u_i(t) (W_{i+1} - W_i), u the behaviour.
 
-    With its first derivative and a bound on its second, for the collar of a
-    smooth map (`warpcli.maps.collar`) and its certificate.
+    u is t (linear), t^2 (quadratic), or, for a boundary that slides along
+    Theta's edges (natural conditions), a non-decreasing piecewise-linear
+    table per edge (``tables``: (t, u) node arrays, as `warpcli.maps.base.slide`
+    reads them). With its derivative and a bound on how far it strays from
+    its tangent, for the collar of a smooth map (`warpcli.maps.collar`) and
+    its certificate.
 
     Parameters
     ----------
     theta : (n, 2) ndarray of float
         Theta's vertices W.
     behaviour : str
-        ``"linear"`` (u = t) or ``"quadratic"`` (u = t^2), `to_theta_parameter`.
+        ``"linear"`` or ``"quadratic"`` (`to_theta_parameter`); ignored with ``tables``.
+    tables : list of (t, u) pairs of 1-D arrays, or None
+        The sliding correspondence, one table per edge.
 
     Examples
     --------
     >>> g = BoundaryData(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0]]), "quadratic")
-    >>> g.points([0], [0.5]).tolist(), g.tangent([0], [0.5]).tolist(), g.bend([0]).tolist()
-    ([[1.0, 0.0]], [[4.0, 0.0]], [8.0])
+    >>> g.points([0], [0.5]).tolist(), g.tangent([0], [0.5]).tolist()
+    ([[1.0, 0.0]], [[4.0, 0.0]])
+    >>> g.stray([0], [0.4], [0.6], [0.1]).round(12).tolist()  # |g''| / 2 * 0.1^2 = 4 * 0.01
+    [0.04]
     """
 
     theta: NDArray[np.float64]
     behaviour: str = "linear"
+    tables: list | None = None
 
     def _edge(self, edge: ArrayLike) -> NDArray[np.float64]:
         e = np.asarray(edge, dtype=np.intp)
         return self.theta[(e + 1) % len(self.theta)] - self.theta[e]
 
+    def _u(self, edge: NDArray[np.intp], t: NDArray[np.float64]) -> NDArray[np.float64]:
+        if self.tables is None:
+            return to_theta_parameter(t, self.behaviour)
+        out = np.empty(t.shape)
+        for i in np.unique(edge):  # loop over the edges present
+            on = edge == i
+            out[on] = np.interp(t[on], *self.tables[i])
+        return out
+
+    def _slopes(self, edge: NDArray[np.intp], t_lo: NDArray[np.float64], t_hi: NDArray[np.float64]):
+        """The least and greatest du/dt over [t_lo, t_hi] on each edge."""
+        if self.tables is None:
+            if self.behaviour == "quadratic":
+                return 2.0 * t_lo, 2.0 * t_hi
+            return np.ones_like(t_lo), np.ones_like(t_lo)
+        lo, hi = np.empty(t_lo.shape), np.empty(t_lo.shape)
+        for i in np.unique(edge):  # loop over the edges present, vectorised over their pieces
+            on = np.flatnonzero(edge == i)
+            tn, un = (np.asarray(a, dtype=np.float64) for a in self.tables[i])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                slope = np.where(np.diff(tn) > 0, np.diff(un) / np.diff(tn), 0.0)
+            # the table's segments meeting [t_lo, t_hi]
+            a = np.clip(np.searchsorted(tn, t_lo[on], side="right") - 1, 0, len(slope) - 1)
+            b = np.clip(np.searchsorted(tn, t_hi[on], side="left") - 1, 0, len(slope) - 1)
+            for k, (x, y) in enumerate(zip(a, np.maximum(a, b))):  # loop over pieces (each spans few segments)
+                lo[on[k]], hi[on[k]] = slope[x : y + 1].min(), slope[x : y + 1].max()
+        return lo, hi
+
     def points(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
-        """g(edge, t), (K, 2): Theta's points (as `edge_points` of `to_theta_parameter`)."""
-        return edge_points(self.theta, edge, to_theta_parameter(t, self.behaviour))
+        """g(edge, t), (K, 2): Theta's points."""
+        e = np.asarray(edge, dtype=np.intp)
+        return edge_points(self.theta, e, self._u(e, np.asarray(t, dtype=np.float64)))
 
     def tangent(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
-        """dg/dt, (K, 2)."""
+        """dg/dt, (K, 2) (a table's: the slope of the segment holding t, the later one at a node)."""
+        e = np.asarray(edge, dtype=np.intp)
         s = np.asarray(t, dtype=np.float64)
-        slope = 2.0 * s if self.behaviour == "quadratic" else np.ones_like(s)
-        return slope[:, None] * self._edge(edge)
+        return self._slopes(e, s, s)[0][:, None] * self._edge(e)
 
-    def bend(self, edge: ArrayLike) -> NDArray[np.float64]:
-        """|d^2 g / dt^2| on the whole edge, (K,): 0 (linear) or 2 |W_{i+1} - W_i| (quadratic)."""
-        k = 2.0 if self.behaviour == "quadratic" else 0.0
-        return k * np.hypot(*self._edge(edge).T)
+    def stray(self, edge: ArrayLike, t_lo: ArrayLike, t_hi: ArrayLike, half: ArrayLike) -> NDArray[np.float64]:
+        """A bound on |g(t) - g(tm) - (t - tm) dg/dt(tm)| over [t_lo, t_hi], tm its middle, half = (t_hi - t_lo) / 2.
 
-    def parameter(self, edge: ArrayLike, t_from: ArrayLike, t_to: ArrayLike, fraction: ArrayLike) -> NDArray[np.float64]:
-        """The t between t_from and t_to whose point lies ``fraction`` of the way from g(t_from) to g(t_to)."""
-        a = to_theta_parameter(t_from, self.behaviour)
-        b = to_theta_parameter(t_to, self.behaviour)
-        return from_theta_parameter(a + np.asarray(fraction, dtype=np.float64) * (b - a), self.behaviour)
+        Smooth u: |u''| half^2 / 2 (0 linear, half^2 quadratic); a table:
+        (greatest - least slope over the range) times half. Times |W_{i+1} - W_i|.
+        """
+        e = np.asarray(edge, dtype=np.intp)
+        lo_t, hi_t = np.asarray(t_lo, dtype=np.float64), np.asarray(t_hi, dtype=np.float64)
+        h = np.abs(np.asarray(half, dtype=np.float64))
+        if self.tables is None:
+            k = h * h if self.behaviour == "quadratic" else np.zeros_like(h)
+        else:
+            lo, hi = self._slopes(e, np.minimum(lo_t, hi_t), np.maximum(lo_t, hi_t))
+            k = (hi - lo) * h
+        return k * np.hypot(*self._edge(e).T)

@@ -414,8 +414,8 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
         polygon's boundary (MFS).
     boundary : BoundaryData or None
         The boundary data (Theta's point for the point at parameter t of
-        the polygon's edge: linear or t^2 along each edge). Given with
-        ``offset`` > 0, the band is proved too (``band``).
+        the polygon's edge: linear, t^2 or a sliding table along each edge).
+        Given with ``offset`` > 0, the band is proved too (``band``).
 
     Returns
     -------
@@ -486,11 +486,12 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
             if collar:  # conditions 4 and 5: the band's collar
                 # the data at the foot of x0 and their first and second derivatives along Gamma
                 rate = c_dt[edge] / length[edge]
-                tm = c_t0[edge] + 0.5 * (t0 + t1) * c_dt[edge]
+                ta, tb = c_t0[edge] + t0 * c_dt[edge], c_t0[edge] + t1 * c_dt[edge]
+                tm = 0.5 * (ta + tb)
                 gc = boundary.points(c_edge[edge], tm) @ np.array([1.0, 1j])
                 gp = boundary.tangent(c_edge[edge], tm) @ np.array([1.0, 1j]) * rate
-                gpp = boundary.bend(c_edge[edge]) * rate * rate
-                inset, transverse, far, cross = _collar(val, d0, dd, r, gc, gp, gpp, w, nd, theta.orientation, sign, noise)
+                stray = boundary.stray(c_edge[edge], ta, tb, 0.5 * (tb - ta))
+                inset, transverse, far, cross = _collar(val, d0, dd, r, gc, gp, stray, w, nd, theta.orientation, sign, noise)
                 proved &= (inset > 0) & (transverse > 0)
                 crossed += int((cross & ~fold & ~far).sum())
             else:
@@ -702,19 +703,20 @@ def _segment_distance(a, b, c, d) -> NDArray[np.float64]:
     return np.where(crossing, 0.0, near)
 
 
-def _collar(val, d0, dd, r, gc, gp, gpp, w, nd, orientation, sign, noise):
+def _collar(val, d0, dd, r, gc, gp, stray, w, nd, orientation, sign, noise):
     """Conditions 4 and 5 on each piece: margins (> 0: proved on the whole piece) and failures at its centre.
 
     Piece: centre value w0 = phi(x0), tangent D0 of phi along Gamma (per unit
     length), dD, half-length r; gc and gp the boundary data at the foot of
-    x0 and their derivative along the piece (0 on a reflex fan), gpp a bound
-    on their second derivative. On the piece phi = w0 + s D0 + E1 with |E1|
-    <= dD |s|, D = D0 + E2 with |E2| <= dD, g = gc + s gp + Eg with |Eg| <=
-    gpp s^2 / 2, and V = phi - g = V0 + s (D0 - gp) + E1 - Eg, so
+    x0 and their derivative along the piece (0 on a reflex fan), stray a
+    bound on how far they leave their tangent over the piece
+    (`BoundaryData.stray`). On the piece phi = w0 + s D0 + E1 with |E1| <=
+    dD |s|, D = D0 + E2 with |E2| <= dD, g = gc + s gp + Eg with |Eg| <=
+    stray, and V = phi - g = V0 + s (D0 - gp) + E1 - Eg, so
 
         sign det(D, V) >= sign det(D0, V0) - r |det(D0, gp)| - |D0| dD r
-                          - dD (|V0| + r |D0 - gp| + dD r + gpp r^2 / 2)
-                          - |D0| gpp r^2 / 2 - (|D0| + dD) noise
+                          - dD (|V0| + r |D0 - gp| + dD r + stray)
+                          - |D0| stray - (|D0| + dD) noise
 
     (condition 5), and phi stays in the capsule w0 +- r D0 thickened by dD r
     + noise, strictly inside every edge line of Theta (condition 4).
@@ -739,8 +741,7 @@ def _collar(val, d0, dd, r, gc, gp, gpp, w, nd, orientation, sign, noise):
     v0 = w0 - gc
     det0 = sign * (np.conj(d0) * v0).imag
     loss = r * np.abs((np.conj(d0) * gp).imag) + np.abs(d0) * dd * r
-    bent = 0.5 * gpp * r * r
-    loss = loss + dd * (np.abs(v0) + r * np.abs(d0 - gp) + dd * r + bent) + np.abs(d0) * bent + (np.abs(d0) + dd) * noise
+    loss = loss + dd * (np.abs(v0) + r * np.abs(d0 - gp) + dd * r + stray) + np.abs(d0) * stray + (np.abs(d0) + dd) * noise
     with np.errstate(invalid="ignore"):
         return inset, det0 - loss, ~(depth > noise), ~(det0 > 0)
 

@@ -181,41 +181,34 @@ class Collar:
             todo = todo[((w[todo] >= lo - pad) & (w[todo] <= hi + pad)).all(axis=1)]  # near this cell's image
             if not todo.size:
                 continue
-            fixed = len(s_k) == 1  # a convex fan: G is one point
-            if fixed:  # the image is the triangle g(F0), g(F1), phi(c): linear in g's fraction along its edge
-                hit, lam, t = _fan(w[todo], g_k[0], g_k[-1], v_k[0])
-                dt = b.t1[c] - b.t0[c]
-                tt = self.data.parameter(np.full(todo.size, b.edge[c]), np.full(todo.size, b.t0[c]), np.full(todo.size, b.t1[c]), lam)
-                s = np.clip((tt - b.t0[c]) / dt, 0.0, 1.0) if dt != 0 else lam
-            else:
-                d_k = v_k - g_k
-                rel = w[todo][:, None, :] - g_k[None]
-                hs = _cross(rel, d_k[None])
-                sgn = np.sign(hs)
-                change = sgn[:, :-1] * sgn[:, 1:] <= 0
-                # lines through far values cross too: only brackets where the segment at the
-                # interpolated crossing comes near w (t within [-1, 2])
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    lam = np.clip(hs[:, :-1] / (hs[:, :-1] - hs[:, 1:]), 0.0, 1.0)[..., None]
-                    gs = g_k[None, :-1] + lam * (g_k[1:] - g_k[:-1])[None]
-                    ds = d_k[None, :-1] + lam * (d_k[1:] - d_k[:-1])[None]
-                    ts = ((w[todo][:, None, :] - gs) * ds).sum(axis=2) / (ds * ds).sum(axis=2)
-                change &= ~(np.abs(ts - 0.5) > 1.5)
-                hit = change.any(axis=1)
-                s = np.full(todo.size, np.nan)
-                t = np.full(todo.size, np.nan)
-                if hit.any():
-                    rows = np.flatnonzero(hit)
-                    # every bracket of a row is tried in turn (most rows have one)
-                    for col in range(change.shape[1]):
-                        pick = rows[change[rows, col] & np.isnan(s[rows])]
-                        if not pick.size:
-                            continue
-                        ss, tt = self._root(w[todo[pick]], c, s_k[col], s_k[col + 1], hs[pick, col], hs[pick, col + 1])
-                        good = (tt >= -EDGE_SLACK) & (tt <= 1.0 + EDGE_SLACK)
-                        s[pick[good]] = ss[good]
-                        t[pick[good]] = tt[good]
-                hit = ~np.isnan(s)
+            d_k = v_k - g_k
+            rel = w[todo][:, None, :] - g_k[None]
+            hs = _cross(rel, d_k[None])
+            sgn = np.sign(hs)
+            change = sgn[:, :-1] * sgn[:, 1:] <= 0
+            # lines through far values cross too: only brackets where the segment at the
+            # interpolated crossing comes near w (t within [-1, 2])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                lam = np.clip(hs[:, :-1] / (hs[:, :-1] - hs[:, 1:]), 0.0, 1.0)[..., None]
+                gs = g_k[None, :-1] + lam * (g_k[1:] - g_k[:-1])[None]
+                ds = d_k[None, :-1] + lam * (d_k[1:] - d_k[:-1])[None]
+                ts = ((w[todo][:, None, :] - gs) * ds).sum(axis=2) / (ds * ds).sum(axis=2)
+            change &= ~(np.abs(ts - 0.5) > 1.5)
+            hit = change.any(axis=1)
+            s = np.full(todo.size, np.nan)
+            t = np.full(todo.size, np.nan)
+            if hit.any():
+                rows = np.flatnonzero(hit)
+                # every bracket of a row is tried in turn (most rows have one)
+                for col in range(change.shape[1]):
+                    pick = rows[change[rows, col] & np.isnan(s[rows])]
+                    if not pick.size:
+                        continue
+                    ss, tt = self._root(w[todo[pick]], c, s_k[col], s_k[col + 1], hs[pick, col], hs[pick, col + 1])
+                    good = (tt >= -EDGE_SLACK) & (tt <= 1.0 + EDGE_SLACK)
+                    s[pick[good]] = ss[good]
+                    t[pick[good]] = tt[good]
+            hit = ~np.isnan(s)
             if hit.any():
                 idx = todo[hit]
                 sh, th = s[hit][:, None], np.clip(t[hit], 0.0, 1.0)[:, None]
@@ -276,9 +269,6 @@ class Collar:
         kg = self.knots[:, 0].astype(np.intp)
         out = []
         for c in range(n):  # loop over cells: knots of its Gamma edge, between the two ends
-            if on_gamma[c] < 0:  # a convex fan: G fixed, g at its two ends
-                out.append((np.zeros(1), v0[c][None], self._data(np.full(2, c), np.array([0.0, 1.0]))[0]))
-                continue
             mine = np.flatnonzero(kg == on_gamma[c])
             order = np.argsort(self.knots[mine, 1], kind="stable")
             s_k = np.concatenate([[0.0], self.knots[mine[order], 1], [1.0]])
@@ -287,17 +277,3 @@ class Collar:
         object.__setattr__(self, "_knots_cache", out)
         return out
 
-
-def _fan(w, ga, gb, p):
-    """w = (1 - t) (ga + lam (gb - ga)) + t p, a fixed apex p: (found, lam, t), found where both lie in [0, 1]."""
-    a = w - ga
-    base = p - ga
-    df = gb - ga
-    slope = _cross(a, -df[None]) - _cross(df[None], base[None])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = -_cross(a, base[None]) / slope
-        f = ga + s[:, None] * df
-        d = p - f
-        t = ((w - f) * d).sum(axis=1) / (d * d).sum(axis=1)
-    found = (s >= -EDGE_SLACK) & (s <= 1 + EDGE_SLACK) & (t >= -EDGE_SLACK) & (t <= 1 + EDGE_SLACK)
-    return found, np.clip(s, 0.0, 1.0), np.clip(t, 0.0, 1.0)

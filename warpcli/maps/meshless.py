@@ -373,9 +373,12 @@ class SmoothMap(ThetaMap):
 
     @cached_property
     def _collar_data(self) -> BoundaryData | None:
-        """The boundary data as the collar takes them (Dirichlet data, linear or t^2 along each edge); None for
-        natural and mixed conditions (the boundary slides as the solution says: no collar)."""
-        if self.solution.trace is not None or self.conditions != "dirichlet" or self.boundary not in ("linear", "quadratic"):
+        """The boundary data as the collar takes them: Dirichlet data (linear or t^2 along each edge), or the
+        correspondence a boundary that slides along Theta's edges settles on (mixed conditions: the solution's
+        trace, `_edge_tables`); None for any other behaviour."""
+        if self.solution.trace is not None:
+            return BoundaryData(self.theta.points, tables=self._edge_tables)
+        if self.boundary not in ("linear", "quadratic"):
             return None
         return BoundaryData(self.theta.points, self.boundary)
 
