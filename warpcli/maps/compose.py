@@ -490,7 +490,8 @@ def _build_onto(src: Polygon, dst: Polygon, theta: Theta, opts: MapOptions, regi
     # kernels load on a third. Each map is independent, so the results do
     # not depend on the scheduling.
     forked = getattr(method, "build_forked", None)
-    pending = forked(src, theta, opts, "source", regions[0]) if forked is not None else None
+    side = "inverse" if regions[0] is not None else None  # the child makes the tables too (see `built`)
+    pending = forked(src, theta, opts, "source", regions[0], precompute=side) if forked is not None else None
     source = Task(built, src, "source", regions[0], "inverse", pending)
     Task(method.prepare)  # nobody waits: a kernel called before it is loaded waits for it
     try:
