@@ -442,6 +442,8 @@ def build_forked(
 
     if not available() or options.conditions == "mixed":
         return None
+    if role == "target" and isinstance(theta, TargetTheta):
+        return None  # the identity (see `build`): nothing to build
     try:
         return _Forked(polygon, theta, options, role, region, precompute)
     except OSError:  # no memory or processes left for a child: the caller builds on a thread
