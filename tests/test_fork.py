@@ -143,3 +143,19 @@ def test_a_worker_answers_call_after_call_with_large_arrays_its_errors_and_its_r
     finally:
         for w in workers:
             w.close()  # returns: the child saw the end of its requests (or was gone)
+
+
+def test_a_target_that_dies_in_its_child_fails_the_build_and_names_it(monkeypatch):
+    from warpcli.maps.compose import build_map
+
+    real = fem._built_to_send
+
+    def target_dies(polygon, theta, options, role, region, side=None):
+        return _die() if role == "target" else real(polygon, theta, options, role, region, side)
+
+    monkeypatch.setattr(fem, "_built_to_send", target_dies)
+    sq = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), name="a.json")
+    dst = Polygon(np.array([[0.0, 0.0], [12.0, 0.0], [12.0, 10.0], [0.0, 10.0]]), name="b.json")
+    region = (0.0, 0.0, 16.0, 16.0)
+    with pytest.raises(MeshingError, match="^b.json: the process meshing and solving it killed by SIGSEGV"):
+        build_map(sq, dst, MapOptions(), regions=(region, region))

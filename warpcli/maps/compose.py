@@ -502,8 +502,9 @@ def _build_onto(src: Polygon, dst: Polygon, theta: Theta, opts: MapOptions, regi
     try:
         phi1 = built(dst, "target", regions[1], "grid", pending[1])
     except BaseException:
-        if pending[0] is not None:
-            pending[0].cancel()  # the source is no longer wanted
+        for child in pending:  # the source is no longer wanted (nor the target, if this was interrupted)
+            if child is not None:
+                child.cancel()
         raise
     phi0 = source.result()
     result = BijectiveMap(phi0, phi1)
