@@ -12,13 +12,13 @@ the stages wrapped below (`WRAP`). Forked children write to the same file (appen
 line are atomic), so both maps' builds show beside the parent's work. The wrappers add a
 few microseconds per call; the import hook a little more per import.
 """
+import functools
+import importlib.abc
+import importlib.machinery
 import os
 import sys
 import threading
 import time
-import importlib.abc
-import importlib.machinery
-import functools
 
 T0 = float(os.environ.get("LAUNCH_T", time.time()))
 LOG = sys.argv[1]
@@ -102,12 +102,12 @@ class Finder(importlib.abc.MetaPathFinder):
                 for dotted in WRAP[name]:
                     try:
                         wrap(module, dotted)
-                    except AttributeError as e:
+                    except AttributeError:  # renamed: logged, the run goes on
                         emit("wraperr", f"{name}.{dotted}", t0, t0)
 
         try:
             loader.exec_module = exec_module
-        except Exception:
+        except AttributeError:  # a loader that takes no attributes: its module is not timed
             pass
         return spec
 

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
-
 from helpers import star, write_png, write_polygon
+
 from warpcli.pipeline import warp_file, warp_image
 from warpcli.raster.imageio import RasterImage, read_image, write_image
 
@@ -20,7 +22,7 @@ def test_render_rows_makes_render_s_pixels_and_covers_every_row_in_order(band, c
     out = np.empty_like(res.pixels)
     rows = list(res.plan.render_rows(px, out, alpha_channel=3 if channels == 4 else None, band=band))
     assert rows[0][0] == 0 and rows[-1][1] == px.shape[0]
-    assert all(a[1] == b[0] and a[0] < a[1] for a, b in zip(rows, rows[1:]))
+    assert all(a[1] == b[0] and a[0] < a[1] for a, b in itertools.pairwise(rows))
     assert out.tobytes() == res.pixels.tobytes()
 
 
