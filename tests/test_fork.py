@@ -67,18 +67,34 @@ def test_a_cancelled_child_is_stopped():
 
 
 @settings(max_examples=8, deadline=None)
-@given(n=st.integers(4, 9), data=st.data(), weights=st.sampled_from(["cotan", "positive"]))
-def test_an_fem_map_built_in_a_child_is_the_one_built_here_bit_for_bit(n, data, weights):
+@given(
+    n=st.integers(4, 9), data=st.data(), weights=st.sampled_from(["cotan", "positive"]),
+    side=st.sampled_from([("source", "inverse"), ("target", "grid")]),
+)
+def test_an_fem_map_built_in_a_child_is_the_one_built_here_bit_for_bit(n, data, weights, side):
     src = Polygon(data.draw(simple_polygons(n)), name="a")
     dst = Polygon(data.draw(simple_polygons(n)), name="b")
     opts = MapOptions(weights=weights)
     theta = theta_for(src, dst, opts)
-    here = fem.build(src, theta, opts, "source", (0.0, 0.0, 128.0, 128.0))
-    there = fem.build_forked(src, theta, opts, "source", (0.0, 0.0, 128.0, 128.0)).result()
+    role, tables = side
+    here = fem.build(src, theta, opts, role, (0.0, 0.0, 128.0, 128.0))
+    there = fem.build_forked(src, theta, opts, role, (0.0, 0.0, 128.0, 128.0), precompute=tables).result()
     assert np.array_equal(here.mesh.vertices, there.mesh.vertices)
     assert np.array_equal(here.mesh.triangles, there.mesh.triangles)
     assert here.values.tobytes() == there.values.tobytes()
     assert here.weights == there.weights
+    # The lookup tables the child made came with the map, the same as made here.
+    made = {k: v for k, v in vars(there).items() if isinstance(v, np.ndarray) and k.startswith("_")}
+    assert len(made) >= 3
+    here.precompute(tables)
+    for name, table in made.items():
+        assert table.tobytes() == getattr(here, name).tobytes(), name
+
+
+def test_the_identity_target_of_theta_none_is_not_forked():
+    sq = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), name="sq")
+    opts = MapOptions(theta="none")
+    assert fem.build_forked(sq, theta_for(sq, sq, opts), opts, "target") is None
 
 
 def test_an_fem_build_that_dies_in_its_child_names_the_polygon(monkeypatch):
@@ -127,3 +143,19 @@ def test_a_worker_answers_call_after_call_with_large_arrays_its_errors_and_its_r
     finally:
         for w in workers:
             w.close()  # returns: the child saw the end of its requests (or was gone)
+
+
+def test_a_target_that_dies_in_its_child_fails_the_build_and_names_it(monkeypatch):
+    from warpcli.maps.compose import build_map
+
+    real = fem._built_to_send
+
+    def target_dies(polygon, theta, options, role, region, side=None):
+        return _die() if role == "target" else real(polygon, theta, options, role, region, side)
+
+    monkeypatch.setattr(fem, "_built_to_send", target_dies)
+    sq = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), name="a.json")
+    dst = Polygon(np.array([[0.0, 0.0], [12.0, 0.0], [12.0, 10.0], [0.0, 10.0]]), name="b.json")
+    region = (0.0, 0.0, 16.0, 16.0)
+    with pytest.raises(MeshingError, match="^b.json: the process meshing and solving it killed by SIGSEGV"):
+        build_map(sq, dst, MapOptions(), regions=(region, region))

@@ -80,3 +80,32 @@ def test_alpha_is_premultiplied_so_transparent_colour_never_bleeds():
 def test_unknown_filter_is_rejected():
     with pytest.raises(ValueError, match="interp"):
         resample(np.zeros((2, 2, 1)), identity_map(2, 2), interp="lanczos")
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_sorted_unique_keys_are_numpys(seed):
+    from warpcli.raster import resample as rs
+
+    rng = np.random.default_rng(seed)
+    keys = rng.integers(0, 50, size=int(rng.integers(0, 80)), dtype=np.int64)
+    assert rs._sorted_unique(keys).tobytes() == np.unique(keys).tobytes()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_border_coverage_of_a_patch_is_that_of_the_patched_points(seed):
+    # A patch (pixels ascending, their points replaced) is the same as the points with the patch written in.
+    from warpcli.raster import resample as rs
+
+    rng = np.random.default_rng(seed)
+    w, h = 12, 9
+    points = rng.uniform(-1.5, [w + 1.5, h + 1.5], size=(w * h, 2))
+    jac = np.broadcast_to(np.eye(2), (w * h, 2, 2)).copy()
+    patch = np.sort(rng.choice(w * h, size=int(rng.integers(1, 30)), replace=False)).astype(np.int64)
+    patch_xy = rng.uniform(-1.5, [w + 1.5, h + 1.5], size=(len(patch), 2))
+    written = points.copy()
+    written[patch] = patch_xy
+    got = rs._border_coverage(points, jac, w, h, patch, patch_xy)
+    want = rs._border_coverage(written, jac, w, h)
+    assert (got is None) == (want is None)
+    if got is not None:
+        assert got[0].tobytes() == want[0].tobytes() and got[1].tobytes() == want[1].tobytes()

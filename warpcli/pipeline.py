@@ -14,7 +14,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -213,10 +213,14 @@ def _warp(
     progress: Callable[[str], None] | None,
     early: _EarlyMap | None = None,
     pair: WithinPair | None = None,
+    streamed: list | None = None,
 ) -> WarpResult:
     """`warp_image`, taking the map from ``early`` when it was built for this image's size.
 
     ``pair``: the cage mesh of ``within`` already made from ``src`` and ``dst`` (then they are its sides).
+    ``streamed``: a list to which, where the output can be made band by band (`_streams`), the
+    `_RowsMade` that makes it on a thread is appended; the result's pixels are then being made
+    when this returns, and are all made once that has been iterated to its end.
     """
     img = np.asarray(image)
     if img.ndim == 2:
@@ -252,10 +256,60 @@ def _warp(
     plan = plan_for(fmap, width, height, opts, jacobian=True)
     t1 = clock()
     stage("resampling")
-    out = plan.render(img, alpha_channel=alpha_channel, associated_alpha=associated_alpha)
     timings["compose"] = t1 - t0
-    timings["resample"] = clock() - t1
+    if streamed is not None and _streams(opts):
+        out = np.empty((height, width, img.shape[2]), dtype=img.dtype)
+        streamed.append(_RowsMade(plan.render_rows(img, out, alpha_channel=alpha_channel,
+                                                   associated_alpha=associated_alpha), timings))  # fmt: skip
+    else:
+        out = plan.render(img, alpha_channel=alpha_channel, associated_alpha=associated_alpha)
+        timings["resample"] = clock() - t1
     return WarpResult(out, fmap, plan.pull, timings, plan=plan, within=pair)
+
+
+def _streams(opts: WarpOptions) -> bool:
+    """Whether `warp_file` resamples the output band by band while the first bands are encoded:
+    the background around the warp (nothing pasted), no conversion of the pixel type before
+    writing, and not ``cubic`` (whose spline would prefilter the input for every band)."""
+    return opts.outside == "background" and opts.dtype is None and opts.interp != "cubic"
+
+
+class _RowsMade:
+    """The output's bands made on a thread of their own (`SamplingPlan.render_rows`); iterating
+    gives the rows ``(y0, y1)`` of each band once it is made, then raises what making them raised.
+
+    The PNG encoder (one core: zlib) then works on the first bands while the
+    next are resampled (on the others), instead of after all of them.
+    """
+
+    def __init__(self, bands: Iterator[tuple[int, int]], timings: dict[str, float]) -> None:
+        import queue
+
+        from .maps.compose import Task
+
+        self._made: queue.SimpleQueue = queue.SimpleQueue()
+        self._ended = False
+        self._task = Task(self._make, bands, timings, name="warp-rows")
+
+    def _make(self, bands: Iterator[tuple[int, int]], timings: dict[str, float]) -> None:
+        t0 = time.perf_counter()
+        try:
+            for rows in bands:
+                self._made.put(rows)
+        finally:
+            timings["resample"] = time.perf_counter() - t0
+            self._made.put(None)
+
+    def __iter__(self) -> Iterator[tuple[int, int]]:
+        while not self._ended and (rows := self._made.get()) is not None:
+            yield rows
+        self._ended = True
+        self._task.result()
+
+    def finish(self) -> None:
+        """Wait until every band is made (raising what making them raised)."""
+        for _ in self:
+            pass
 
 
 def _cages_of(shapes: Any, name: str) -> list[Polygon | Partition]:
@@ -308,14 +362,19 @@ def check_output(opts: WarpOptions, size: tuple[int, int], input_size: tuple[int
 
 def write_like(
     path: str | os.PathLike[str], image: RasterImage, pixels: NDArray, dtype: str | None = None,
-    compression: int | None = None,
+    compression: int | None = None, rows: Iterable[tuple[int, int]] | None = None,
 ) -> None:  # fmt: skip
     """Write pixels made from ``image`` with its channel names, alpha, alpha convention
     and metadata, converted to ``dtype`` if given, a PNG at zlib level ``compression``
-    if given (`warpcli.options.WarpOptions`)."""
+    if given (`warpcli.options.WarpOptions`); ``rows``: the pixels are still being made
+    (`warpcli.raster.imageio.write_image`)."""
+    if dtype is not None and rows is not None:
+        for _ in rows:  # converted whole
+            pass
+        rows = None
     px = pixels if dtype is None else convert_pixels(pixels, dtype)
     attrs = with_compression(image.attributes, compression)
-    write_image(path, RasterImage(px, image.channel_names, image.alpha_channel, attrs, image.associated_alpha))
+    write_image(path, RasterImage(px, image.channel_names, image.alpha_channel, attrs, image.associated_alpha), rows)
 
 
 #: Log records held back by the thread building an `_EarlyMap` (and the threads it
@@ -564,13 +623,19 @@ def warp_file(
         background_values(opts.background, image.pixels)
     except InputError as err:
         raise naming(err, os.fspath(input_path)) from err
-    result = _warp(image.pixels, src, dst, opts, image.alpha_channel, image.associated_alpha, None, progress, early, pair)
+    streamed: list[_RowsMade] = []
+    result = _warp(
+        image.pixels, src, dst, opts, image.alpha_channel, image.associated_alpha, None, progress, early, pair, streamed
+    )  # fmt: skip
+    rows = streamed[0] if streamed else None
     # Every output is written under a pending name and renamed into place
     # only when all are written: a run's outputs succeed or fail together.
     with PendingOutputs() as pending:
         t0 = clock()
         stage("writing")
-        write_like(pending.path(output_path), image, result.pixels, opts.dtype, opts.compression)
+        write_like(pending.path(output_path), image, result.pixels, opts.dtype, opts.compression, rows=rows)
+        if rows is not None:
+            rows.finish()  # every band made (a writer that stopped early stopped reading them)
         for (_, label_out), label_image in zip(labels, label_images):
             write_like(pending.path(label_out), label_image, warp_labels(label_image.pixels, result), None, opts.compression)
         result.timings["read"] = t_read

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
@@ -340,6 +341,51 @@ class SamplingPlan:
                 associated_alpha=associated_alpha, vacated=self.vacated, feather=self.feather, dst=self.dst,
             )  # fmt: skip
         return self._whole(pixels, bg, alpha_channel, associated_alpha)
+
+    def render_rows(
+        self, pixels: NDArray, out: NDArray, *, alpha_channel: int | None = None, associated_alpha: bool = False,
+        band: int = 128,
+    ) -> Iterator[tuple[int, int]]:
+        """`render` into ``out`` band by band, yielding the rows ``(y0, y1)`` of each band once
+        it is done, in order, from row 0 to the last.
+
+        For a writer that encodes the first rows while the next are resampled
+        (`warpcli.pipeline.warp_file`). ``out`` ends with the pixels `render`
+        returns, bit for bit: each pixel is sampled from its own source point,
+        Jacobian and edge coverage, which a band of the plan holds as the whole
+        plan does (`crop`). Only with ``outside="background"``.
+
+        Parameters
+        ----------
+        pixels : (H, W, C) ndarray
+            The input image.
+        out : (height, width, C) ndarray
+            Filled with the output, of ``pixels``' type.
+        alpha_channel, associated_alpha
+            As for `render`.
+        band : int
+            Rows of the window resampled at once.
+        """
+        if self.outside != "background":
+            raise ValueError("render_rows pastes nothing: outside must be 'background'")
+        bg = self.background_values(pixels)
+        width, height = self.size
+        r, c = self.pull.origin
+        wh, ww = self.pull.points.shape[:2]
+        if (wh, ww) != (height, width):
+            out[:] = resample(pixels, np.full((1, 1, 2), np.nan), interp=self.interp, background=bg,
+                              alpha_channel=alpha_channel, associated_alpha=associated_alpha)[0, 0]  # fmt: skip
+            if r > 0:
+                yield 0, r
+        for a in range(0, wh, band):
+            b = min(wh, a + band)
+            part = self.crop((a, b), (0, ww))
+            out[r + a : r + b, c : c + ww] = part.sample_window(
+                pixels, alpha_channel=alpha_channel, associated_alpha=associated_alpha, background=bg
+            )
+            yield r + a, r + b
+        if r + wh < height:
+            yield r + wh, height
 
     def _whole(self, pixels: NDArray, bg: NDArray, alpha_channel: int | None, associated_alpha: bool) -> NDArray:
         """The window resampled, ``bg`` elsewhere."""

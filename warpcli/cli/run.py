@@ -97,9 +97,24 @@ def main(argv: list[str] | None = None) -> int:
 
 def run() -> None:
     """Console-script entry point."""
+    one_blas_thread()
     code = main()
     _exit_now(code)
     sys.exit(code)
+
+
+def one_blas_thread() -> None:
+    """OpenBLAS on one thread in this process, unless ``OPENBLAS_NUM_THREADS`` says otherwise.
+
+    Set before numpy loads OpenBLAS (which reads it then). warpcli's BLAS calls
+    are tiny (numpy's 2x2 products per triangle, SuperLU's dense blocks) or
+    limited to one thread already (`warpcli.maps.closed_form.lstsq`), so
+    OpenBLAS's pool only spun: its second thread took about 50 ms of a core in
+    a 1-megapixel FEM warp, from the forked child building the other map. The
+    results are the same bits: one thread is what those calls ran on anyway.
+    """
+    if "numpy" not in sys.modules:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def _exit_now(code: int) -> None:

@@ -7,7 +7,7 @@ import logging
 import os
 import re
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -335,7 +335,7 @@ def check_image_output(path: str | os.PathLike[str], inputs: tuple[str | os.Path
         raise ImageInputError(f"{name}: unknown output image format for extension {ext}")
 
 
-def write_image(path: str | os.PathLike[str], image: RasterImage) -> None:
+def write_image(path: str | os.PathLike[str], image: RasterImage, rows: Iterable[tuple[int, int]] | None = None) -> None:
     """Write an image atomically: to a temporary file beside ``path``, then rename.
 
     An interrupted or failed write leaves no partial file at ``path``, and no
@@ -361,6 +361,11 @@ def write_image(path: str | os.PathLike[str], image: RasterImage) -> None:
     image : RasterImage
         Pixels (H, W, C) and what to carry over (channel names, alpha, its
         convention, metadata).
+    rows : iterable of (int, int) or None
+        The pixels are still being made: each ``(y0, y1)`` it yields says
+        that those rows are done, in order from row 0 to H. A PNG encodes
+        each band as it comes (scanlines: the same bytes as the whole image
+        at once); other formats are written once all rows are done.
 
     Raises
     ------
@@ -374,10 +379,12 @@ def write_image(path: str | os.PathLike[str], image: RasterImage) -> None:
     name = os.fspath(path)
     check_image_output(name)
     with atomic_path(name) as tmp:
-        _write(oiio, tmp, image, shown_name=name)
+        _write(oiio, tmp, image, shown_name=name, rows=rows)
 
 
-def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
+def _write(oiio, filename: str, image: RasterImage, *, shown_name: str, rows=None) -> None:
+    if rows is not None and not image.pixels.flags.c_contiguous:
+        rows = _drained(rows)  # copied whole below
     px = np.ascontiguousarray(image.pixels)
     h, w, nc = px.shape
     try:
@@ -397,6 +404,11 @@ def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
         oiio, fmt, (w, h, nc), type_name, image.channel_names, image.alpha_channel, image.associated_alpha,
         image.attributes,
     )  # fmt: skip
+    if rows is not None and (fmt != "png" or premultiply is not None):
+        # Only PNG's scanlines written in bands make the bytes of the whole image written
+        # at once (libpng filters and deflates row by row, one stream); and premultiplying
+        # takes the whole image.
+        rows = _drained(rows)
     if premultiply is not None:
         px = premultiplied(px, premultiply)
     staged = memory_file("warpcli-image")
@@ -404,7 +416,21 @@ def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
     try:
         _check_room(fmt, image, px, filename, shown_name, staged=staged is not None)
         with c_stderr() as said:
-            ok = bool(out.open(target, spec)) and bool(out.write_image(px))
+            ok = bool(out.open(target, spec))
+            if ok and rows is not None:
+                done = 0
+                for y0, y1 in rows:
+                    if y0 != done or not y0 < y1 <= h:
+                        raise ValueError(f"rows {y0}-{y1} do not follow row {done} of {h}")
+                    # PNG's writer reports a failed write on the file, not in its return value.
+                    ok = bool(out.write_scanlines(y0, y1, 0, px[y0:y1])) and not out.has_error
+                    done = y1
+                    if not ok:
+                        break
+                if ok and done != h:
+                    raise ValueError(f"{done} of {h} rows were made")
+            elif ok:
+                ok = bool(out.write_image(px))
             closed = bool(out.close())
         problem = one_line(out.geterror(), oiio.geterror(), said.text, default="")
         if not (ok and closed):
@@ -421,6 +447,12 @@ def _write(oiio, filename: str, image: RasterImage, *, shown_name: str) -> None:
     verify_written(oiio, filename, fmt, spec, size, shown_name, problem)
     if problem:
         _log.debug("%s: %s", shown_name, problem)
+
+
+def _drained(rows: Iterable[tuple[int, int]]) -> None:
+    """Wait for every row (`write_image`'s ``rows``): the image is then written whole."""
+    for _ in rows:
+        pass
 
 
 _PNG_LEVEL = "png:compressionLevel"
