@@ -98,6 +98,12 @@ def set_jobs(n: int | None) -> None:
     ------
     InputError
         If ``n`` is not None or a whole number of at least 1.
+
+    Examples
+    --------
+    >>> import warpcli
+    >>> warpcli.set_jobs(1)     # from here on: one core, as ``warp --jobs 1``
+    >>> warpcli.set_jobs(None)  # every core the process may use again
     """
     global _budget
     n = check_jobs(n)
@@ -110,12 +116,23 @@ def set_jobs(n: int | None) -> None:
 
 @contextlib.contextmanager
 def jobs(n: int | None) -> Iterator[int]:
-    """``with jobs(n):`` the budget is ``n`` in the block (None: leave it as it is), the previous one after.
+    """``with jobs(n):`` the budget is ``n`` in the block, the previous one after.
 
-    Yields
-    ------
-    int
-        The budget in the block.
+    Parameters
+    ----------
+    n : int or None
+        At least 1 (1: strictly one core); None leaves the budget as it is.
+
+    Returns
+    -------
+    context manager
+        Entered, it gives the budget in the block (an int).
+
+    Examples
+    --------
+    >>> import warpcli
+    >>> with warpcli.jobs(1):  # one core: no threads, no child processes
+    ...     pass               # warp_image(...), warp_file(...), build_map(...)
     """
     n = check_jobs(n)
     if n is None or n == _budget:
