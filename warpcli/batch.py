@@ -777,14 +777,19 @@ def _pipeline_sizes(runs, opts, maps, missing) -> list[list[tuple[int, int]]] | 
 
 
 def _plans_in_child(
-    src: Polygon | Partition, dst: Polygon | Partition, opts: WarpOptions, sizes
+    src: Polygon | Partition, dst: Polygon | Partition, opts: WarpOptions, sizes, share: int = 1
 ) -> dict[tuple[int, int], SamplingPlan]:
     """In a forked child (`_pipelined`): a run's map, and its sampling plan for each output size."""
     from ._fork import FORK_ENV
+    from .cores import set_jobs
 
     # This child is already one of the builders beside the parent: its two
-    # maps are built one after the other, not in a child of its own.
+    # maps are built one after the other, not in a child of its own, and it
+    # keeps to its share of the run's cores (``share``: 1 when there are as
+    # many builders as cores), so that the builders and the parent's warping
+    # do not crowd the cores with threads.
     os.environ[FORK_ENV] = "0"
+    set_jobs(share, pools=False)
     fmap = map_between(src, dst, opts.map)
     return {size: plan_for(fmap, size[0], size[1], opts) for size in sizes}
 
@@ -833,7 +838,7 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
             job = idle() if src is not None and run_sizes else None
             if job is not None:
                 try:
-                    job.submit(src, dst, opts, run_sizes)
+                    job.submit(src, dst, opts, run_sizes, max(1, jobs // width))
                 except ChildDied:
                     workers.remove(job)
                     job = None

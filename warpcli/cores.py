@@ -85,7 +85,7 @@ def check_jobs(n: object) -> int | None:
     raise InputError(f"jobs must be a whole number of at least 1, got {n!r}")
 
 
-def set_jobs(n: int | None) -> None:
+def set_jobs(n: int | None, *, pools: bool = True) -> None:
     """Let this process keep at most ``n`` cores busy from now on; None: the default (`available`).
 
     Parameters
@@ -93,6 +93,10 @@ def set_jobs(n: int | None) -> None:
     n : int or None
         At least 1; 1 is strictly one core (no threads, no child processes,
         the libraries' pools on one thread).
+    pools : bool
+        Also size the libraries' thread pools (OpenImageIO, OpenEXR, BLAS).
+        False in a forked child, whose copies of those pools must not be
+        touched (their threads were not forked).
 
     Raises
     ------
@@ -111,7 +115,8 @@ def set_jobs(n: int | None) -> None:
         if n == _budget:
             return
         _budget = n
-        _apply_libraries(n)
+        if pools:
+            _apply_libraries(n)
 
 
 @contextlib.contextmanager
