@@ -170,7 +170,7 @@ def _apply_libraries(n: int | None) -> None:
             _saved_env = None
     oiio = sys.modules.get("OpenImageIO")
     if oiio is not None:  # already imported: its attributes
-        if n is not None and _saved_oiio is None:
+        if n is not None and _saved_oiio is None and not _applied:  # its own settings, not a budget's
             _saved_oiio = (oiio.get_int_attribute("threads"), oiio.get_int_attribute("exr_threads"))
         if n is not None:
             for option in _oiio_options(n):
@@ -186,7 +186,9 @@ def _apply_libraries(n: int | None) -> None:
     if _blas_limiter is not None:
         _blas_limiter.restore_original_limits()
         _blas_limiter = None
-    if n is not None and "numpy" in sys.modules:  # BLAS libraries loaded already
+    # BLAS libraries loaded already; one loaded while a budget was in force took its
+    # thread count from the environment then, and keeps it (its default is not known here).
+    if n is not None and "numpy" in sys.modules:
         from threadpoolctl import threadpool_limits
 
         _blas_limiter = threadpool_limits(limits=n)
