@@ -1,28 +1,31 @@
-"""Batch and sequence speed-up with --jobs: N frames through one map, or a shot with a map per frame.
+"""--jobs N, the cores a run may keep busy: batches, animated shots and single images against one core.
 
     python bench/jobs.py                      # 50 frames of 1600x1250 PNG, 3 rounds: ~3 minutes
     python bench/jobs.py --frames 20 --format exr --jobs 1,2,4
-    python bench/jobs.py --shot animated --frames 24 --size 1280x720 --rounds 5
+    python bench/jobs.py --shot animated --frames 24 --size 1280x720 --rounds 3 --one-core
+    python bench/jobs.py --shot single --frames 6 --checkout /path/to/old/clone
 
 ``--shot batch`` (the default) warps the frames with ``--out-dir``, one map for all of them.
 ``--shot animated`` warps them as a sequence (``frame.#.png --frames 1-N``) whose polygons are
 keyframed (the star turns and moves from the first frame to the last), so every frame has a map
 of its own: the case that only processes make parallel (with --jobs N, N forked workers build
 the next frames' maps while the main process warps the frames whose maps have arrived).
+``--shot single`` runs ``warp IN OUT`` once per frame, one image each: the single-image run.
 
-Each round runs `warp --out-dir` as a subprocess once per jobs value, in alternating order, on
-the same generated frames (a colour ramp and a checker, different per frame; a 12-vertex star
-onto a rotated one). Prints the median wall time per jobs value, the speed-up against jobs 1
-measured in the same rounds, and whether every output file is byte-identical to jobs 1's.
+Each round runs `warp` as a subprocess once per row, in alternating order (after one untimed
+warm-up run of each row on the first frames), on the same generated frames (a colour ramp and
+a checker, different per frame; a 12-vertex star onto a rotated one). The rows are ``--jobs``
+values (``--jobs 1`` is one core: no threads, no child processes) and ``default`` (no
+``--jobs``: every core the process may use). Prints the median wall time per row, the speed-up
+against the first row measured in the same rounds, the CPU seconds and the cores kept busy
+(CPU / wall), and whether every output file is byte-identical to the first row's.
 
 Two more rows put the speed-up in context, measured in the same rounds:
 
-    python bench/jobs.py --shot animated --frames 24 --size 1280x720 --one-core --checkout /path/to/old/clone
-
-``--one-core`` runs ``--jobs 1`` pinned to one CPU (``sched_setaffinity``), the serial cost of
-the shot (``--jobs 1`` itself is not serial: a forked child builds one of each frame's two maps
-and kernels run on threads); ``--checkout DIR`` runs ``--jobs 1`` with another checkout's
-``warpcli`` first on ``PYTHONPATH`` (e.g. the release an issue was measured on).
+``--one-core`` runs ``--jobs 1`` pinned to one CPU (``sched_setaffinity``, as ``taskset``
+does): an independent check that ``--jobs 1`` is the serial cost of the shot (the two rows
+should agree). ``--checkout DIR`` runs another checkout's ``warpcli`` (e.g. the release an
+issue was measured on, or the code before a change) with its default ``--jobs``.
 """
 
 from __future__ import annotations
@@ -82,21 +85,22 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--frames", type=int, default=50)
     parser.add_argument("--size", default="1600x1250")
     parser.add_argument("--format", default="png")
-    parser.add_argument("--jobs", default="1,2")
+    parser.add_argument("--jobs", default="1,2,default", help="rows: --jobs values, 'default' for none [1,2,default]")
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--shot", choices=("batch", "animated"), default="batch")
+    parser.add_argument("--shot", choices=("batch", "animated", "single"), default="batch")
     parser.add_argument("--one-core", action="store_true", help="add --jobs 1 pinned to one CPU")
-    parser.add_argument("--checkout", metavar="DIR", help="add --jobs 1 run with DIR's warpcli")
+    parser.add_argument("--checkout", metavar="DIR", help="add a row running DIR's warpcli with its default --jobs")
     args = parser.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
-    jobs = [int(j) for j in args.jobs.split(",")]
-    # Rows: (label, jobs value, extra environment, CPUs to pin the process to).
-    rows = [(f"{j}", j, {}, None) for j in jobs]
+    jobs = [None if j == "default" else int(j) for j in args.jobs.split(",")]
+    # Rows: (label, jobs value or None for the default, extra environment, CPUs to pin the process to).
+    rows = [(f"{j or 'default'}", j, {}, None) for j in jobs]
     if args.one_core:
-        rows.append(("1, one core", 1, {}, {min(os.sched_getaffinity(0))}))
+        rows.append(("1, taskset one core", 1, {}, {min(os.sched_getaffinity(0))}))
     if args.checkout:
-        rows.append((f"1, {os.path.basename(os.path.abspath(args.checkout))}", 1, {"PYTHONPATH": os.path.abspath(args.checkout)}, None))
+        rows.append((f"default, {os.path.basename(os.path.abspath(args.checkout))}", None, {"PYTHONPATH": os.path.abspath(args.checkout)}, None))
     warp = os.path.join(os.path.dirname(sys.executable), "warp")
+    load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         frames = write_frames(tmp, args.frames, w, h, args.format)
         s = min(w, h)
@@ -111,32 +115,42 @@ def main(argv: list[str] | None = None) -> None:
         times: dict[str, list[float]] = {row[0]: [] for row in rows}
         cpu: dict[str, list[float]] = {row[0]: [] for row in rows}
         hashes: dict[str, dict[str, str]] = {}
-        for r in range(args.rounds):
-            for label, j, env, pin in (rows if r % 2 == 0 else rows[::-1]):
-                out = os.path.join(tmp, f"out{[row[0] for row in rows].index(label)}")
-                os.makedirs(out, exist_ok=True)
-                polys = ["--src", os.path.join(tmp, "src.json"), "--dst", os.path.join(tmp, "dst.json")]
-                if args.shot == "animated":
-                    ins = os.path.join(tmp, f"frame.#.{args.format}")
-                    cmd = [warp, ins, os.path.join(out, f"out.#.{args.format}"), "--frames", f"1-{args.frames}", *polys, "--jobs", str(j), "-q"]
-                else:
-                    cmd = [warp, *frames, *polys, "--out-dir", out, "--jobs", str(j), "-q"]
+        polys = ["--src", os.path.join(tmp, "src.json"), "--dst", os.path.join(tmp, "dst.json")]
+
+        def commands(out: str, j: int | None, count: int) -> list[list[str]]:
+            flag = [] if j is None else ["--jobs", str(j)]
+            if args.shot == "animated":
+                ins = os.path.join(tmp, f"frame.#.{args.format}")
+                return [[warp, ins, os.path.join(out, f"out.#.{args.format}"), "--frames", f"1-{count}", *polys, *flag, "-q"]]
+            if args.shot == "single":
+                return [[warp, f, os.path.join(out, os.path.basename(f)), *polys, *flag, "-q"] for f in frames[:count]]
+            return [[warp, *frames[:count], *polys, "--out-dir", out, *flag, "-q"]]
+
+        def run(label: str, j: int | None, env: dict, pin, out: str, count: int) -> None:
+            os.makedirs(out, exist_ok=True)
+            for cmd in commands(out, j, count):
                 if env.get("PYTHONPATH"):  # another checkout's code, through the same interpreter
                     cmd = [sys.executable, "-m", "warpcli", *cmd[1:]]
-                t0, c0 = time.perf_counter(), _children_cpu()
                 # -m puts the working directory first on sys.path: run another checkout's code from there.
                 cwd = env.get("PYTHONPATH")
                 subprocess.run(cmd, check=True, cwd=cwd, env={**os.environ, **env}, preexec_fn=(lambda pin=pin: os.sched_setaffinity(0, pin)) if pin else None)
+
+        for label, j, env, pin in rows:  # warm-up: compiled kernels loaded (or compiled) once, files cached
+            run(label, j, env, pin, os.path.join(tmp, "warm"), min(2, args.frames))
+        for r in range(args.rounds):
+            for label, j, env, pin in (rows if r % 2 == 0 else rows[::-1]):
+                out = os.path.join(tmp, f"out{[row[0] for row in rows].index(label)}")
+                t0, c0 = time.perf_counter(), _children_cpu()
+                run(label, j, env, pin, out, args.frames)
                 times[label].append(time.perf_counter() - t0)
                 cpu[label].append(_children_cpu() - c0)
                 hashes[label] = digest(out)
                 print(f"round {r + 1} jobs {label}: {times[label][-1]:.2f} s, {cpu[label][-1]:.2f} s of CPU", file=sys.stderr, flush=True)
     first = rows[0][0]
     base = statistics.median(times[first])
-    print(f"{args.shot}: {args.frames} frames of {w}x{h} {args.format.upper()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}; median of {args.rounds}")
-    # Cores busy = CPU / wall: jobs 1 is not one core's worth (a forked child builds one of each
-    # frame's two maps, kernels run on threads), so on 2 cores the speed-up of jobs 2 is at most
-    # about 2 / (jobs 1's cores busy), less the serial start-up.
+    print(f"{args.shot}: {args.frames} frames of {w}x{h} {args.format.upper()}, {os.cpu_count()} cores, load {load_before:.2f} before, {os.getloadavg()[0]:.2f} after; median of {args.rounds}")
+    # Cores busy = CPU / wall: jobs 1 keeps one core busy, so on 2 cores the speed-up of
+    # jobs 2 is at most about 2, less the serial start-up and what other processes take.
     print(f"| jobs | seconds (median) | per frame | CPU seconds (median) | cores busy | speed-up vs jobs {first} | outputs identical to jobs {first} |")
     print("|---|---:|---:|---:|---:|---:|---|")
     for label, *_ in rows:
@@ -144,10 +158,10 @@ def main(argv: list[str] | None = None) -> None:
         c = statistics.median(cpu[label])
         busy = statistics.median(cj / tj for cj, tj in zip(cpu[label], times[label]))
         print(f"| {label} | {m:.2f} | {m / args.frames:.3f} | {c:.2f} | {busy:.2f} | {base / m:.2f} | {'yes' if hashes[label] == hashes[first] else 'NO'} |")
-    best = min(statistics.median(times[f"{j}"]) for j in jobs)
+    best = min(statistics.median(times[f"{j or 'default'}"]) for j in jobs)
     others = ", ".join(f"x{statistics.median(times[label]) / best:.2f} over jobs {label}" for label, *_ in rows if statistics.median(times[label]) > best)
     if others:
-        print(f"\nThe fastest jobs value: {others}.")
+        print(f"\nThe fastest jobs row: {others}.")
 
 
 if __name__ == "__main__":

@@ -59,7 +59,8 @@ def test_keyframed_polygons_give_each_frame_its_interpolated_warp_and_maps_only_
     built = []
     original = BijectiveMap.between.__func__
     monkeypatch.setattr(BijectiveMap, "between", classmethod(lambda cls, *a, **k: built.append(1) or original(cls, *a, **k)))
-    code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", "1-6"])
+    # --jobs 1: the maps are built in this process, where they are counted (not in forked builders)
+    code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", "1-6", "--jobs", 1])
     assert code == 0, err
     # frames 1-2 share keyframe a, 3 is between, 4-6 share b: three maps
     assert len(built) == 3
@@ -135,7 +136,8 @@ def test_maps_are_built_only_for_frames_with_images_and_missing_ones_are_summari
     built = []
     original = BijectiveMap.between.__func__
     monkeypatch.setattr(BijectiveMap, "between", classmethod(lambda cls, *a, **k: built.append(1) or original(cls, *a, **k)))
-    code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", f"1-{n}"])
+    # --jobs 1: the maps are built in this process, where they are counted (not in forked builders)
+    code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", f"1-{n}", "--jobs", 1])
     missing = n - len(present)
     assert len(built) == len(present)  # one map per frame that has an image (the target moves every frame)
     assert code == (2 if missing else 0), err

@@ -64,6 +64,8 @@ _EXPORTS = {
     "transfer_file": "surface",
     "transfer_texture": "surface",
     "parse_frames": "sequence",
+    "jobs": "cores",
+    "set_jobs": "cores",
     "write_image": "raster.imageio",
     "WithinPair": "within",
     "read_cages": "within",
@@ -95,6 +97,7 @@ if TYPE_CHECKING:
     from .pipeline import WarpResult, apply_map_file, warp_file, warp_image
     from .plan import SamplingPlan
     from .sequence import parse_frames
+    from .cores import jobs, set_jobs
     from .polygon import Polygon, read_polygon
     from .polygon.partition import Partition, read_partition, read_shape
     from .transform import PolygonTransform

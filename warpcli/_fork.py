@@ -43,8 +43,11 @@ class ChildDied(Exception):
 
 
 def available() -> bool:
-    """Whether work may go to a forked child here."""
-    return sys.platform.startswith("linux") and hasattr(os, "fork") and os.environ.get(FORK_ENV, "1") != "0"
+    """Whether work may go to a forked child here: on Linux, not turned off, and with a
+    core budget of more than one (`warpcli.cores`; a child works beside its parent)."""
+    from .cores import budget
+
+    return sys.platform.startswith("linux") and hasattr(os, "fork") and os.environ.get(FORK_ENV, "1") != "0" and budget() > 1
 
 
 class Forked:

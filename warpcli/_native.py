@@ -86,15 +86,14 @@ _LIBC = frozenset(
 
 
 def cores() -> int:
-    """The CPU cores this process may run on (at least 1)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
+    """The cores this run may keep busy (`warpcli.cores.budget`: ``--jobs``, else the process's affinity)."""
+    from .cores import budget
+
+    return budget()
 
 
 def parallel(fn: Callable[[Any], None], parts: Sequence[Any]) -> None:
-    """``fn(part)`` for every part, the parts shared out over `cores` threads.
+    """``fn(part)`` for every part, the parts shared out over `cores` threads (none with a budget of 1).
 
     For independent pieces of work that write disjoint outputs, mostly in
     kernels (which release the GIL): the results do not depend on how the

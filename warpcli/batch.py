@@ -13,6 +13,7 @@ the GIL, so threads would take turns.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import os
@@ -22,6 +23,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from .cores import check_jobs, jobs as core_budget
 from .errors import ImageInputError, InputError, WarpError, naming
 from .files import check_regular_file
 from .maps.cage import map_between
@@ -39,6 +41,18 @@ __all__ = [
     "BatchItem", "FrameMaps", "MissingFrameError", "PlanCache", "RunMaps", "apply_map_sequence", "link_or_copy",
     "output_name", "prepare_batch", "warp_batch", "warp_one", "warp_run", "warp_sequence",
 ]  # fmt: skip
+
+
+def _within_budget(fn: Callable) -> Callable:
+    """``fn`` run with its ``jobs`` as the process's core budget (`warpcli.cores.jobs`; None:
+    the budget as it is), and given the budget as ``jobs``: the threads and processes it starts."""
+
+    @functools.wraps(fn)
+    def run(*args: Any, jobs: int | None = None, **kwargs: Any) -> Any:
+        with core_budget(jobs) as n:
+            return fn(*args, jobs=n, **kwargs)
+
+    return run
 
 
 @dataclass(frozen=True)
@@ -96,6 +110,7 @@ def output_name(input_path: str | os.PathLike[str], pattern: str = "{name}") -> 
     return result
 
 
+@_within_budget
 def warp_batch(
     input_paths: Sequence[str | os.PathLike[str]],
     out_dir: str | os.PathLike[str],
@@ -107,7 +122,7 @@ def warp_batch(
     src_label: str | None = None,
     dst_label: str | None = None,
     on_item: Callable[[BatchItem], None] | None = None,
-    jobs: int = 1,
+    jobs: int | None = None,
     **changes: Any,
 ) -> list[BatchItem]:
     """Warp many images with one map: ``out_dir/<pattern>`` for each input.
@@ -116,7 +131,7 @@ def warp_batch(
     (inputs of one size share it). With ``jobs`` > 1 the images are read,
     resampled and written by that many threads (the compiled kernels and
     OpenImageIO release the GIL); every output's bytes are those of
-    ``jobs=1``.
+    ``jobs=1``, which keeps one core busy and no more.
 
     Parameters
     ----------
@@ -134,8 +149,11 @@ def warp_batch(
         Which polygon to take from a polygon file holding several.
     on_item : callable or None
         Called with each `BatchItem` as it is done, in input order.
-    jobs : int
-        Threads warping images at once.
+    jobs : int or None
+        The cores the batch may keep busy (`warpcli.cores`): threads
+        warping images at once, and the kernels' threads; 1: one core, no
+        thread beside the caller's. None: the process's budget (`set_jobs`,
+        else every core it may use).
 
     Returns
     -------
@@ -383,8 +401,7 @@ def warp_one(
 
 def _each(work: Callable, tasks: list, jobs: int, on_item: Callable[[BatchItem], None] | None) -> list[BatchItem]:
     """``work`` over ``tasks`` on ``jobs`` threads; items (and ``on_item`` calls) in task order."""
-    if not (isinstance(jobs, int) and jobs >= 1):
-        raise InputError(f"jobs must be a whole number of at least 1, got {jobs!r}")
+    jobs = check_jobs(jobs) or 1
     items: list[BatchItem] = []
     if jobs == 1 or len(tasks) <= 1:
         results = map(work, tasks)
@@ -466,11 +483,14 @@ def _pair_of(tasks, pairs, missing):
     return pairs[first] if first is not None else (None, None)
 
 
-def _warp_run_in_worker(src, dst, tasks, opts, maps, level, filters, missing=None):
+def _warp_run_in_worker(src, dst, tasks, opts, maps, level, filters, missing=None, budget=None):
     """`warp_run` in a worker process: its items, and its log records for the parent to log in order."""
     import warnings
 
     from ._fork import KeptRecords
+    from .cores import set_jobs
+
+    set_jobs(budget)  # the parent's (a spawned process starts with the default)
 
     warnings.filters[:] = filters  # the parent's: the CLI shows no library's warnings
     log = logging.getLogger("warpcli")
@@ -484,6 +504,7 @@ def _warp_run_in_worker(src, dst, tasks, opts, maps, level, filters, missing=Non
         log.handlers[:] = []
 
 
+@_within_budget
 def warp_sequence(
     input_pattern: str,
     output_pattern: str,
@@ -495,7 +516,7 @@ def warp_sequence(
     src_label: str | None = None,
     dst_label: str | None = None,
     on_item: Callable[[BatchItem], None] | None = None,
-    jobs: int = 1,
+    jobs: int | None = None,
     maps: FrameMaps | None = None,
     **changes: Any,
 ) -> list[BatchItem]:
@@ -518,7 +539,8 @@ def warp_sequence(
     would take turns. Where that cannot be (forward maps to write, frames
     warped in strips, no ``fork``), the runs go to ``jobs`` worker
     processes, a run each. Items, messages and output bytes are those of
-    ``jobs=1``, in frame order.
+    ``jobs=1``, in frame order; ``jobs=1`` keeps one core busy and no more
+    (no thread or process beside the caller's).
 
     Parameters
     ----------
@@ -536,8 +558,10 @@ def warp_sequence(
         Which polygon of a file holding several (in every keyframe).
     on_item : callable or None
         Called with each `BatchItem` as it is done, in frame order.
-    jobs : int
-        Threads or processes warping frames at once.
+    jobs : int or None
+        The cores the sequence may keep busy (`warpcli.cores`): threads or
+        processes warping frames at once, and the kernels' threads. None:
+        the process's budget (`set_jobs`, else every core it may use).
     maps : FrameMaps or None
         Per-frame STMaps to write beside the frames (`FrameMaps`).
 
@@ -563,8 +587,6 @@ def warp_sequence(
     if frames is None:
         frames, message = frames_from_disk(input_pattern)
         logging.getLogger("warpcli").warning("%s", message)
-    if not (isinstance(jobs, int) and jobs >= 1):
-        raise InputError(f"jobs must be a whole number of at least 1, got {jobs!r}")
     patterns = {"input": parse_pattern(os.fspath(input_pattern))}
     outputs = {"output": output_pattern}
     if maps is not None:
@@ -755,14 +777,19 @@ def _pipeline_sizes(runs, opts, maps, missing) -> list[list[tuple[int, int]]] | 
 
 
 def _plans_in_child(
-    src: Polygon | Partition, dst: Polygon | Partition, opts: WarpOptions, sizes
+    src: Polygon | Partition, dst: Polygon | Partition, opts: WarpOptions, sizes, share: int = 1
 ) -> dict[tuple[int, int], SamplingPlan]:
     """In a forked child (`_pipelined`): a run's map, and its sampling plan for each output size."""
     from ._fork import FORK_ENV
+    from .cores import set_jobs
 
     # This child is already one of the builders beside the parent: its two
-    # maps are built one after the other, not in a child of its own.
+    # maps are built one after the other, not in a child of its own, and it
+    # keeps to its share of the run's cores (``share``: 1 when there are as
+    # many builders as cores), so that the builders and the parent's warping
+    # do not crowd the cores with threads.
     os.environ[FORK_ENV] = "0"
+    set_jobs(share, pools=False)
     fmap = map_between(src, dst, opts.map)
     return {size: plan_for(fmap, size[0], size[1], opts) for size in sizes}
 
@@ -811,7 +838,7 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
             job = idle() if src is not None and run_sizes else None
             if job is not None:
                 try:
-                    job.submit(src, dst, opts, run_sizes)
+                    job.submit(src, dst, opts, run_sizes, max(1, jobs // width))
                 except ChildDied:
                     workers.remove(job)
                     job = None
@@ -823,6 +850,13 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
             if on_item is not None:
                 on_item(item)
 
+    # The method's kernels loaded here, once, before the builders are forked:
+    # each would load its own copy otherwise (about 0.1 s of CPU each).
+    from .maps.registry import METHODS
+
+    prepare = getattr(METHODS[opts.map.method].load(), "prepare", None)
+    if callable(prepare):
+        prepare()
     failed = True
     try:
         fill()
@@ -870,6 +904,7 @@ def _in_processes(units, pairs, opts, maps, width, on_item, missing) -> list[Bat
     from concurrent.futures.process import BrokenProcessPool
 
     from ._fork import replay
+    from .cores import explicit
 
     level = logging.getLogger("warpcli").getEffectiveLevel()
     filters = list(warnings.filters)
@@ -878,7 +913,7 @@ def _in_processes(units, pairs, opts, maps, width, on_item, missing) -> list[Bat
     items: list[BatchItem] = []
     try:
         futures = [pool.submit(_warp_run_in_worker, *_pair_of(u, pairs, missing), u, opts, maps, level, filters,
-                               {f: missing[f] for _, _, f in u if f in missing}) for u in units]  # fmt: skip
+                               {f: missing[f] for _, _, f in u if f in missing}, explicit()) for u in units]  # fmt: skip
         for unit, future in zip(units, futures):
             try:
                 done, records = future.result()
@@ -894,6 +929,7 @@ def _in_processes(units, pairs, opts, maps, width, on_item, missing) -> list[Bat
     return items
 
 
+@_within_budget
 def apply_map_sequence(
     map_path: str | os.PathLike[str],
     input_pattern: str,
@@ -903,7 +939,7 @@ def apply_map_sequence(
     *,
     t_up: bool | None = None,
     on_item: Callable[[BatchItem], None] | None = None,
-    jobs: int = 1,
+    jobs: int | None = None,
     map_scale: str = "refuse",
     **changes: Any,
 ) -> list[BatchItem]:
@@ -929,8 +965,10 @@ def apply_map_sequence(
         Which way the maps' t runs; None: as each map's header says.
     on_item : callable or None
         Called with each `BatchItem`, in frame order.
-    jobs : int
-        Threads warping frames at once (bytes as with 1).
+    jobs : int or None
+        The cores the sequence may keep busy (`warpcli.cores`): threads
+        warping frames at once (bytes as with 1). None: the process's
+        budget (`set_jobs`, else every core it may use).
     map_scale : {"refuse", "stretch"}
         A frame of another size than its map was made for: refused (in its
         item), or the map stretched to it.

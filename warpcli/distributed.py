@@ -148,7 +148,7 @@ def warp_batch_dask(
     src_label: str | None = None,
     dst_label: str | None = None,
     on_item: Callable[[BatchItem], None] | None = None,
-    workers: int = 2,
+    workers: int | None = None,
     **changes: Any,
 ) -> list[BatchItem]:
     """`warp_batch` on a Dask cluster.
@@ -161,8 +161,8 @@ def warp_batch_dask(
         A scheduler's address (``tcp://host:8786``), ``"local"`` (a
         `LocalCluster` of ``workers`` processes, closed at the end), or a
         Client.
-    workers : int
-        Workers of a local cluster.
+    workers : int or None
+        Workers of a local cluster; None: the core budget (`warpcli.cores.budget`).
     **changes
         Fields of `WarpOptions` or `MapOptions` to change.
 
@@ -199,6 +199,10 @@ def warp_batch_dask(
             cache.get(tuple(opts.size) if opts.size is not None else header.displayed_size)
     plans = PlanCache(None, opts, cache.plans)
 
+    if workers is None:
+        from .cores import budget
+
+        workers = budget()
     with quiet_dask():
         return _run(Client, LocalCluster, scheduler, workers, timeout, tasks, plans, on_item)
 

@@ -6,7 +6,7 @@ import click
 
 from ..options import MAP_SCALES, STMAP_T, WarpOptions
 from .exits import EXIT_CODES
-from .options import CONTEXT, background_option, collected, compression_option, dtype_option, interp_option, quiet_option
+from .options import CONTEXT, background_option, collected, compression_option, dtype_option, interp_option, jobs_option, quiet_option
 
 
 @click.command("apply-map", context_settings=CONTEXT, epilog=EXIT_CODES)
@@ -30,7 +30,7 @@ from .options import CONTEXT, background_option, collected, compression_option, 
     help="Sequences: INPUT and OUTPUT are patterns (shot.#.exr), MAP a pattern (one map per frame) or one "
     "map for all; SPEC the frames (1001-1100); without it, the frames of INPUT on disk.",
 )
-@click.option("--jobs", type=click.IntRange(1, 256), default=1, show_default=True, help="Sequences: frames warped at once, on threads.")
+@jobs_option("sequence frames warped N at a time, on threads, the kernels on N threads")
 @click.option(
     "--map-scale",
     type=click.Choice(MAP_SCALES),

@@ -357,3 +357,30 @@ verbosity = collected(
 
 #: -q/--quiet alone, for the commands that report no progress; the log is set up before the command runs.
 quiet_option = collected(None, configure_logging, _quiet)
+
+
+# --- how many cores -------------------------------------------------------------------
+
+
+def _set_jobs(ctx, param, value):
+    """The run's core budget (`warpcli.cores`), set as soon as the option is read: every
+    thread pool of the run, the libraries' included, is sized by it."""
+    from ..cores import set_jobs
+
+    set_jobs(value)
+    return value
+
+
+def jobs_option(what: str, *, expose_value: bool = True) -> Callable:
+    """``--jobs N``: the cores the command may keep busy (`warpcli.cores`); ``what`` says what runs on them."""
+    return click.option(
+        "--jobs",
+        "jobs",
+        type=click.IntRange(1, 256),
+        default=None,
+        metavar="N",
+        callback=_set_jobs,
+        expose_value=expose_value,
+        help=f"The cores this run may keep busy: {what}. 1: one core, no threads or child processes (OpenImageIO's "
+        "and BLAS's pools too). Output bytes as with any other N.  [default: the cores this process may use]",
+    )

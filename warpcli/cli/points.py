@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from .exits import EXIT_CODES
-from .options import CONTEXT, map_options, parse_size, polygon_options, quiet_option
+from .options import CONTEXT, jobs_option, map_options, parse_size, polygon_options, quiet_option
 
 
 def _columns(ctx, param, value):
@@ -31,6 +31,7 @@ def _columns(ctx, param, value):
 @click.option("--columns", metavar="X,Y", callback=_columns, help="Tables: the x and y columns, by header name or number from 1 (default: the columns named x and y, else the first two).")
 @click.option("--within", metavar="image|MARGIN|FILE.json", help="A retouch within a fixed outline, as warp --within (the same map as the image's): points outside the outline stay.")
 @click.option("--image-size", callback=parse_size, metavar="WxH", help="--within: the image's size (an OBJ's --texture-size when not given).")
+@jobs_option("the map's two halves built side by side (one in a forked child), the kernels on N threads", expose_value=False)
 @quiet_option
 def points(input_path, output_path, polygons, inverse, mapping, texture_size, outside, frame, precision, columns, within, image_size):
     """Map points (JSON, a CSV or text table, or an OBJ's vt texture coordinates) from SRC's coordinates to DST's.

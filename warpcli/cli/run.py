@@ -75,6 +75,9 @@ def main(argv: list[str] | None = None) -> int:
         click.echo("Try 'warp --help' for help; 'warp apply-map --help' for saved maps.", err=True)
         return EXIT_BAD_INPUT
     prog = f"warp {args[0]}" if args[0] in cli.commands and args[0] != cli.default else "warp"
+    from ..cores import explicit, set_jobs
+
+    budget = explicit()  # --jobs sets the process's core budget for this run: put back after it
     try:
         # Without standalone mode click returns an Exit's code instead of raising it.
         code = cli.main(args=args, prog_name="warp", standalone_mode=False)
@@ -92,6 +95,8 @@ def main(argv: list[str] | None = None) -> int:
     except WarpError as err:
         click.echo(f"warp: error: {err}", err=True)
         return exit_code(err)
+    finally:
+        set_jobs(budget)
     return code if isinstance(code, int) else EXIT_OK
 
 

@@ -12,6 +12,7 @@ from .options import (
     collected,
     dtype_option,
     interp_option,
+    jobs_option,
     map_options,
     parse_size,
     quiet_option,
@@ -58,6 +59,7 @@ resampling_options = collected(
 @click.option("--attribute", "attributes", multiple=True, metavar="NAME", help="Mesh OUT: a vertex attribute to move (repeat for several).  [default: all of SRC's; for an OBJ, its colours]")
 @map_options
 @resampling_options
+@jobs_option("the map's two halves built side by side (one in a forked child), the kernels on N threads", expose_value=False)
 @quiet_option
 def texture(src_path, dst_path, output_path, texture, src_corners, dst_corners, src_start, dst_start, flip_v, src_flip_v,
             dst_flip_v, padding, attributes, mapping, resampling):  # fmt: skip

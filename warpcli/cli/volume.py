@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from .exits import EXIT_CODES
-from .options import CONTEXT, quiet_option
+from .options import CONTEXT, jobs_option, quiet_option
 
 
 @click.command("volume", context_settings=CONTEXT, epilog=EXIT_CODES)
@@ -21,6 +21,7 @@ from .options import CONTEXT, quiet_option
 @click.option("--allow-folds", is_flag=True, help="Write the volume even if a tetrahedron stays inverted after untangling (with a warning); by default such a map is refused, exit 1, nothing written: in 3D no theorem rules folds out.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write a JSON report: flipped tetrahedra before and after untangling, 3D distortion, min det J, timings.")
 @click.option("--picture", type=click.Path(dir_okay=False), help="Write three orthogonal slices of input and output with a grid carried through the map (PNG).")
+@jobs_option("the libraries' thread pools (BLAS, OpenImageIO) with N threads; the tetrahedral maps are built one after the other", expose_value=False)
 @quiet_option
 def volume(input_path, output_path, src_path, dst_path, theta, interpolation, background, edge, untangle, allow_folds, report_path, picture):
     """Warp a 3D image (NIfTI .nii/.nii.gz, or a multi-page TIFF stack) so that cage SRC goes onto cage DST.

@@ -14,7 +14,7 @@ from .. import __version__
 from ..options import HEATMAP_MEASURES, STMAP_T
 from .exits import EXIT_CODES, exit_code
 from .group import DefaultCommand
-from .options import CONTEXT, collected, map_options, polygon_options, resample_options, verbosity
+from .options import CONTEXT, collected, jobs_option, map_options, polygon_options, resample_options, verbosity
 from .progress import Progress
 
 WARP_EPILOG = EXIT_CODES + """
@@ -117,8 +117,8 @@ single_outputs = collected(
 @click.option("--frame", "frame", type=int, metavar="N", help="Keyframed polygon files in a single warp: the polygons at frame N.")
 @click.option("--inverse", is_flag=True, help="Undo the warp from SRC to DST: map DST onto SRC (the same polygon files, swapped).")
 @click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
-@click.option("--scheduler", metavar="ADDRESS|local", help="Batch: run on a Dask cluster (tcp://host:8786), or 'local' for a LocalCluster of --jobs processes; the map is built here once and shipped; a scheduler silent for 10 s (WARPCLI_DASK_TIMEOUT) is an error. Needs warpcli[dask].")
-@click.option("--jobs", type=click.IntRange(1, 256), default=1, show_default=True, help="Batch and sequences: images warped at once, by threads sharing the map, or for animated polygons by processes, a run of frames each (output bytes as with 1).")
+@click.option("--scheduler", metavar="ADDRESS|local", help="Batch: run on a Dask cluster (tcp://host:8786), or 'local' for a LocalCluster of --jobs processes (default: the cores this process may use); the map is built here once and shipped; a scheduler silent for 10 s (WARPCLI_DASK_TIMEOUT) is an error. Needs warpcli[dask].")
+@jobs_option("batch images and sequence frames warped N at a time (threads sharing a map; for animated polygons, processes building the next maps), the kernels on N threads")
 @click.option("--out-name", default="{name}", show_default=True, help="Batch output file name: {name}, {stem}, {ext} of the input (the extension picks the format).")
 @resample_options
 @map_options
@@ -241,7 +241,7 @@ def _single(input_path, output_path, polygons, options, outputs, frame=None) -> 
         log.debug("%s: %s", key.replace("_", " "), value)
 
 
-def _sequence(paths, frames, polygons, options, jobs=1, outputs=None):
+def _sequence(paths, frames, polygons, options, jobs=None, outputs=None):
     """Warp the frames of a sequence; report failed frames one line each and go on."""
     from ..errors import InputError
     from ..batch import FrameMaps, warp_sequence
@@ -290,7 +290,7 @@ class _MissingFrames:
             click.echo(f"warp: error: ... and {more} more missing frame{'s' if more > 1 else ''}", err=True)
 
 
-def _batch(paths, out_dir, out_name, polygons, options, jobs=1, scheduler=None):
+def _batch(paths, out_dir, out_name, polygons, options, jobs=None, scheduler=None):
     """Warp every input with one map; report failures one line each and go on."""
     if scheduler is not None:
         from ..distributed import warp_batch_dask

@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._native import Kernels, parallel
+from ..cores import budget
 from ..errors import InputError
 from ..grid import window
 from ..options import MapOptions
@@ -343,16 +344,26 @@ class Task:
     """``fn(*args)`` on a thread of its own; `result` waits for it and returns or raises what it did.
 
     ``fn`` runs in a copy of the creator's context (`contextvars`), as if
-    called there. Its thread is marked ``warpcli_task``: work that nobody may
-    wait for any more (the map of a run stopped by bad input) and that the
-    ``warp`` command does not wait for before it exits; Python's own exit
-    does, as for any thread.
+    called there. Its thread is marked ``warpcli_task``: work that nobody
+    may wait for any more (the map of a run stopped by bad input) and that
+    the ``warp`` command does not wait for before it exits; Python's own
+    exit does, as for any thread.
+
+    With a core budget of 1 (`warpcli.cores`) nothing runs beside the
+    creator: ``fn`` runs when `result` is first called, on the caller's
+    thread (after the creator's own work, the order in which a forked
+    builder's records are logged), and never if nobody asks.
     """
 
     def __init__(self, fn: Callable[..., Any], *args: Any, name: str = "warp-task") -> None:
         self._value: Any = None
         self._error: BaseException | None = None
+        self._thread: threading.Thread | None = None
         context = contextvars.copy_context()
+        if budget() <= 1:  # one core (`warpcli.cores`): run by `result`, on the caller's thread
+            self._later: tuple | None = (context, fn, args)
+            return
+        self._later = None
         self._thread = threading.Thread(target=context.run, args=(self._run, fn, args), name=name)
         self._thread.warpcli_task = True  # type: ignore[attr-defined]
         self._thread.start()
@@ -364,7 +375,12 @@ class Task:
             self._error = err
 
     def result(self) -> Any:
-        self._thread.join()
+        if self._later is not None:
+            context, fn, args = self._later
+            self._later = None
+            context.run(self._run, fn, args)
+        if self._thread is not None:
+            self._thread.join()
         if self._error is not None:
             raise self._error
         return self._value
