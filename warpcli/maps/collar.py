@@ -160,29 +160,41 @@ class Collar:
         Along each cell, h(s) = cross(w - g(F(s)), phi(G(s)) - g(F(s))) is
         0 where the collar's segment through s passes through w. The
         certificate's piece centres (exact values of phi) bracket its sign
-        changes; each is narrowed by regula falsi (Illinois) on the closed
-        form, and accepted when t lies in [0, 1]: the collar is one-to-one,
-        so an accepted point is the pre-image.
+        changes; every bracket of every value is narrowed at once by regula
+        falsi (Illinois), one evaluation of the closed form per step for all
+        of them, and accepted when t lies in [0, 1]: the collar is
+        one-to-one, so an accepted point is the pre-image.
         """
         b = self.band
         w = np.asarray(values, dtype=np.float64).reshape(-1, 2)
         out = np.full(w.shape, np.nan)
         if not len(w):
             return out
-        knots = self._knots
-        for c in range(len(b.f0)):  # loop over cells, vectorised over the values still looking
-            todo = np.flatnonzero(np.isnan(out[:, 0]))
-            if not todo.size:
-                break
-            s_k, v_k, g_k = knots[c]
+        who, cell, lo, hi, h_lo, h_hi = self._brackets(w)
+        if not who.size:
+            return out
+        s, t = self._roots(w[who], cell, lo, hi, h_lo, h_hi)
+        good = np.flatnonzero((t >= -EDGE_SLACK) & (t <= 1.0 + EDGE_SLACK))
+        # the first accepted bracket of each value (one, but for values on a shared segment)
+        first = good[np.unique(who[good], return_index=True)[1]] if good.size else good
+        c, sh, th = cell[first], s[first][:, None], np.clip(t[first], 0.0, 1.0)[:, None]
+        f = b.f0[c] + sh * (b.f1 - b.f0)[c]
+        g = b.g0[c] + sh * (b.g1 - b.g0)[c]
+        out[who[first]] = f + th * (g - f)
+        return out
+
+    def _brackets(self, w):
+        """Every (value, cell, knot interval) where h changes sign near the value: index arrays and h at the ends."""
+        parts = []
+        for c, (s_k, v_k, g_k) in enumerate(self._knots):  # loop over cells, vectorised over the values near one
             corners = np.concatenate([g_k, v_k])
             lo, hi = corners.min(axis=0), corners.max(axis=0)
             pad = 0.5 * (hi - lo).max() + 1e-12 * (1.0 + np.abs(corners).max())
-            todo = todo[((w[todo] >= lo - pad) & (w[todo] <= hi + pad)).all(axis=1)]  # near this cell's image
-            if not todo.size:
+            near = np.flatnonzero(((w >= lo - pad) & (w <= hi + pad)).all(axis=1))  # near this cell's image
+            if not near.size:
                 continue
             d_k = v_k - g_k
-            rel = w[todo][:, None, :] - g_k[None]
+            rel = w[near][:, None, :] - g_k[None]
             hs = _cross(rel, d_k[None])
             sgn = np.sign(hs)
             change = sgn[:, :-1] * sgn[:, 1:] <= 0
@@ -192,58 +204,48 @@ class Collar:
                 lam = np.clip(hs[:, :-1] / (hs[:, :-1] - hs[:, 1:]), 0.0, 1.0)[..., None]
                 gs = g_k[None, :-1] + lam * (g_k[1:] - g_k[:-1])[None]
                 ds = d_k[None, :-1] + lam * (d_k[1:] - d_k[:-1])[None]
-                ts = ((w[todo][:, None, :] - gs) * ds).sum(axis=2) / (ds * ds).sum(axis=2)
+                ts = ((w[near][:, None, :] - gs) * ds).sum(axis=2) / (ds * ds).sum(axis=2)
             change &= ~(np.abs(ts - 0.5) > 1.5)
-            hit = change.any(axis=1)
-            s = np.full(todo.size, np.nan)
-            t = np.full(todo.size, np.nan)
-            if hit.any():
-                rows = np.flatnonzero(hit)
-                # every bracket of a row is tried in turn (most rows have one)
-                for col in range(change.shape[1]):
-                    pick = rows[change[rows, col] & np.isnan(s[rows])]
-                    if not pick.size:
-                        continue
-                    ss, tt = self._root(w[todo[pick]], c, s_k[col], s_k[col + 1], hs[pick, col], hs[pick, col + 1])
-                    good = (tt >= -EDGE_SLACK) & (tt <= 1.0 + EDGE_SLACK)
-                    s[pick[good]] = ss[good]
-                    t[pick[good]] = tt[good]
-            hit = ~np.isnan(s)
-            if hit.any():
-                idx = todo[hit]
-                sh, th = s[hit][:, None], np.clip(t[hit], 0.0, 1.0)[:, None]
-                f = b.f0[c] + sh * (b.f1 - b.f0)[c]
-                g = b.g0[c] + sh * (b.g1 - b.g0)[c]
-                out[idx] = f + th * (g - f)
-        return out
+            row, col = np.nonzero(change)
+            if row.size:
+                parts.append((near[row], np.full(row.size, c), s_k[col], s_k[col + 1], hs[row, col], hs[row, col + 1]))
+        if not parts:
+            empty = np.zeros(0)
+            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp), empty, empty, empty, empty
+        return tuple(np.concatenate(col) for col in zip(*parts))
 
-    def _root(self, w, c, s0, s1, h0, h1):
-        """s in [s0, s1] where h changes sign (Illinois), and t there, for values w in cell c."""
+    def _roots(self, w, c, s0, s1, h0, h1):
+        """s in each bracket [s0, s1] of cell c where h changes sign (Illinois, all at once), and t there."""
         b = self.band
-        a, z = np.full(len(w), s0), np.full(len(w), s1)
+        a, z = s0.astype(np.float64), s1.astype(np.float64)
         fa, fz = h0.astype(np.float64), h1.astype(np.float64)
         side = np.zeros(len(w), dtype=np.int8)
         s = a.copy()
-        for _ in range(ROOT_STEPS):  # each step evaluates the closed form once per value
-            before = s
+        live = np.arange(len(w))
+        for _ in range(ROOT_STEPS):  # each step evaluates the closed form once for the brackets still open
+            k = live
             with np.errstate(divide="ignore", invalid="ignore"):
-                s = np.where(fz != fa, z - fz * (z - a) / (fz - fa), 0.5 * (a + z))
-            s = np.where((s > a) & (s < z) | (s < a) & (s > z), s, 0.5 * (a + z))
-            g = b.g0[c] + s[:, None] * (b.g1 - b.g0)[c]
-            gf = self._data(np.full(len(s), c), s)[0]
+                trial = np.where(fz[k] != fa[k], z[k] - fz[k] * (z[k] - a[k]) / (fz[k] - fa[k]), 0.5 * (a[k] + z[k]))
+            inside = (trial > a[k]) & (trial < z[k]) | (trial < a[k]) & (trial > z[k])
+            trial = np.where(inside, trial, 0.5 * (a[k] + z[k]))
+            before = s[k]
+            s[k] = trial
+            g = b.g0[c[k]] + trial[:, None] * (b.g1 - b.g0)[c[k]]
+            gf = self._data(c[k], trial)[0]
             val = self.solution.value_and_jacobian(g)[0]
-            h = _cross(w - gf, val - gf)
-            left = np.sign(h) == np.sign(fa)
+            h = _cross(w[k] - gf, val - gf)
+            left = np.sign(h) == np.sign(fa[k])
             # Illinois: halve the kept end's value when the same end is kept twice
-            fz = np.where(~left & (side == -1), 0.5 * fz, fz)
-            fa = np.where(left & (side == 1), 0.5 * fa, fa)
-            a, fa = np.where(left, s, a), np.where(left, h, fa)
-            z, fz = np.where(left, z, s), np.where(left, fz, h)
-            side = np.where(left, 1, -1).astype(np.int8)
-            if ((s == before) | (h == 0) | (np.abs(z - a) <= 4e-16)).all():
+            fz[k] = np.where(~left & (side[k] == -1), 0.5 * fz[k], fz[k])
+            fa[k] = np.where(left & (side[k] == 1), 0.5 * fa[k], fa[k])
+            a[k], fa[k] = np.where(left, trial, a[k]), np.where(left, h, fa[k])
+            z[k], fz[k] = np.where(left, z[k], trial), np.where(left, fz[k], h)
+            side[k] = np.where(left, 1, -1)
+            live = k[~((trial == before) | (h == 0) | (np.abs(z[k] - a[k]) <= 4e-16))]
+            if not live.size:
                 break
         g = b.g0[c] + s[:, None] * (b.g1 - b.g0)[c]
-        gf = self._data(np.full(len(s), c), s)[0]
+        gf = self._data(c, s)[0]
         val = self.solution.value_and_jacobian(g)[0]
         d = val - gf
         with np.errstate(divide="ignore", invalid="ignore"):
