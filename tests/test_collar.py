@@ -96,6 +96,27 @@ def test_the_collar_of_an_affine_map_is_the_map(seed):
     assert np.allclose(back, p, rtol=0, atol=1e-9)
 
 
+@pytest.mark.parametrize("shape", sorted(SHAPES))
+def test_inside_gamma_is_the_even_odd_test_of_the_grid(shape):
+    """`Collar.inside` (compiled) gives `warpcli.grid.inside_polygon`'s booleans: random points, Gamma's
+    vertices, points on and a rounding away from its edges, NaN."""
+    from warpcli.grid import inside_polygon
+
+    rng = np.random.default_rng(7)
+    v = SHAPES[shape](rng)
+    band = offset_band(v, 0.1)  # 0.1 px at 300 px: every shape has such a band
+    collar = Collar(band, None, BoundaryData(v), np.zeros((0, 4)))
+    g = np.asarray(band.gamma)
+    lo, hi = g.min(axis=0), g.max(axis=0)
+    mid = 0.5 * (g + np.roll(g, -1, axis=0))
+    points = np.concatenate([
+        rng.uniform(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo), (4000, 2)), g, mid,
+        mid * (1 + 1e-15), np.nextafter(g, np.inf), [[np.nan, 0.0], [0.0, np.nan]],
+    ])  # fmt: skip
+    assert np.array_equal(collar.inside(points), inside_polygon(points, g))
+    assert collar.inside(np.zeros((0, 2))).shape == (0,)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_a_map_whose_curve_leaves_theta_is_refused_with_its_band(seed):
     """The same affine maps onto a Theta shrunk by 5 % about its centre: phi(Gamma), 0.01 inside, lies outside it."""
