@@ -26,7 +26,7 @@ from warpcli import MapOptions, Polygon
 from warpcli.boundary import BoundaryData
 from warpcli.maps.boundary_certificate import certify_boundary, offset_band
 from warpcli.maps.collar import Collar
-from warpcli.maps.meshless import BEM, MFS
+from warpcli.maps.meshless import BEM, MFS, SmoothMap
 from warpcli.maps.theta import Theta
 from warpcli.maps.theta import regular as regular_theta
 
@@ -115,6 +115,10 @@ def test_inside_gamma_is_the_even_odd_test_of_the_grid(shape):
     ])  # fmt: skip
     assert np.array_equal(collar.inside(points), inside_polygon(points, g))
     assert collar.inside(np.zeros((0, 2))).shape == (0,)
+    # the same kernel against the polygon itself (BEM's Newton line search, `SmoothMap._inside_polygon`)
+    phi = SmoothMap.__new__(SmoothMap)  # only its polygon is read
+    object.__setattr__(phi, "polygon", Polygon(v))
+    assert np.array_equal(phi._inside_polygon(points), inside_polygon(points, v))
 
 
 @pytest.mark.parametrize("seed", range(4))
