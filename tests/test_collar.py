@@ -26,7 +26,7 @@ from warpcli import MapOptions, Polygon
 from warpcli.boundary import BoundaryData
 from warpcli.maps.boundary_certificate import certify_boundary, offset_band
 from warpcli.maps.collar import Collar
-from warpcli.maps.meshless import BEM, MFS
+from warpcli.maps.meshless import BEM, MFS, SmoothMap
 from warpcli.maps.theta import Theta
 from warpcli.maps.theta import regular as regular_theta
 
@@ -94,6 +94,31 @@ def test_the_collar_of_an_affine_map_is_the_map(seed):
     assert np.allclose(jac, exact[None], rtol=1e-8, atol=1e-8 * np.abs(exact).max())
     back = collar.inverse(val)
     assert np.allclose(back, p, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("shape", sorted(SHAPES))
+def test_inside_gamma_is_the_even_odd_test_of_the_grid(shape):
+    """`Collar.inside` (compiled) gives `warpcli.grid.inside_polygon`'s booleans: random points, Gamma's
+    vertices, points on and a rounding away from its edges, NaN."""
+    from warpcli.grid import inside_polygon
+
+    rng = np.random.default_rng(7)
+    v = SHAPES[shape](rng)
+    band = offset_band(v, 0.1)  # 0.1 px at 300 px: every shape has such a band
+    collar = Collar(band, None, BoundaryData(v), np.zeros((0, 4)))
+    g = np.asarray(band.gamma)
+    lo, hi = g.min(axis=0), g.max(axis=0)
+    mid = 0.5 * (g + np.roll(g, -1, axis=0))
+    points = np.concatenate([
+        rng.uniform(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo), (4000, 2)), g, mid,
+        mid * (1 + 1e-15), np.nextafter(g, np.inf), [[np.nan, 0.0], [0.0, np.nan]],
+    ])  # fmt: skip
+    assert np.array_equal(collar.inside(points), inside_polygon(points, g))
+    assert collar.inside(np.zeros((0, 2))).shape == (0,)
+    # the same kernel against the polygon itself (BEM's Newton line search, `SmoothMap._inside_polygon`)
+    phi = SmoothMap.__new__(SmoothMap)  # only its polygon is read
+    object.__setattr__(phi, "polygon", Polygon(v))
+    assert np.array_equal(phi._inside_polygon(points), inside_polygon(points, v))
 
 
 @pytest.mark.parametrize("seed", range(4))

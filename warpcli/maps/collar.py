@@ -31,11 +31,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from .._native import Kernels
 from ..boundary import BoundaryData
-from ..grid import inside_polygon
 from .boundary_certificate import OffsetBand
 
 __all__ = ["Collar"]
+
+_compiled = Kernels("warpcli.maps._smooth_kernels")
 
 #: Iterations of the bracketed root search along a cell (`Collar.inverse`): halving at worst.
 ROOT_STEPS = 80
@@ -75,8 +77,29 @@ class Collar:
         return float(np.hypot(*(self.band.g0 - self.band.f0).T).max()) if len(self.band.f0) else 0.0
 
     def inside(self, points: NDArray[np.float64]) -> NDArray[np.bool_]:
-        """Whether each point (known to be inside the polygon) lies in R, inside Gamma (else in the band)."""
-        return inside_polygon(points, self.band.gamma)
+        """Whether each point (known to be inside the polygon) lies in R, inside Gamma (else in the band).
+
+        `warpcli.grid.inside_polygon`'s test and arithmetic, compiled: Newton's line search in
+        `SmoothMap._band_inverse` asks it about a few points at a time, up to 800 times a point
+        (20 iterations, 40 halvings), against Gamma's ~100 edges; numpy's pass per edge made that
+        2 s of a 1 MP MFS warp for 7 points (measured, bench/results/2026-11-24-smooth-speed.md).
+        """
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        out = np.zeros(len(p), dtype=np.bool_)
+        if len(p):
+            g = self._gamma_xy
+            _compiled.inside_points(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), g[0], g[1], out)
+        return out
+
+    @property
+    def _gamma_xy(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Gamma's x and y, contiguous (for `inside_points`)."""
+        cached = self.__dict__.get("_gamma_cache")
+        if cached is None:
+            gamma = np.asarray(self.band.gamma, dtype=np.float64)
+            cached = (np.ascontiguousarray(gamma[:, 0]), np.ascontiguousarray(gamma[:, 1]))
+            object.__setattr__(self, "_gamma_cache", cached)
+        return cached
 
     def _data(self, c: NDArray[np.intp], s: NDArray[np.float64]):
         """g(F(s)) on cells c, and its derivative in s: (K, 2) each."""
