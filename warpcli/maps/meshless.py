@@ -37,13 +37,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._native import Kernels
-from ..boundary import BoundaryData, nearest_edge, on_boundary
+from ..boundary import BoundaryData, nearest_edge, on_boundary, slide
 from ..budget import MAX_IMAGE_BYTES_ENV, max_image_bytes
 from ..errors import InputError, MeshingError
 from ..files import format_bytes
 from ..grid import inside_polygon
 from ..polygon import Polygon
-from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, slide, sliding_tables
+from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, sliding_tables
 from .boundary_certificate import BoundaryCertificate, certify_boundary, offset_band
 from .collar import Collar
 from .certificate import CellCertificate, band_floor, certify_cells, degenerate_vertices, vertex_ball
