@@ -16,21 +16,21 @@ import os
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._cached import cached_property
 from .annotations import warp_labels
+from .budget import check_fits
 from .errors import ImageInputError, InputError, WarpError, naming
+from .keyframes import read_shape_at
 from .maps.cage import map_between
 from .maps.compose import BijectiveMap, PullBack
-from .budget import check_fits
 from .options import WarpOptions, resolve_options
 from .outputs import PendingOutputs, check_output_path, write_checked
 from .plan import SamplingPlan, background_values, check_paste, plan_for, warn_if_outside
-from .keyframes import read_shape_at
 from .polygon import Polygon
 from .polygon.partition import Partition, check_shapes
 from .raster.imageio import (

@@ -30,12 +30,12 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field, replace
-from functools import cached_property
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._cached import cached_property
 from .._native import Kernels
 from ..boundary import BoundaryData, nearest_edge, on_boundary, slide
 from ..budget import MAX_IMAGE_BYTES_ENV, max_image_bytes
@@ -45,8 +45,8 @@ from ..grid import inside_polygon
 from ..polygon import Polygon
 from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, sliding_tables
 from .boundary_certificate import BoundaryCertificate, certify_boundary, offset_band
-from .collar import Collar
 from .certificate import CellCertificate, band_floor, certify_cells, degenerate_vertices, vertex_ball
+from .collar import Collar
 from .theta import Theta
 
 #: Points closer than this (times the polygon's size) to its boundary take the exact boundary data.
