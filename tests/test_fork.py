@@ -159,3 +159,66 @@ def test_a_target_that_dies_in_its_child_fails_the_build_and_names_it(monkeypatc
     region = (0.0, 0.0, 16.0, 16.0)
     with pytest.raises(MeshingError, match="^b.json: the process meshing and solving it killed by SIGSEGV"):
         build_map(sq, dst, MapOptions(), regions=(region, region))
+
+
+def test_a_fork_beside_a_thread_computing_a_cached_property_does_not_hang():
+    """A fork while another thread computes a cached property (any instance of the class): the child reads it.
+
+    Python 3.11's functools.cached_property holds one lock per property for the whole class while it
+    computes; a forked map builder then waited on that lock forever (the suite hung at a --save-map
+    warp). `warpcli._cached.cached_property` has no lock, as Python 3.12's."""
+    import os
+    import threading
+    import time
+
+    from warpcli._cached import cached_property
+
+    inside, release = threading.Event(), threading.Event()
+
+    class Thing:
+        def __init__(self, slow: bool) -> None:
+            self.slow = slow
+
+        @cached_property
+        def value(self) -> int:
+            if self.slow:
+                inside.set()
+                release.wait(30)
+            return 7
+
+    worker = threading.Thread(target=lambda: Thing(True).value)
+    worker.start()
+    try:
+        assert inside.wait(10)
+        pid = os.fork()
+        if pid == 0:  # the child: one read of another instance's property, then out
+            os._exit(0 if Thing(False).value == 7 else 1)
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            done, status = os.waitpid(pid, os.WNOHANG)
+            if done:
+                break
+            time.sleep(0.02)
+        else:
+            os.kill(pid, 9)
+            os.waitpid(pid, 0)
+            raise AssertionError("the forked child hung reading a cached property")
+        assert os.waitstatus_to_exitcode(status) == 0
+    finally:
+        release.set()
+        worker.join()
+
+
+def test_no_module_uses_the_locking_cached_property_of_the_standard_library():
+    """Every cached property in warpcli is `warpcli._cached`'s: a functools one could hang a forked builder."""
+    import pathlib
+    import re
+
+    package = pathlib.Path(_fork.__file__).parent
+    offenders = [
+        str(path.relative_to(package))
+        for path in sorted(package.rglob("*.py"))
+        if path.name != "_cached.py"
+        and re.search(r"functools\.cached_property|from functools import[^\n]*\bcached_property", path.read_text())
+    ]
+    assert offenders == []

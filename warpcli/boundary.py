@@ -120,6 +120,33 @@ def on_boundary(
     return index, edge[index], t[index]
 
 
+def slide(tables: list, edge: ArrayLike, u: ArrayLike, *, forward: bool) -> NDArray[np.float64]:
+    """Parameters along Theta's edges of polygon parameters (forward), or the reverse, by the tables `warpcli.maps.base.sliding_tables` makes.
+
+    Parameters
+    ----------
+    tables : list of (t, s) pairs
+    edge : array_like of int
+        Edge of each parameter.
+    u : array_like of float
+        Parameters along the polygon's edges (forward) or Theta's (not forward).
+    forward : bool
+
+    Returns
+    -------
+    ndarray of float
+        The other side's parameters, linear between table entries.
+    """
+    e = np.broadcast_to(np.asarray(edge, dtype=np.intp), np.shape(u))
+    u = np.asarray(u, dtype=np.float64)
+    out = np.empty(u.shape)
+    for i, (t_nodes, s_nodes) in enumerate(tables):  # loop over edges
+        on = e == i
+        if on.any():
+            out[on] = np.interp(u[on], t_nodes, s_nodes) if forward else np.interp(u[on], s_nodes, t_nodes)
+    return out
+
+
 @dataclass(frozen=True)
 class BoundaryData:
     """Boundary data onto Theta, edge by edge: g(i, t) = W_i + u_i(t) (W_{i+1} - W_i), u the behaviour.
@@ -160,11 +187,7 @@ class BoundaryData:
     def _u(self, edge: NDArray[np.intp], t: NDArray[np.float64]) -> NDArray[np.float64]:
         if self.tables is None:
             return to_theta_parameter(t, self.behaviour)
-        out = np.empty(t.shape)
-        for i in np.unique(edge):  # loop over the edges present
-            on = edge == i
-            out[on] = np.interp(t[on], *self.tables[i])
-        return out
+        return slide(self.tables, edge, t, forward=True)
 
     def _slopes(self, edge: NDArray[np.intp], t_lo: NDArray[np.float64], t_hi: NDArray[np.float64]):
         """The least and greatest du/dt over [t_lo, t_hi] on each edge."""

@@ -16,21 +16,22 @@ import os
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._cached import cached_property
 from .annotations import warp_labels
+from .budget import check_fits
+from .cores import budget
 from .errors import ImageInputError, InputError, WarpError, naming
+from .keyframes import read_shape_at
 from .maps.cage import map_between
 from .maps.compose import BijectiveMap, PullBack
-from .budget import check_fits
 from .options import WarpOptions, resolve_options
 from .outputs import PendingOutputs, check_output_path, write_checked
 from .plan import SamplingPlan, background_values, check_paste, plan_for, warn_if_outside
-from .keyframes import read_shape_at
 from .polygon import Polygon
 from .polygon.partition import Partition, check_shapes
 from .raster.imageio import (
@@ -269,9 +270,11 @@ def _warp(
 
 def _streams(opts: WarpOptions) -> bool:
     """Whether `warp_file` resamples the output band by band while the first bands are encoded:
-    the background around the warp (nothing pasted), no conversion of the pixel type before
+    a core budget of more than one (`warpcli.cores`; with one, the bands' `Task` would only run
+    when the encoder had taken them all, and nothing may run beside the encoder anyway), the
+    background around the warp (nothing pasted), no conversion of the pixel type before
     writing, and not ``cubic`` (whose spline would prefilter the input for every band)."""
-    return opts.outside == "background" and opts.dtype is None and opts.interp != "cubic"
+    return budget() > 1 and opts.outside == "background" and opts.dtype is None and opts.interp != "cubic"
 
 
 class _RowsMade:

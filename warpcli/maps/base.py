@@ -234,28 +234,3 @@ def sliding_tables(theta: NDArray[np.float64], edge: ArrayLike, t: ArrayLike, im
     return tables
 
 
-def slide(tables: EdgeTables, edge: ArrayLike, u: ArrayLike, *, forward: bool) -> NDArray[np.float64]:
-    """Parameters along Theta's edges of polygon parameters (forward), or the reverse, by `sliding_tables`.
-
-    Parameters
-    ----------
-    tables : list of (t, s) pairs
-    edge : array_like of int
-        Edge of each parameter.
-    u : array_like of float
-        Parameters along the polygon's edges (forward) or Theta's (not forward).
-    forward : bool
-
-    Returns
-    -------
-    ndarray of float
-        The other side's parameters, linear between table entries.
-    """
-    e = np.broadcast_to(np.asarray(edge, dtype=np.intp), np.shape(u))
-    u = np.asarray(u, dtype=np.float64)
-    out = np.empty(u.shape)
-    for i, (t_nodes, s_nodes) in enumerate(tables):  # loop over edges
-        on = e == i
-        if on.any():
-            out[on] = np.interp(u[on], t_nodes, s_nodes) if forward else np.interp(u[on], s_nodes, t_nodes)
-    return out

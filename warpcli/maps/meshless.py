@@ -30,23 +30,23 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field, replace
-from functools import cached_property
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._cached import cached_property
 from .._native import Kernels
-from ..boundary import BoundaryData, nearest_edge, on_boundary
+from ..boundary import BoundaryData, nearest_edge, on_boundary, slide
 from ..budget import MAX_IMAGE_BYTES_ENV, max_image_bytes
 from ..errors import InputError, MeshingError
 from ..files import format_bytes
 from ..grid import inside_polygon
 from ..polygon import Polygon
-from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, slide, sliding_tables
+from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, sliding_tables
 from .boundary_certificate import BoundaryCertificate, certify_boundary, offset_band
-from .collar import Collar
 from .certificate import CellCertificate, band_floor, certify_cells, degenerate_vertices, vertex_ball
+from .collar import Collar
 from .theta import Theta
 
 #: Points closer than this (times the polygon's size) to its boundary take the exact boundary data.
@@ -71,9 +71,6 @@ FIT_BYTES_PER_NODE2 = {"bem": 220, "mfs": 300}
 #: 0.02-0.15x the rigorous cells' for MFS on the bench pairs; docs/proving.md), unless a vertex is
 #: degenerate; the others by the cell certificate (`certify_cells`).
 BOUNDARY_CERTIFIED = frozenset({"bem", "mfs"})
-#: Boundary data other than linear (no collar): an MFS map whose boundary certificate fails with
-#: Gamma the polygon itself is certified again with Gamma `band_floor` inside, the band not proved.
-MFS_INNER_FALLBACK = True
 #: Gamma's distances inside the polygon, in units of `band_floor` (0.01 px at 1 MP): the first that
 #: proves the map with its band is taken (`SmoothMap.boundary_certificate`).
 BAND_STEPS = (1.0, 4.0, 16.0, 64.0, 256.0)
@@ -364,31 +361,16 @@ class SmoothMap(ThetaMap):
         return degenerate_vertices(self.polygon.points, self.theta.points, self.boundary_to_theta, self.conditions == "mixed")
 
     @cached_property
-    def boundary_certificate(self) -> BoundaryCertificate | None:
-        """`warpcli.maps.boundary_certificate.certify_boundary`, computed once; None for natural or mixed
-        conditions that force det J -> 0 at a vertex (`degenerate_vertices`: those maps keep the cell
-        certificate and its balls).
+    def boundary_certificate(self) -> BoundaryCertificate:
+        """`warpcli.maps.boundary_certificate.certify_boundary`, computed once, with the collar's band.
 
-        Dirichlet data (linear, the default, or t^2): Gamma is the polygon moved inwards by the first of `_band_widths`
-        that proves the map with its band (the collar, `collar`), for BEM (its closed form is singular at its
-        boundary nodes, and folds next to them) and MFS alike (its fit leaves Theta along the boundary, and
-        folds there next to some reflex vertices); ``closer`` counts the first width's failures when a later
-        one holds; a vertex where the data force det J -> 0 (t^2) lies in the band, which the collar covers.
-        Other conditions (no collar): MFS on its polygon itself (its sites lie outside), else, like BEM,
-        `band_floor` inside (`MFS_INNER_FALLBACK`), the band not proved.
+        Gamma is the polygon moved inwards by the first of `_band_widths` that proves the map with its band
+        (the collar, `collar`), for BEM (its closed form is singular at its boundary nodes, and folds next to
+        them) and MFS alike (its fit leaves Theta along the boundary, and folds there next to some reflex
+        vertices), whatever the boundary data (`_collar_data`); ``closer`` counts the first width's failures
+        when a later one holds. A vertex where the data force det J -> 0 (t^2, mixed conditions at a sharp
+        corner) lies in the band, which the collar covers.
         """
-        if self._collar_data is None and self._degenerate.any():
-            return None
-        if self._collar_data is None:
-            whole = None
-            if self.name == "mfs":
-                whole = self.certify_boundary_at(0.0)
-                if whole.ok or not MFS_INNER_FALLBACK:
-                    return whole
-            moved = self.certify_boundary_at(band_floor(self._size))
-            if whole is None:
-                return moved
-            return replace(moved, closer=whole.failed) if moved.ok else whole
         first = None
         for width in self._band_widths:
             moved = self.certify_boundary_at(width)
@@ -398,23 +380,21 @@ class SmoothMap(ThetaMap):
         return first
 
     @cached_property
-    def _collar_data(self) -> BoundaryData | None:
-        """The boundary data as the collar takes them: Dirichlet data (linear or t^2 along each edge), or the
-        correspondence a boundary that slides along Theta's edges settles on (mixed conditions: the solution's
-        trace, `_edge_tables`); None for any other behaviour."""
+    def _collar_data(self) -> BoundaryData:
+        """The boundary data as the collar takes them (the same as `boundary_to_theta`): Dirichlet data
+        (linear or t^2 along each edge), or the correspondence a boundary that slides along Theta's edges
+        settles on (mixed conditions: the solution's trace, `_edge_tables`)."""
         if self.solution.trace is not None:
             return BoundaryData(self.theta.points, tables=self._edge_tables)
-        if self.boundary not in ("linear", "quadratic"):
-            return None
         return BoundaryData(self.theta.points, self.boundary)
 
     @cached_property
     def _band_widths(self) -> tuple[float, ...]:
         """Gamma's distances inside the polygon tried in turn (`BAND_STEPS` times `band_floor`): a
         closed form whose values 0.01 px inside still leave Theta (MFS's fit, BEM next to a node) is
-        proved farther in, with the collar between (none for data other than linear: `band_floor`)."""
+        proved farther in, with the collar between."""
         inner = band_floor(self._size)
-        return tuple(inner * k for k in BAND_STEPS) if self._collar_data is not None else (inner,)
+        return tuple(inner * k for k in BAND_STEPS)
 
     def certify_boundary_at(self, offset: float) -> BoundaryCertificate:
         """`warpcli.maps.boundary_certificate.certify_boundary` of this map on Gamma ``offset`` inside its

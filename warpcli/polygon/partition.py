@@ -24,11 +24,11 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
-from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._cached import cached_property
 from ..errors import PolygonError
 from .formats import points_of, read_document
 from .messages import LongInteger, format_point, short_value

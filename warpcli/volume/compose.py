@@ -5,18 +5,18 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import mapping
+from .._cached import cached_property
 from ..errors import InputError
 from ..mapping import Certificate, ComposedMap, Mapped
 from ..simplicial import PiecewiseLinear
 from . import _kernels
 from .surface import Surface
-from .tetmesh import TetMesh, tet_volumes
+from .tetmesh import TetMesh
 from .theta import Theta
 from .untangle import inverted, pinned_flat
 

@@ -14,20 +14,20 @@ import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
-from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..._cached import cached_property
 from ..._native import Kernels
 from ...boundary import nearest_edge
 from ...errors import MeshingError
 from ...options import MapOptions
 from ...polygon import Polygon
+from ...simplicial import PiecewiseLinear
 from ..base import Certificate, GridSample, Mapped, ThetaMap, as_points, inv2
 from ..straight import IdentityMap, straight_boundary
 from ..theta import TargetTheta, Theta
-from ...simplicial import PiecewiseLinear
 from . import sparse, topology
 from .locate import TriangleLocator, affine_coefficients, triangle_neighbours
 from .mesh import TriMesh, auto_max_area, mesh_polygon

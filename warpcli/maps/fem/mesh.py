@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..._cached import cached_property
 from ...errors import InputError, MeshingError, PolygonError
 from ...polygon import Polygon
 from .topology import mesh_edges
