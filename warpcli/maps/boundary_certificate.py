@@ -178,10 +178,13 @@ class BoundaryCertificate:
     crossed : int
         Pieces where the collar's condition 5 fails at the centre (among
         ``failed``).
-    knots : (K, 4) ndarray of float or None
-        The proved pieces' centres, in Gamma's order: its edge, the
-        parameter along it, and phi's value there (x, y); None unless
-        ``band``. `warpcli.maps.collar.Collar.inverse` brackets with them.
+    knots : (K, 7) ndarray of float or None
+        The proved pieces, in Gamma's order: the edge, the centre's
+        parameter along it, phi's value there (x, y), and the piece's
+        capsule: its half-axis r D0 (x, y) and its thickness dD r + the
+        rounding of the value (phi on the piece lies within the thickness of
+        the segment w0 +- r D0); None unless ``band``.
+        `warpcli.maps.collar.Collar.inverse` brackets with them.
     """
 
     failed: int
@@ -559,7 +562,9 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
     knots = None
     if collar:
         mid = 0.5 * (col["t0"] + col["t1"])
-        knots = np.stack([col["edge"].astype(np.float64), mid, col["w0"].real, col["w0"].imag], axis=1)
+        axis = col["r"] * col["d0"]
+        thick = col["dd"] * col["r"] + noise
+        knots = np.stack([col["edge"].astype(np.float64), mid, col["w0"].real, col["w0"].imag, axis.real, axis.imag, thick], axis=1)
     return BoundaryCertificate(0, checked, len(wv), winding, turns, offset, 0, 0, 0, band=collar, knots=knots)
 
 

@@ -43,6 +43,10 @@ _compiled = Kernels("warpcli.maps._smooth_kernels")
 ROOT_STEPS = 80
 #: Slack on the cells' parameters, relative (points on a shared segment belong to both cells).
 EDGE_SLACK = 1e-9
+#: How far from the collar's segment (relative to Theta's size) a value may be and be found on it:
+#: the closed form's rounding (MFS's sums of large weights: 1e-11 at m = 1024, measured), within
+#: which `SmoothMap.inverse`'s Newton accepts a pre-image too (its NEWTON_FLOOR).
+MISS = 1e-9
 
 
 def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -183,9 +187,15 @@ class Collar:
         Along each cell, h(s) = cross(w - g(F(s)), phi(G(s)) - g(F(s))) is
         0 where the collar's segment through s passes through w. The
         certificate's piece centres (exact values of phi) bracket its sign
-        changes; every bracket of every value is narrowed at once by regula
-        falsi (Illinois), one evaluation of the closed form per step for all
-        of them, and accepted when t lies in [0, 1]: the collar is
+        changes, in the intervals between them whose image's box (proved
+        from the pieces' capsules, `_knots`) holds w: lines through far
+        values cross too, and an estimate of where the segment lies
+        (interpolating phi between centres) missed pre-images in bands
+        0.01 px wide, where phi bends across an interval by more than the
+        segment's length. Every bracket of every value is narrowed at once by
+        regula falsi (Illinois), one evaluation of the closed form per step
+        for all of them, and accepted when w lies on the segment there (t in
+        [0, 1], to the closed form's rounding, `MISS`): the collar is
         one-to-one, so an accepted point is the pre-image.
         """
         b = self.band
@@ -197,7 +207,7 @@ class Collar:
         if not who.size:
             return out
         s, t = self._roots(w[who], cell, lo, hi, h_lo, h_hi)
-        good = np.flatnonzero((t >= -EDGE_SLACK) & (t <= 1.0 + EDGE_SLACK))
+        good = np.flatnonzero(np.isfinite(t))
         # the first accepted bracket of each value (one, but for values on a shared segment)
         first = good[np.unique(who[good], return_index=True)[1]] if good.size else good
         c, sh, th = cell[first], s[first][:, None], np.clip(t[first], 0.0, 1.0)[:, None]
@@ -207,38 +217,35 @@ class Collar:
         return out
 
     def _brackets(self, w):
-        """Every (value, cell, knot interval) where h changes sign near the value: index arrays and h at the ends."""
+        """Every (value, cell, knot interval) where h changes sign and the value lies in the box that
+        holds the interval's image: index arrays and h at the ends."""
         parts = []
-        for c, (s_k, v_k, g_k) in enumerate(self._knots):  # loop over cells, vectorised over the values near one
-            corners = np.concatenate([g_k, v_k])
-            lo, hi = corners.min(axis=0), corners.max(axis=0)
-            pad = 0.5 * (hi - lo).max() + 1e-12 * (1.0 + np.abs(corners).max())
-            near = np.flatnonzero(((w >= lo - pad) & (w <= hi + pad)).all(axis=1))  # near this cell's image
+        for c, (s_k, v_k, g_k, box_lo, box_hi) in enumerate(self._knots):  # loop over cells, vectorised over the values near one
+            near = np.flatnonzero(((w >= box_lo.min(axis=0)) & (w <= box_hi.max(axis=0))).all(axis=1))
             if not near.size:
                 continue
+            wn = w[near]
+            # the knot intervals whose image's box holds the value: every other interval's image misses it
+            held = ((wn[:, None, :] >= box_lo[None]) & (wn[:, None, :] <= box_hi[None])).all(axis=2)
+            row, col = np.nonzero(held)
+            if not row.size:
+                continue
             d_k = v_k - g_k
-            rel = w[near][:, None, :] - g_k[None]
-            hs = _cross(rel, d_k[None])
-            sgn = np.sign(hs)
-            change = sgn[:, :-1] * sgn[:, 1:] <= 0
-            # lines through far values cross too: only brackets where the segment at the
-            # interpolated crossing comes near w (t within [-1, 2])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                lam = np.clip(hs[:, :-1] / (hs[:, :-1] - hs[:, 1:]), 0.0, 1.0)[..., None]
-                gs = g_k[None, :-1] + lam * (g_k[1:] - g_k[:-1])[None]
-                ds = d_k[None, :-1] + lam * (d_k[1:] - d_k[:-1])[None]
-                ts = ((w[near][:, None, :] - gs) * ds).sum(axis=2) / (ds * ds).sum(axis=2)
-            change &= ~(np.abs(ts - 0.5) > 1.5)
-            row, col = np.nonzero(change)
-            if row.size:
-                parts.append((near[row], np.full(row.size, c), s_k[col], s_k[col + 1], hs[row, col], hs[row, col + 1]))
+            h_lo = _cross(wn[row] - g_k[col], d_k[col])
+            h_hi = _cross(wn[row] - g_k[col + 1], d_k[col + 1])
+            # lines through far values cross too; the boxes leave those out
+            change = np.sign(h_lo) * np.sign(h_hi) <= 0
+            if change.any():
+                row, col = row[change], col[change]
+                parts.append((near[row], np.full(row.size, c), s_k[col], s_k[col + 1], h_lo[change], h_hi[change]))
         if not parts:
             empty = np.zeros(0)
             return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp), empty, empty, empty, empty
         return tuple(np.concatenate(col) for col in zip(*parts))
 
     def _roots(self, w, c, s0, s1, h0, h1):
-        """s in each bracket [s0, s1] of cell c where h changes sign (Illinois, all at once), and t there."""
+        """s in each bracket [s0, s1] of cell c where h changes sign (Illinois, all at once), and t there
+        (NaN unless w lies on the segment there, to the closed form's rounding: `MISS`)."""
         b = self.band
         a, z = s0.astype(np.float64), s1.astype(np.float64)
         fa, fz = h0.astype(np.float64), h1.astype(np.float64)
@@ -275,12 +282,24 @@ class Collar:
             t = ((w - gf) * d).sum(axis=1) / (d * d).sum(axis=1)
         miss = np.hypot(*(gf + t[:, None] * d - w).T)
         scale = np.hypot(*d.T)
-        t[~(miss <= 1e-9 * np.maximum(scale, 1e-300) + 1e-12 * np.abs(w).max(axis=1))] = np.nan
+        scale = np.maximum(scale, 1e-300)
+        # w on the segment, within the closed form's rounding (MISS) across it and along it
+        slack = EDGE_SLACK + self._miss / scale
+        on = (miss <= 1e-9 * scale + self._miss) & (t >= -slack) & (t <= 1.0 + slack)
+        t[~on] = np.nan
         return s, t
 
     @property
     def _knots(self):
-        """Per cell: the parameters s where phi(G(s)) is known, its values there (ends included), and g(F(s))."""
+        """Per cell: the parameters s where phi(G(s)) is known (the pieces' centres, and the ends), its
+        values there, g(F(s)) there, and per interval between two of them a box (lower and upper
+        corners) holding the interval's image.
+
+        The box is proved, up to rounding: on an interval, g(F(s)) lies on the chord of the data
+        within `BoundaryData.stray`, and phi(G(s)) in the capsules of the certificate's pieces that
+        cover it (the two whose centres end it); the collar's segments between them, and the
+        values `_roots` accepts (within `MISS` of a segment), lie in the box of those.
+        """
         cached = self.__dict__.get("_knots_cache")
         if cached is not None:
             return cached
@@ -292,13 +311,38 @@ class Collar:
         on_gamma = np.full(n, -1, dtype=np.intp)
         on_gamma[b.of_gamma] = np.arange(len(b.of_gamma))
         kg = self.knots[:, 0].astype(np.intp)
+        pad = self._miss
         out = []
         for c in range(n):  # loop over cells: knots of its Gamma edge, between the two ends
             mine = np.flatnonzero(kg == on_gamma[c])
-            order = np.argsort(self.knots[mine, 1], kind="stable")
-            s_k = np.concatenate([[0.0], self.knots[mine[order], 1], [1.0]])
-            v_k = np.concatenate([v0[c][None], self.knots[mine[order], 2:4], v1[c][None]])
-            out.append((s_k, v_k, self._data(np.full(len(s_k), c), s_k)[0]))
+            mine = mine[np.argsort(self.knots[mine, 1], kind="stable")]
+            s_k = np.concatenate([[0.0], self.knots[mine, 1], [1.0]])
+            v_k = np.concatenate([v0[c][None], self.knots[mine, 2:4], v1[c][None]])
+            g_k = self._data(np.full(len(s_k), c), s_k)[0]
+            # the capsules: w0 +- r D0, thickened; interval j is covered by pieces j - 1 and j
+            reach = np.abs(self.knots[mine, 4:6]) + self.knots[mine, 6:7]
+            cap_lo, cap_hi = self.knots[mine, 2:4] - reach, self.knots[mine, 2:4] + reach
+            lo, hi = np.full((len(s_k) - 1, 2), np.inf), np.full((len(s_k) - 1, 2), -np.inf)
+            if len(mine):
+                lo[:-1], hi[:-1] = cap_lo, cap_hi
+                lo[1:], hi[1:] = np.minimum(lo[1:], cap_lo), np.maximum(hi[1:], cap_hi)
+            else:  # no piece to bound phi(G(s)) (not expected: every edge of Gamma has one): anywhere
+                lo[:], hi[:] = -np.inf, np.inf
+            # the data over each interval: the tangent at its middle +- half, and how far they stray from it
+            t_a = b.t0[c] + s_k[:-1] * (b.t1 - b.t0)[c]
+            t_b = b.t0[c] + s_k[1:] * (b.t1 - b.t0)[c]
+            e = np.full(len(t_a), b.edge[c])
+            half = 0.5 * (t_b - t_a)
+            gm = self.data.points(e, 0.5 * (t_a + t_b))
+            span = np.abs(self.data.tangent(e, 0.5 * (t_a + t_b)) * half[:, None])
+            stray = self.data.stray(e, t_a, t_b, half)[:, None]
+            lo, hi = np.minimum(lo, gm - span - stray), np.maximum(hi, gm + span + stray)
+            out.append((s_k, v_k, g_k, lo - pad, hi + pad))
         object.__setattr__(self, "_knots_cache", out)
         return out
 
+    @property
+    def _miss(self) -> float:
+        """How far from a segment a value may be and still be found on it (`MISS` of Theta's size)."""
+        theta = np.asarray(self.data.theta, dtype=np.float64)
+        return MISS * float(np.ptp(theta, axis=0).max())
