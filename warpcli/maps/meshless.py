@@ -346,6 +346,16 @@ class SmoothMap(ThetaMap):
         mesh = mesh_polygon(self.polygon, max(area / GUESS_TRIANGLES, 1e-12 * area))
         return mesh, self.evaluate(mesh.vertices).points
 
+    def precompute(self, side: str) -> None:
+        """Make now what a pull-back asks first: the certificate with the collar's band (`collar`), and
+        for the ``"inverse"`` side the first guess's triangulation (`_guess_mesh`). Built in a forked
+        child (`_Method.build_forked`), the map comes back with them: made there beside the other
+        map's build, not by the parent on one GIL."""
+        self.certify()
+        _ = self.collar
+        if side == "inverse":
+            _ = self._guess_mesh
+
     def certify(self) -> Certificate:
         return self._certificate
 
@@ -477,6 +487,27 @@ class _Method:
         phi.timings["solve"] = time.perf_counter() - t0
         return phi
 
+    def build_forked(
+        self, polygon: Polygon, theta: Theta, options, role: str = "source", region=None, *, precompute: str | None = None,
+    ) -> _Forked | None:
+        """`build` in a forked child process, with `SmoothMap.precompute` for side ``precompute``
+        (the certificate and collar whatever the side); None where that is not available
+        (`warpcli._fork.available`). ``.result()`` is what `build` returns, bit for bit.
+
+        The fit (LAPACK), the certificate and the first guess's mesh hold the GIL
+        for most of their time: on two threads the two maps took turns (measured:
+        the two builds of a 1 MP warp on threads ended together, each as long as
+        both). In two children they run on two cores while the parent reads the image."""
+        from .._fork import available
+
+        if not available():
+            return None
+        _load_runtime()  # before the fork: loaded once, for the children and this process
+        try:
+            return _Forked(self, polygon, theta, options, role, region, precompute)
+        except OSError:  # no memory or processes left for a child: the caller builds on a thread
+            return None
+
     def fit_bytes(self, m: int) -> int:
         """About how many bytes a warp with ``m`` nodes holds at its peak (`FIT_BYTES_PER_NODE2`)."""
         return FIT_BYTES_PER_NODE2[self.name] * int(m) ** 2
@@ -544,7 +575,59 @@ class _Method:
             raise MeshingError(f"{polygon.name}: MFS with m = {err.m} sites: {err}; use --method fem or bem") from None
 
     def prepare(self) -> None:
-        """Nothing to warm up beyond what the first fit compiles."""
+        """Load what the pull-back imports and calls first, while the maps are built.
+
+        `warpcli.maps.compose.build_map` runs this on a thread of its own: the kernels'
+        runtime (`_load_runtime`), the modules the maps (and their pickles, from forked
+        children) and the inverse need, and numpy.ma (``np.unique``'s test for masked
+        arrays imports it: 10-20 ms the collar's inverse would otherwise pay in the
+        pull-back).
+        """
+        import numpy.ma  # noqa: F401
+
+        from . import newton  # noqa: F401
+        from .fem import locate  # noqa: F401
+
+        if self.name == "bem":
+            from . import bem, bem_eval  # noqa: F401
+        else:
+            from . import mfs  # noqa: F401
+        _load_runtime()
+
+
+def _load_runtime() -> None:
+    """The compiled kernels' runtime (llvmlite and its JIT engine: 0.04 s quiet) and the polygon
+    test every certificate and pull-back calls, loaded by a call on a triangle."""
+    v = np.array([0.0, 1.0, 0.0])
+    _compiled.inside_points(np.zeros(1), np.zeros(1), v, v[::-1].copy(), np.zeros(1, dtype=np.bool_))
+
+
+def _built_to_send(method: _Method, polygon: Polygon, theta: Theta, options, role: str, region, side) -> SmoothMap:
+    """What a forked child runs (`_Method.build_forked`): the map, with what its side's pull-back asks first."""
+    phi = method.build(polygon, theta, options, role, region)
+    phi.precompute(side or "")
+    return phi
+
+
+class _Forked:
+    """A BEM or MFS map being built in a forked child (`warpcli._fork`); `result` gives it."""
+
+    def __init__(self, method: _Method, polygon: Polygon, theta: Theta, options, role: str, region, side) -> None:
+        from .._fork import Forked
+
+        self.name = polygon.name
+        self._child = Forked(_built_to_send, method, polygon, theta, options, role, region, side)
+
+    def result(self) -> SmoothMap:
+        from .._fork import ChildDied
+
+        try:
+            return self._child.result()
+        except ChildDied as err:
+            raise MeshingError(f"{self.name}: the process fitting and certifying it {err}") from None
+
+    def cancel(self) -> None:
+        self._child.cancel()
 
 
 BEM = _Method("bem")
