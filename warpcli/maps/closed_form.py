@@ -32,6 +32,7 @@ __all__ = [
     "fast_log",
     "interior_angles",
     "local_edges",
+    "load_lstsq",
     "lstsq",
     "node_data",
     "on_edges",
@@ -471,6 +472,16 @@ def _gelsd(A, b, cond: float | None) -> NDArray[np.float64]:
     if info < 0:
         raise ValueError(f"illegal value in {-info}-th argument of internal gelsd")
     return x[:n]
+
+
+def load_lstsq() -> None:
+    """Load what `lstsq` calls (LAPACK's module, threadpoolctl) now: before a fork, the
+    children find them loaded rather than each loading them again."""
+    from threadpoolctl import threadpool_limits
+
+    _flapack()
+    with threadpool_limits(limits=1, user_api="blas"):
+        pass
 
 
 _FLAPACK_NAME = "scipy.linalg._flapack"

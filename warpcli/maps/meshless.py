@@ -502,7 +502,10 @@ class _Method:
 
         if not available():
             return None
-        _load_runtime()  # before the fork: loaded once, for the children and this process
+        # Before the fork (beside the image's decoding), loaded once for the children and this process
+        # (which unpickles the maps) rather than in each.
+        _load_runtime()
+        self._load_fit()
         try:
             return _Forked(self, polygon, theta, options, role, region, precompute)
         except OSError:  # no memory or processes left for a child: the caller builds on a thread
@@ -562,6 +565,16 @@ class _Method:
         )  # fmt: skip
         return m
 
+    def _load_fit(self) -> None:
+        """Import the fit's modules and load its least squares' LAPACK (`closed_form.load_lstsq`)."""
+        from .closed_form import load_lstsq
+
+        if self.name == "bem":
+            from . import bem  # noqa: F401
+        else:
+            from . import mfs  # noqa: F401
+        load_lstsq()
+
     def _fit(self, polygon: Polygon, theta: Theta, m: int | None, boundary: str, free):
         if self.name == "bem":
             from .bem import fit_bem
@@ -589,9 +602,8 @@ class _Method:
         from .fem import locate  # noqa: F401
 
         if self.name == "bem":
-            from . import bem, bem_eval  # noqa: F401
-        else:
-            from . import mfs  # noqa: F401
+            from . import bem_eval  # noqa: F401
+        self._load_fit()
         _load_runtime()
 
 
