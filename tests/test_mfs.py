@@ -371,3 +371,24 @@ def test_a_meshless_fit_does_not_import_scipy_linalg():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert "'scipy.linalg'" not in out and "scipy.linalg._flapack" in out
+
+
+def test_the_grid_path_of_a_smooth_map_is_the_default_one():
+    """A smooth map's pixel-grid evaluation (its compiled even-odd test, `SmoothMap._inside_polygon`) gives
+    what `ThetaMap.evaluate_grid` defines: phi at the centres `warpcli.grid.inside_polygon` keeps, with
+    edges and vertices through pixel centres (where "inside" is decided by the test's arithmetic)."""
+    from warpcli import MapOptions, Polygon
+    from warpcli.grid import inside_polygon, pixel_centres
+    from warpcli.maps.compose import theta_for
+    from warpcli.maps.meshless import MFS
+
+    v = np.array([[2.5, 2.5], [30.5, 2.5], [30.5, 14.5], [16.5, 16.5], [14.5, 29.5], [2.5, 29.5]])
+    poly = Polygon(v, name="p")
+    opts = MapOptions(method="mfs", nodes=32)
+    phi = MFS.build(poly, theta_for(poly, poly, opts), opts)
+    got = phi.evaluate_grid(33, 32)
+    centres = pixel_centres(33, 32, (0, 32))
+    keep = np.flatnonzero(inside_polygon(centres, v))
+    want = phi.evaluate(centres[keep])
+    ok = np.isfinite(want.points[:, 0])
+    assert np.array_equal(got.pixels, keep[ok]) and got.values.tobytes() == want.points[ok].tobytes()
