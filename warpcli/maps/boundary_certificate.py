@@ -662,7 +662,6 @@ def _pairs_within(w: NDArray[np.complex128], radius: NDArray[np.float64]) -> tup
     the callers keep only pairs whose capsules meet, all well within the
     radius, so the same pairs come out whichever superset is searched.
     """
-    n = len(w)
     sweeps = []
     for coord in (w.real, w.imag):
         order = np.argsort(coord, kind="stable")
