@@ -273,6 +273,14 @@ def test_a_smooth_build_that_dies_in_its_child_names_the_polygon(monkeypatch):
         meshless.MFS.build_forked(sq, theta_for(sq, sq, opts), opts).result()
 
 
+_FORK_REQUESTED: list = []
+
+
+def _note_fork_request() -> None:
+    for event in _FORK_REQUESTED:
+        event.set()
+
+
 def test_a_fork_waits_for_a_kernel_being_loaded_and_the_child_can_load_kernels():
     """A child that loads a compiled kernel while a thread of the parent held the kernels' lock at the
     fork would wait forever: the fork waits for the lock (`warpcli._native`), the child gets its own."""
@@ -280,6 +288,11 @@ def test_a_fork_waits_for_a_kernel_being_loaded_and_the_child_can_load_kernels()
 
     from warpcli import _native
 
+    requested = threading.Event()
+    if not _FORK_REQUESTED:
+        # registered after warpcli._native's handler, so it runs before it: the fork has been asked for
+        os.register_at_fork(before=_note_fork_request)
+    _FORK_REQUESTED[:] = [requested]
     held, release = threading.Event(), threading.Event()
 
     def loader():
@@ -293,10 +306,13 @@ def test_a_fork_waits_for_a_kernel_being_loaded_and_the_child_can_load_kernels()
     forked = []
     forking = threading.Thread(target=lambda: forked.append(_fork.Forked(_native_kernel_call)))
     forking.start()
-    time.sleep(0.2)
-    assert not forked  # the fork waits while the lock is held
-    release.set()
-    worker.join()
+    try:
+        assert requested.wait(10)
+        assert not forked  # asked for while the lock is held: the fork waits
+    finally:
+        release.set()
+        worker.join()
+        _FORK_REQUESTED.clear()
     forking.join(20)
     assert forked and forked[0].result() is True
 
@@ -304,5 +320,6 @@ def test_a_fork_waits_for_a_kernel_being_loaded_and_the_child_can_load_kernels()
 def _native_kernel_call():
     from warpcli.maps.meshless import _load_runtime
 
+    signal.alarm(20)  # a child stuck on the lock ends (ChildDied) rather than hanging the suite
     _load_runtime()
     return True
