@@ -202,6 +202,7 @@ def main(argv=None) -> int:
         f"peak RSS by {runner.method}",
     ]
     rows = []
+    loads = []  # the 1-minute load average at the start of every timed round
     for mp in sizes:
         w, h = bench_run.image_dims(mp)
         progress(f"{mp:g} MP ({w}x{h}): inputs")
@@ -237,8 +238,10 @@ def main(argv=None) -> int:
             cmds[name] = cmd
         res = {name: ([], []) for name in cmds}
         for rnd in range(args.repeat + 1):
+            if rnd:
+                loads.append(os.getloadavg()[0])
             for name, cmd in cmds.items():
-                progress(f"{mp:g} MP round {rnd}/{args.repeat}: {name}")
+                progress(f"{mp:g} MP round {rnd}/{args.repeat}: {name} (load {os.getloadavg()[0]:.2f})")
                 wall, rss = run_child(runner, cmd, before_env if name.startswith("before") else env)
                 if rnd:  # round 0 warms the page cache and any kernel cache
                     res[name][0].append(wall)
@@ -246,6 +249,8 @@ def main(argv=None) -> int:
         rows.append((mp, w, h, res))
         print(table(rows, md=False, ref=args.ratio_to), flush=True)
     text = "\n".join(head) + "\n\n" + table(rows, md=True, ref=args.ratio_to) + "\n" + footer(rows, args.ratio_to) + "\n"
+    if loads:
+        text += f"1-minute load at the start of each timed round: {' '.join(f'{x:.2f}' for x in loads)}\n"
     methods = [m.strip() for m in args.editor_methods.split(",") if m.strip()]
     if methods:
         progress("editor rebuilds, in-process")
@@ -346,6 +351,13 @@ def footer(rows, ref: str = "floor") -> str:
     for mp, w, h, res in rows:
         spread = ", ".join(f"{n} {min(t):.2f}-{max(t):.2f}" for n, (t, _) in res.items())
         lines.append(f"- {mp:g} MP ({w}x{h}): {spread}")
+    for mp, w, h, res in rows:
+        if ref in res and len(res) > 1:
+            # each round runs every contender once, one after the other: the ratio within a round
+            # is less disturbed by a burst of load than the ratio of medians
+            per = ", ".join(f"{n} x{statistics.median(a / b for a, b in zip(t, res[ref][0])):.2f}"
+                            for n, (t, _) in res.items() if n != ref)
+            lines.append(f"- {mp:g} MP, median of the rounds' ratios to {ref}: {per}")
     lines.append(f"Ratios in brackets: to the {ref} measured in the same rounds.")
     return "\n".join(lines)
 

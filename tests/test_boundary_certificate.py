@@ -28,7 +28,7 @@ from nasty import SHAPES, dense_check, dense_samples
 from warpcli import MapOptions, Polygon, build_map
 from warpcli.boundary import nearest_edge
 from warpcli.grid import inside_polygon
-from warpcli.maps.boundary_certificate import certify_boundary, inner_offset
+from warpcli.maps.boundary_certificate import _pairs_within, certify_boundary, inner_offset
 from warpcli.maps.meshless import BAND_STEPS, BEM, MFS
 from warpcli.maps.theta import Theta
 from warpcli.maps.theta import regular as regular_theta
@@ -275,3 +275,29 @@ def test_an_mfs_fold_on_the_polygon_itself_is_real_and_the_map_is_proved_inside_
     assert not any(c.ok for c in nearer)
     assert cert.closer == (nearer[0].failed if nearer else 0)
     assert phi.certify().ok
+
+
+@pytest.mark.parametrize("kind", ["curve", "cloud", "axis", "ties"])
+@pytest.mark.parametrize("seed", range(4))
+def test_pairs_within_finds_exactly_the_pairs_a_dense_search_finds(kind, seed):
+    """The capsules' candidate pairs (`_pairs_within`): every (i, j) with |w_j - w_i| <= radius_i, against
+    all n^2 distances: points along a closed curve (as capsules' centres lie), a cloud, points on
+    lines parallel to the axes (a sweep's worst case), repeated points; radii over decades."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 300))
+    if kind == "curve":
+        t = np.sort(rng.uniform(0, 2 * np.pi, n))
+        w = (1 + 0.3 * np.cos(5 * t)) * np.exp(1j * t)
+    elif kind == "cloud":
+        w = rng.normal(size=n) + 1j * rng.normal(size=n)
+    elif kind == "axis":
+        w = np.where(rng.random(n) < 0.5, rng.integers(0, 3, n) + 1j * rng.uniform(0, 3, n),
+                     rng.uniform(0, 3, n) + 1j * rng.integers(0, 3, n))
+    else:
+        w = rng.integers(0, 4, n) + 1j * rng.integers(0, 4, n) + 0.0
+    radius = 10.0 ** rng.uniform(-4, 0.5, n)
+    i, j = _pairs_within(w, radius)
+    got = set(zip(i.tolist(), j.tolist()))
+    dense = np.abs(w[None, :] - w[:, None]) <= radius[:, None]
+    assert got == set(zip(*(x.tolist() for x in np.nonzero(dense))))
+    assert len(got) == len(i)  # no pair twice

@@ -222,3 +222,104 @@ def test_no_module_uses_the_locking_cached_property_of_the_standard_library():
         and re.search(r"functools\.cached_property|from functools import[^\n]*\bcached_property", path.read_text())
     ]
     assert offenders == []
+
+
+@pytest.mark.parametrize("method, side", [("mfs", ("source", "inverse")), ("mfs", ("target", "grid"))])
+def test_a_smooth_map_built_in_a_child_is_the_one_built_here_bit_for_bit(method, side):
+    """MFS in a forked child (`warpcli.maps.meshless`): the same fit, certificate, collar,
+    first-guess mesh (inverse side), and the same values and pre-images."""
+    from warpcli.maps.meshless import BEM, MFS
+
+    builder = {"bem": BEM, "mfs": MFS}[method]
+    src = Polygon(np.array([[0.0, 0.0], [40.0, 0.0], [40.0, 18.0], [22.0, 20.0], [20.0, 38.0], [0.0, 40.0]]), name="L")
+    dst = Polygon(np.array([[2.0, 0.0], [42.0, 4.0], [38.0, 20.0], [24.0, 22.0], [18.0, 36.0], [0.0, 38.0]]), name="L2")
+    opts = MapOptions(method=method, nodes=48)
+    theta = theta_for(src, dst, opts)
+    role, tables = side
+    region = (0.0, 0.0, 48.0, 48.0)
+    here = builder.build(src, theta, opts, role, region)
+    there = builder.build_forked(src, theta, opts, role, region, precompute=tables).result()
+    for name in ("coef", "sites", "nodes"):
+        if hasattr(here.solution, name):
+            assert np.asarray(getattr(here.solution, name)).tobytes() == np.asarray(getattr(there.solution, name)).tobytes()
+    # what the child made came with the map
+    assert {"boundary_certificate", "collar", "_certificate"} <= set(vars(there))
+    assert ("_guess_mesh" in vars(there)) == (tables == "inverse")
+    assert there.certify() == here.certify()
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(0.0, 40.0, (300, 2))
+    a, b = here.evaluate(pts, jacobian=True), there.evaluate(pts, jacobian=True)
+    assert a.points.tobytes() == b.points.tobytes() and a.jacobian.tobytes() == b.jacobian.tobytes()
+    q = a.points[np.isfinite(a.points).all(axis=1)]
+    assert here.inverse(q).points.tobytes() == there.inverse(q).points.tobytes()
+
+
+def test_bem_is_built_on_a_thread_not_forked():
+    """BEM's numba kernels would be loaded again in every child: its maps stay on threads."""
+    from warpcli.maps.meshless import BEM
+
+    sq = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), name="sq")
+    opts = MapOptions(method="bem")
+    assert BEM.build_forked(sq, theta_for(sq, sq, opts), opts) is None
+
+
+def test_a_smooth_build_that_dies_in_its_child_names_the_polygon(monkeypatch):
+    from warpcli.maps import meshless
+
+    monkeypatch.setattr(meshless, "_built_to_send", lambda *args: _die())
+    sq = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), name="square.json")
+    opts = MapOptions(method="mfs")
+    with pytest.raises(MeshingError, match="^square.json: the process fitting and certifying it killed by SIGSEGV"):
+        meshless.MFS.build_forked(sq, theta_for(sq, sq, opts), opts).result()
+
+
+_FORK_REQUESTED: list = []
+
+
+def _note_fork_request() -> None:
+    for event in _FORK_REQUESTED:
+        event.set()
+
+
+def test_a_fork_waits_for_a_kernel_being_loaded_and_the_child_can_load_kernels():
+    """A child that loads a compiled kernel while a thread of the parent held the kernels' lock at the
+    fork would wait forever: the fork waits for the lock (`warpcli._native`), the child gets its own."""
+    import threading
+
+    from warpcli import _native
+
+    requested = threading.Event()
+    if not _FORK_REQUESTED:
+        # registered after warpcli._native's handler, so it runs before it: the fork has been asked for
+        os.register_at_fork(before=_note_fork_request)
+    _FORK_REQUESTED[:] = [requested]
+    held, release = threading.Event(), threading.Event()
+
+    def loader():
+        with _native._LOCK:  # as a thread loading a kernel holds it
+            held.set()
+            release.wait(30)
+
+    worker = threading.Thread(target=loader)
+    worker.start()
+    assert held.wait(10)
+    forked = []
+    forking = threading.Thread(target=lambda: forked.append(_fork.Forked(_native_kernel_call)))
+    forking.start()
+    try:
+        assert requested.wait(10)
+        assert not forked  # asked for while the lock is held: the fork waits
+    finally:
+        release.set()
+        worker.join()
+        _FORK_REQUESTED.clear()
+    forking.join(20)
+    assert forked and forked[0].result() is True
+
+
+def _native_kernel_call():
+    from warpcli.maps.meshless import _load_runtime
+
+    signal.alarm(20)  # a child stuck on the lock ends (ChildDied) rather than hanging the suite
+    _load_runtime()
+    return True

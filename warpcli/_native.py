@@ -271,6 +271,26 @@ _LOCK = threading.RLock()
 _JIT = None
 
 
+def _hold_for_fork() -> None:
+    _LOCK.acquire()
+
+
+def _release_after_fork() -> None:
+    _LOCK.release()
+
+
+def _new_lock_in_child() -> None:
+    global _LOCK
+    _LOCK = threading.RLock()
+
+
+if hasattr(os, "register_at_fork"):
+    # A forked child may load kernels (a BEM or MFS map certified there: `warpcli._fork`): a fork
+    # waits until no thread of the parent is loading one, so the child never inherits the lock
+    # held, or the JIT engine half way through adding a kernel, by a thread it does not have.
+    os.register_at_fork(before=_hold_for_fork, after_in_parent=_release_after_fork, after_in_child=_new_lock_in_child)
+
+
 class _JitEngine:
     """One MCJIT engine holding every kernel loaded in this process."""
 

@@ -143,12 +143,16 @@ class ThetaMap(ABC):
         """
         r0, r1 = rows if rows is not None else (0, height)
         centres = pixel_centres(width, height, (r0, r1))
-        inside = np.flatnonzero(inside_polygon(centres, self.polygon.points))
+        inside = np.flatnonzero(self._inside_polygon(centres))
         mapped = self.evaluate(centres[inside], jacobian=jacobian)
         ok = np.isfinite(mapped.points[:, 0])
         pixels = (inside[ok] + r0 * width).astype(np.int64)
         jac = mapped.jacobian[ok] if mapped.jacobian is not None else None
         return GridSample(pixels, mapped.points[ok], jac)
+
+    def _inside_polygon(self, points: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """`warpcli.grid.inside_polygon` against the polygon (a method may give the same booleans faster)."""
+        return inside_polygon(points, self.polygon.points)
 
     def to_theta_parameter(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
         """The boundary behaviour: the parameter along Theta's edge i of parameter t along the

@@ -10,10 +10,14 @@ graded towards the polygon's corners (`boundary_nodes`), by least squares
 
 from __future__ import annotations
 
+import importlib.machinery
+import importlib.util
+import os
+import sys
+import threading
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from ..boundary import to_theta_parameter
@@ -28,6 +32,7 @@ __all__ = [
     "fast_log",
     "interior_angles",
     "local_edges",
+    "load_lstsq",
     "lstsq",
     "node_data",
     "on_edges",
@@ -431,7 +436,84 @@ def lstsq(A: NDArray[np.float64], b: NDArray[np.float64], cond: float | None = N
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):
+        return _gelsd(A, b, cond)
+
+
+def _gelsd(A, b, cond: float | None) -> NDArray[np.float64]:
+    """``scipy.linalg.lstsq(A, b, cond=cond, lapack_driver="gelsd")[0]``, the same LAPACK calls with
+    the same arguments (so the same bits) for real float64 data, without importing scipy.linalg.
+
+    Importing scipy.linalg imports numpy.testing, unittest, importlib.metadata and more
+    (0.17 s of a 1.6 s MFS warp at 1 MP, on the map's path); its LAPACK routines live in one
+    extension module, loaded here from its file (`_flapack`). Other data, or a scipy whose
+    module cannot be loaded so, go through scipy.linalg itself.
+    """
+    a1 = np.asarray_chkfinite(A)  # lstsq's checks (check_finite=True): NaN or inf raise ValueError
+    b1 = np.asarray_chkfinite(b)
+    flapack = _flapack() if a1.dtype == np.float64 and b1.dtype == np.float64 and a1.ndim == 2 else None
+    m, n = a1.shape if a1.ndim == 2 else (0, 0)
+    if flapack is None or b1.ndim not in (1, 2) or b1.shape[0] != m or m < n or n == 0:
+        import scipy.linalg
+
         return scipy.linalg.lstsq(A, b, cond=cond, lapack_driver="gelsd")[0]
+    nrhs = b1.shape[1] if b1.ndim == 2 else 1
+    if cond is None:
+        cond = np.finfo(np.float64).eps
+    # scipy's _compute_lwork: the workspace query's sizes, as integers
+    work, iwork, info = flapack.dgelsd_lwork(m, n, nrhs, cond)
+    if info != 0:
+        raise ValueError(f"Internal work array size computation failed: {info}")
+    lwork, liwork = int(work.real), int(iwork.real)
+    if not (0 <= lwork <= np.iinfo(np.intc).max and 0 <= liwork <= np.iinfo(np.intc).max):
+        raise ValueError("Too large work array required -- computation cannot be performed with standard 32-bit LAPACK.")
+    x, _, _, info = flapack.dgelsd(a1, b1, lwork, liwork, cond, False, False)
+    if info > 0:
+        raise np.linalg.LinAlgError("SVD did not converge in Linear Least Squares")
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}-th argument of internal gelsd")
+    return x[:n]
+
+
+def load_lstsq() -> None:
+    """Load what `lstsq` calls (LAPACK's module, threadpoolctl) now: before a fork, the
+    children find them loaded rather than each loading them again."""
+    from threadpoolctl import threadpool_limits
+
+    _flapack()
+    with threadpool_limits(limits=1, user_api="blas"):
+        pass
+
+
+_FLAPACK_NAME = "scipy.linalg._flapack"
+_FLAPACK: list = []
+_FLAPACK_LOCK = threading.Lock()
+
+
+def _flapack():
+    """scipy's Fortran LAPACK extension module, loaded from its file without importing scipy.linalg
+    (as `warpcli.maps.fem.sparse` loads SuperLU), registered under its own name so that a later
+    ``import scipy.linalg`` finds this module; None if it cannot be loaded so."""
+    with _FLAPACK_LOCK:
+        if not _FLAPACK:
+            module = sys.modules.get(_FLAPACK_NAME)
+            if module is None:
+                try:
+                    spec = importlib.util.find_spec("scipy")
+                    folder = os.path.join(os.path.dirname(spec.origin), "linalg") if spec and spec.origin else ""
+                    path = next(
+                        (p for p in (os.path.join(folder, "_flapack" + x) for x in importlib.machinery.EXTENSION_SUFFIXES)
+                         if os.path.isfile(p)),
+                        None,
+                    )  # fmt: skip
+                    if path is not None:
+                        loader = importlib.machinery.ExtensionFileLoader(_FLAPACK_NAME, path)
+                        module = importlib.util.module_from_spec(importlib.util.spec_from_file_location(_FLAPACK_NAME, path, loader=loader))
+                        loader.exec_module(module)
+                        sys.modules[_FLAPACK_NAME] = module
+                except (ImportError, OSError):
+                    module = None
+            _FLAPACK.append(module if module is not None and hasattr(module, "dgelsd") and hasattr(module, "dgelsd_lwork") else None)
+        return _FLAPACK[0]
 
 
 def __getattr__(name: str):

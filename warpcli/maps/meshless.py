@@ -41,7 +41,6 @@ from ..boundary import BoundaryData, nearest_edge, on_boundary, slide
 from ..budget import MAX_IMAGE_BYTES_ENV, max_image_bytes
 from ..errors import InputError, MeshingError
 from ..files import format_bytes
-from ..grid import inside_polygon
 from ..polygon import Polygon
 from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, sliding_tables
 from .boundary_certificate import BoundaryCertificate, certify_boundary, offset_band
@@ -118,7 +117,7 @@ class SmoothMap(ThetaMap):
         finite = np.flatnonzero(np.isfinite(p).all(axis=1))
         edge, t, dist = nearest_edge(p[finite], self.polygon.points)
         near = np.flatnonzero(dist <= ON_BOUNDARY * self._size)
-        inside = inside_polygon(p[finite], self.polygon.points)
+        inside = self._inside_polygon(p[finite])
         inside[near] = False
         k = finite[inside]
         band = np.zeros(0, dtype=np.intp)
@@ -198,7 +197,7 @@ class SmoothMap(ThetaMap):
         if finite.size:
             scale = float(np.ptp(w, axis=0).max())
             near, edge, s = on_boundary(q[finite], w, ON_BOUNDARY * scale)
-            inside = inside_polygon(q[finite], w)
+            inside = _inside_points(q[finite], *self._theta_xy)
             inside[near] = False
             out[finite[near]] = self.boundary_from_theta(edge, s)
             k = finite[inside]
@@ -308,16 +307,16 @@ class SmoothMap(ThetaMap):
         """`warpcli.grid.inside_polygon` against the polygon, compiled (the same booleans): Newton's
         line search (BEM) asks it ~900 times in a 1 MP pull-back, most calls for a few points, where
         numpy's pass per edge cost 0.30 s of a 3.9 s single-thread pull-back (measured)."""
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        out = np.zeros(len(p), dtype=np.bool_)
-        if len(p):
-            vx, vy = self._polygon_xy
-            _compiled.inside_points(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), vx, vy, out)
-        return out
+        return _inside_points(points, *self._polygon_xy)
 
     @cached_property
     def _polygon_xy(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         v = np.asarray(self.polygon.points, dtype=np.float64)
+        return np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1])
+
+    @cached_property
+    def _theta_xy(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        v = np.asarray(self.theta.points, dtype=np.float64)
         return np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1])
 
     def _in_band(self, y: NDArray[np.float64]) -> NDArray[np.intp]:
@@ -345,6 +344,16 @@ class SmoothMap(ThetaMap):
         area = abs(self.polygon.signed_area)
         mesh = mesh_polygon(self.polygon, max(area / GUESS_TRIANGLES, 1e-12 * area))
         return mesh, self.evaluate(mesh.vertices).points
+
+    def precompute(self, side: str) -> None:
+        """Make now what a pull-back asks first: the certificate with the collar's band (`collar`), and
+        for the ``"inverse"`` side the first guess's triangulation (`_guess_mesh`). Built in a forked
+        child (`_Method.build_forked`), the map comes back with them: made there beside the other
+        map's build, not by the parent on one GIL."""
+        self.certify()
+        _ = self.collar
+        if side == "inverse":
+            _ = self._guess_mesh
 
     def certify(self) -> Certificate:
         return self._certificate
@@ -440,6 +449,17 @@ class SmoothMap(ThetaMap):
         return sliding_tables(self.theta.points, *self.solution.trace)
 
 
+def _inside_points(points: ArrayLike, vx: NDArray[np.float64], vy: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """`warpcli.grid.inside_polygon`'s booleans against the polygon (vx, vy), compiled: one pass over
+    the points rather than numpy's passes per edge (the pixel grid's test in the pull-back, 1 MP of
+    points against 12 edges: 0.36 of a 5.6 s single-thread pull-back under load, measured)."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    out = np.zeros(len(p), dtype=np.bool_)
+    if len(p):
+        _compiled.inside_points(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), vx, vy, out)
+    return out
+
+
 def _nearest_triangles(mesh, points: NDArray[np.float64]) -> NDArray[np.intp]:
     """The mesh triangle whose centroid is nearest each point (few points)."""
     c = mesh.vertices[mesh.triangles].mean(axis=1)
@@ -476,6 +496,33 @@ class _Method:
             log.warning("%s: the %s map folds with m = %d; fitting again with m = %d", polygon.name, self.name, phi.solution.m, m)
         phi.timings["solve"] = time.perf_counter() - t0
         return phi
+
+    def build_forked(
+        self, polygon: Polygon, theta: Theta, options, role: str = "source", region=None, *, precompute: str | None = None,
+    ) -> _Forked | None:
+        """`build` in a forked child process, with `SmoothMap.precompute` for side ``precompute``
+        (the certificate and collar whatever the side); None where that is not available
+        (`warpcli._fork.available`). ``.result()`` is what `build` returns, bit for bit.
+
+        The fit (LAPACK), the certificate and the first guess's mesh hold the GIL
+        for most of their time: on two threads the two maps took turns (measured:
+        the two builds of a 1 MP warp on threads ended together, each as long as
+        both). In two children they run on two cores while the parent reads the image."""
+        from .._fork import available
+
+        if not available() or self.name == "bem":
+            # BEM's kernels are numba's own (not `warpcli._native`'s): each child loaded them
+            # from numba's cache again, and the parent once more for the pull-back (measured at
+            # 1 MP under load: 6.77 s of CPU against 5.63 s on threads, the wall time worse too)
+            return None
+        # Before the fork (beside the image's decoding), loaded once for the children and this process
+        # (which unpickles the maps) rather than in each.
+        _load_runtime()
+        self._load_fit()
+        try:
+            return _Forked(self, polygon, theta, options, role, region, precompute)
+        except OSError:  # no memory or processes left for a child: the caller builds on a thread
+            return None
 
     def fit_bytes(self, m: int) -> int:
         """About how many bytes a warp with ``m`` nodes holds at its peak (`FIT_BYTES_PER_NODE2`)."""
@@ -531,6 +578,16 @@ class _Method:
         )  # fmt: skip
         return m
 
+    def _load_fit(self) -> None:
+        """Import the fit's modules and load its least squares' LAPACK (`closed_form.load_lstsq`)."""
+        from .closed_form import load_lstsq
+
+        if self.name == "bem":
+            from . import bem  # noqa: F401
+        else:
+            from . import mfs  # noqa: F401
+        load_lstsq()
+
     def _fit(self, polygon: Polygon, theta: Theta, m: int | None, boundary: str, free):
         if self.name == "bem":
             from .bem import fit_bem
@@ -544,7 +601,58 @@ class _Method:
             raise MeshingError(f"{polygon.name}: MFS with m = {err.m} sites: {err}; use --method fem or bem") from None
 
     def prepare(self) -> None:
-        """Nothing to warm up beyond what the first fit compiles."""
+        """Load what the pull-back imports and calls first, while the maps are built.
+
+        `warpcli.maps.compose.build_map` runs this on a thread of its own: the kernels'
+        runtime (`_load_runtime`), the modules the maps (and their pickles, from forked
+        children) and the inverse need, and numpy.ma (``np.unique``'s test for masked
+        arrays imports it: 10-20 ms the collar's inverse would otherwise pay in the
+        pull-back).
+        """
+        import numpy.ma  # noqa: F401
+
+        from . import newton  # noqa: F401
+        from .fem import locate  # noqa: F401
+
+        if self.name == "bem":
+            from . import bem_eval  # noqa: F401
+        self._load_fit()
+        _load_runtime()
+
+
+def _load_runtime() -> None:
+    """The compiled kernels' runtime (llvmlite and its JIT engine: 0.04 s quiet) and the polygon
+    test every certificate and pull-back calls, loaded by a call on a triangle."""
+    v = np.array([0.0, 1.0, 0.0])
+    _compiled.inside_points(np.zeros(1), np.zeros(1), v, v[::-1].copy(), np.zeros(1, dtype=np.bool_))
+
+
+def _built_to_send(method: _Method, polygon: Polygon, theta: Theta, options, role: str, region, side) -> SmoothMap:
+    """What a forked child runs (`_Method.build_forked`): the map, with what its side's pull-back asks first."""
+    phi = method.build(polygon, theta, options, role, region)
+    phi.precompute(side or "")
+    return phi
+
+
+class _Forked:
+    """A BEM or MFS map being built in a forked child (`warpcli._fork`); `result` gives it."""
+
+    def __init__(self, method: _Method, polygon: Polygon, theta: Theta, options, role: str, region, side) -> None:
+        from .._fork import Forked
+
+        self.name = polygon.name
+        self._child = Forked(_built_to_send, method, polygon, theta, options, role, region, side)
+
+    def result(self) -> SmoothMap:
+        from .._fork import ChildDied
+
+        try:
+            return self._child.result()
+        except ChildDied as err:
+            raise MeshingError(f"{self.name}: the process fitting and certifying it {err}") from None
+
+    def cancel(self) -> None:
+        self._child.cancel()
 
 
 BEM = _Method("bem")
