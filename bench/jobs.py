@@ -17,8 +17,11 @@ warm-up run of each row on the first frames), on the same generated frames (a co
 a checker, different per frame; a 12-vertex star onto a rotated one). The rows are ``--jobs``
 values (``--jobs 1`` is one core: no threads, no child processes) and ``default`` (no
 ``--jobs``: every core the process may use). Prints the median wall time per row, the speed-up
-against the first row measured in the same rounds, the CPU seconds and the cores kept busy
-(CPU / wall), and whether every output file is byte-identical to the first row's.
+against the first row measured in the same rounds, the CPU seconds (user and system of the
+whole process tree: the figure to read on a loaded machine, where wall times follow the other
+work), of which system seconds, the cores kept busy (CPU / wall), the CPU against the first
+row's, and whether every output file is byte-identical to the first row's. Each round's line
+(on stderr) gives the load average next to its times.
 
 Two more rows put the speed-up in context, measured in the same rounds:
 
@@ -74,10 +77,10 @@ def digest(directory: str) -> dict[str, str]:
     return {name: hashlib.sha256(open(os.path.join(directory, name), "rb").read()).hexdigest() for name in sorted(os.listdir(directory))}
 
 
-def _children_cpu() -> float:
+def _children_cpu() -> tuple[float, float]:
     """User and system seconds of the finished child processes (and theirs) so far."""
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
+    return usage.ru_utime, usage.ru_stime
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -114,6 +117,8 @@ def main(argv: list[str] | None = None) -> None:
                 json.dump(pts, fh)
         times: dict[str, list[float]] = {row[0]: [] for row in rows}
         cpu: dict[str, list[float]] = {row[0]: [] for row in rows}
+        sys_cpu: dict[str, list[float]] = {row[0]: [] for row in rows}  # of which the kernel's (page faults, pipes)
+        loads: list[float] = []
         hashes: dict[str, dict[str, str]] = {}
         polys = ["--src", os.path.join(tmp, "src.json"), "--dst", os.path.join(tmp, "dst.json")]
 
@@ -140,24 +145,33 @@ def main(argv: list[str] | None = None) -> None:
         for r in range(args.rounds):
             for label, j, env, pin in (rows if r % 2 == 0 else rows[::-1]):
                 out = os.path.join(tmp, f"out{[row[0] for row in rows].index(label)}")
-                t0, c0 = time.perf_counter(), _children_cpu()
+                t0, (u0, s0) = time.perf_counter(), _children_cpu()
                 run(label, j, env, pin, out, args.frames)
                 times[label].append(time.perf_counter() - t0)
-                cpu[label].append(_children_cpu() - c0)
+                u1, s1 = _children_cpu()
+                cpu[label].append(u1 - u0 + s1 - s0)
+                sys_cpu[label].append(s1 - s0)
+                loads.append(os.getloadavg()[0])
                 hashes[label] = digest(out)
-                print(f"round {r + 1} jobs {label}: {times[label][-1]:.2f} s, {cpu[label][-1]:.2f} s of CPU", file=sys.stderr, flush=True)
+                print(f"round {r + 1} jobs {label}: {times[label][-1]:.2f} s, {cpu[label][-1]:.2f} s of CPU ({sys_cpu[label][-1]:.2f} system), "
+                      f"load {loads[-1]:.2f}", file=sys.stderr, flush=True)  # fmt: skip
     first = rows[0][0]
     base = statistics.median(times[first])
-    print(f"{args.shot}: {args.frames} frames of {w}x{h} {args.format.upper()}, {os.cpu_count()} cores, load {load_before:.2f} before, {os.getloadavg()[0]:.2f} after; median of {args.rounds}")
+    print(f"{args.shot}: {args.frames} frames of {w}x{h} {args.format.upper()}, {os.cpu_count()} cores, load {load_before:.2f} before, "
+          f"{os.getloadavg()[0]:.2f} after, {statistics.median(loads):.2f} median after each run; median of {args.rounds}")  # fmt: skip
     # Cores busy = CPU / wall: jobs 1 keeps one core busy, so on 2 cores the speed-up of
     # jobs 2 is at most about 2, less the serial start-up and what other processes take.
-    print(f"| jobs | seconds (median) | per frame | CPU seconds (median) | cores busy | speed-up vs jobs {first} | outputs identical to jobs {first} |")
-    print("|---|---:|---:|---:|---:|---:|---|")
+    # CPU seconds are user + system of the whole process tree (the workers too): on a loaded
+    # machine they are the steadier figure; system seconds show page faults and pipe copies.
+    print(f"| jobs | seconds (median) | per frame | CPU seconds (median) | of which system | cores busy | speed-up vs jobs {first} | CPU vs jobs {first} | outputs identical to jobs {first} |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---|")
+    base_cpu = statistics.median(cpu[first])
     for label, *_ in rows:
         m = statistics.median(times[label])
         c = statistics.median(cpu[label])
         busy = statistics.median(cj / tj for cj, tj in zip(cpu[label], times[label]))
-        print(f"| {label} | {m:.2f} | {m / args.frames:.3f} | {c:.2f} | {busy:.2f} | {base / m:.2f} | {'yes' if hashes[label] == hashes[first] else 'NO'} |")
+        print(f"| {label} | {m:.2f} | {m / args.frames:.3f} | {c:.2f} | {statistics.median(sys_cpu[label]):.2f} | {busy:.2f} | {base / m:.2f} | "
+              f"{c / base_cpu:.3f} | {'yes' if hashes[label] == hashes[first] else 'NO'} |")  # fmt: skip
     best = min(statistics.median(times[f"{j or 'default'}"]) for j in jobs)
     others = ", ".join(f"x{statistics.median(times[label]) / best:.2f} over jobs {label}" for label, *_ in rows if statistics.median(times[label]) > best)
     if others:

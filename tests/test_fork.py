@@ -323,3 +323,64 @@ def _native_kernel_call():
     signal.alarm(20)  # a child stuck on the lock ends (ChildDied) rather than hanging the suite
     _load_runtime()
     return True
+
+
+def _arrays(n, fill):
+    """Two large arrays (out of band: 10 n bytes) and a small one (in the pickle), of ``fill``."""
+    return {"a": np.full(n, fill, dtype=np.float64), "b": np.full((n // 4, 2), -fill, dtype=np.float32), "small": np.full(3, fill)}
+
+
+def _is(out, n, fill):
+    return (np.array_equal(out["a"], np.full(n, fill)) and np.array_equal(out["b"], np.full((n // 4, 2), -fill, np.float32))
+            and out["small"].tolist() == [fill] * 3)  # fmt: skip
+
+
+def _in_shared(shared, array, regions):
+    """Whether ``array``'s memory lies in one of ``shared``'s ``regions`` regions."""
+    at = array.ctypes.data
+    for k in range(regions):
+        start = np.frombuffer(shared.region(k), dtype=np.uint8).ctypes.data
+        if start <= at < start + shared.capacity:
+            return True
+    return False
+
+
+@settings(max_examples=6, deadline=None)
+@given(sizes=st.lists(st.integers(9_000, 60_000), min_size=4, max_size=4))  # "a": 72 kB or more, out of band
+def test_results_come_through_shared_memory_never_written_over_while_alive(sizes):
+    """A worker's large arrays come back in shared memory, without a copy; a region is lent again
+    only once the arrays made over it are gone, so results the caller keeps keep their values; with
+    no region free they come through the pipe."""
+    shared = _fork.SharedMemory(2, 10 * 60_000 + 128)
+    worker = _fork.Worker(_arrays, shared)
+
+    def call(k):
+        worker.submit(sizes[k], float(k + 1))
+        return worker.result()
+
+    try:
+        first, second = call(0), call(1)
+        assert _in_shared(shared, first["a"], 2) and _in_shared(shared, second["a"], 2)
+        third = call(2)  # both regions hold live results: through the pipe
+        assert not _in_shared(shared, third["a"], 2)
+        del first
+        fourth = call(3)  # the first's region, free again
+        assert _in_shared(shared, fourth["a"], 2)
+        for out, k in ((second, 1), (third, 2), (fourth, 3)):
+            assert _is(out, sizes[k], float(k + 1))  # none written over
+    finally:
+        worker.close()
+
+
+def test_an_array_larger_than_a_region_comes_through_the_pipe():
+    shared = _fork.SharedMemory(1, 1 << 17)
+    worker = _fork.Worker(_arrays, shared)
+    try:
+        worker.submit(40_000, 2.5)  # 320 kB, more than the region, through the pipe; 80 kB in the region
+        out = worker.result()
+        assert _is(out, 40_000, 2.5) and not _in_shared(shared, out["a"], 1) and _in_shared(shared, out["b"], 1)
+        del out
+        worker.submit(4_000, 1.5)  # 32 kB: in band, in the pickle
+        assert _is(worker.result(), 4_000, 1.5)
+    finally:
+        worker.close()

@@ -450,3 +450,20 @@ def test_a_builder_that_dies_fails_its_frames_and_the_others_go_on(tmp_path, mon
     items = warp_sequence(tmp_path / "in" / "shot.#.png", str(tmp_path / "o.#.png"), [1, 2, 3, 4, 5], src, dst, jobs=2)
     assert [i.error is None for i in items] == [True, True, False, True, True]
     assert "shot.0003.png: the process building its map ended: killed by SIGKILL" in str(items[2].error)
+
+
+def test_pipelined_plans_come_through_shared_memory_every_time(tmp_path, monkeypatch):
+    """Every map the workers build sends its plans through shared memory (`warpcli._fork.SharedMemory`):
+    the main process lets each run's plans go before it lends their region again, so no plan falls back
+    to the pipe for want of a free region."""
+    import warpcli._fork as fork
+    from warpcli.batch import warp_sequence
+
+    lent = []
+    real = fork.SharedMemory.lend
+    monkeypatch.setattr(fork.SharedMemory, "lend", lambda self: lent.append(real(self)) or lent[-1])
+    _frames(tmp_path / "in", range(1, 7))
+    src, dst = _animated(tmp_path, 5, 1, 6)
+    items = warp_sequence(tmp_path / "in" / "shot.#.png", str(tmp_path / "o.#.png"), range(1, 7), src, dst, jobs=2)
+    assert all(i.error is None for i in items)
+    assert len(lent) == 6 and None not in lent and len(set(lent)) <= 3  # a region per worker and one more

@@ -801,11 +801,12 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
 
     A map holds the GIL while it is built (triangle, SuperLU), so the builds go
     to forked children, each with a GIL of its own (`warpcli._fork.Worker`:
-    forked once, not per map); only the sampling plans (arrays) come back.
-    Runs are taken in frame order, so items, ``on_item`` calls and log records
-    (a child's are logged when its plans are taken, as `warp_run` would have
-    logged them while building) come in the order of ``jobs=1``, and the plans
-    are those `warp_run` makes, bit for bit.
+    forked once, not per map); only the sampling plans (arrays) come back,
+    through memory shared with the workers (`warpcli._fork.SharedMemory`: no
+    copy through a pipe). Runs are taken in frame order, so items, ``on_item``
+    calls and log records (a child's are logged when its plans are taken, as
+    `warp_run` would have logged them while building) come in the order of
+    ``jobs=1``, and the plans are those `warp_run` makes, bit for bit.
     """
     from collections import deque
 
@@ -815,6 +816,7 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
     queue: deque = deque()  # (tasks, the worker building their plans or None), in run order
     workers: list[Worker] = []
     todo = iter(zip(runs, sizes))
+    shared = _plan_memory(sizes, opts, width)
 
     def idle() -> Worker | None:
         for worker in workers:
@@ -822,7 +824,7 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
                 return worker
         if len(workers) < width:
             try:
-                workers.append(Worker(_plans_in_child))
+                workers.append(Worker(_plans_in_child, shared))
             except OSError:  # no process left: the runs are built here, when their turn comes
                 return None
             return workers[-1]
@@ -849,6 +851,19 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
             items.append(item)
             if on_item is not None:
                 on_item(item)
+
+    def warp_frames(tasks, plans) -> None:
+        # A function of its own: the plans are let go when it returns, before the next
+        # result is taken, so that their shared memory can be lent to the next build.
+        cache = PlanCache(None, opts, plans)
+        run_maps = None if maps is None else RunMaps(maps)
+
+        def one(task):
+            if task[2] in missing:
+                return missing[task[2]]
+            return warp_one(task[0], task[1], cache, frame=task[2], maps=run_maps)
+
+        items.extend(_each(one, list(tasks), jobs, on_item))
 
     # The method's kernels loaded here, once, before the builders are forked:
     # each would load its own copy otherwise (about 0.1 s of CPU each).
@@ -880,20 +895,40 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
                       for inp, out, f in tasks])  # fmt: skip
                 continue
             fill()  # the next maps are built while these frames are warped
-            cache = PlanCache(None, opts, plans)
-            run_maps = None if maps is None else RunMaps(maps)
-
-            def one(task, cache=cache, run_maps=run_maps):
-                if task[2] in missing:
-                    return missing[task[2]]
-                return warp_one(task[0], task[1], cache, frame=task[2], maps=run_maps)
-
-            items.extend(_each(one, list(tasks), jobs, on_item))
+            warp_frames(tasks, plans)
+            del plans
         failed = False
     finally:
         for worker in workers:  # after an error, the builds still running are not waited for
             worker.close(kill=failed)
     return items
+
+
+def _plan_memory(sizes, opts: WarpOptions, width: int):
+    """Shared memory for the sampling plans of `_pipelined`'s workers (`warpcli._fork.SharedMemory`),
+    or None where it would not fit in the memory budget (the plans then come through pipes).
+
+    A region per worker and one more (the plans this process warps with while
+    the workers build the next); each holds a run's plans: the points and
+    Jacobians of every pixel of each output size (48 bytes a pixel, the most
+    a window takes) and their edge coverage (a few values per pixel of the
+    perimeter). Only the pages written take memory.
+    """
+    from ._fork import SharedMemory
+    from .budget import max_image_bytes
+
+    def plan_bytes(w: int, h: int) -> int:
+        per_pixel = 16 + (32 if opts.antialias and opts.interp != "nearest" else 0)
+        return w * h * per_pixel + 64 * (w + h) * 8 + (1 << 20)
+
+    capacity = max((sum(plan_bytes(w, h) for w, h in run_sizes) for run_sizes in sizes), default=0)
+    count = width + 1
+    if capacity == 0 or count * capacity > max_image_bytes():
+        return None
+    try:
+        return SharedMemory(count, capacity)
+    except (OSError, ValueError):  # no shared memory to be had: the pipes
+        return None
 
 
 def _in_processes(units, pairs, opts, maps, width, on_item, missing) -> list[BatchItem]:
