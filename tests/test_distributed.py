@@ -165,7 +165,10 @@ def test_a_fifo_among_the_inputs_does_not_block_before_the_cluster(tmp_path):
     assert done.returncode == 2 and "cannot reach the Dask scheduler" in done.stderr, done.stderr
 
 
-@pytest.mark.parametrize("kill_after", [1, 3])
+# One kill point: after the first image, the most images (seven) are still to run on plans the
+# dead worker held; killing after the third took the same path (the plans shipped again; about 12 s of CPU,
+# a second local cluster) and nothing more.
+@pytest.mark.parametrize("kill_after", [1])
 def test_a_worker_killed_mid_batch_loses_no_image_and_dask_stays_quiet(tmp_path, capfd, kill_after):
     # The worker holding the only copy of the plans (the second one joins
     # after they were shipped) is killed: every image still to run would fail
