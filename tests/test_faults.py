@@ -120,12 +120,12 @@ def test_the_cli_reports_a_full_disk_on_one_line(full_disk, tmp_path, case):
     inp = tmp_path / f"in.{ext}"
     write_image(inp, RasterImage(noise(256, 256, channels, dtype)))
     frame = write_polygon(tmp_path / "frame.json", [[0, 0], [256, 0], [256, 256], [0, 256]])
-    out = full_disk / f"out.{ext}"
-    args = [sys.executable, "-m", "warpcli", str(inp), "--src", frame, "--dst", frame, str(out), "--interp", "nearest"]
-    done = subprocess.run(args, capture_output=True, text=True, cwd=REPO, timeout=300)
+    out = f"out.{ext}"  # as a user types it, in the directory it goes to: the message names it so
+    args = [sys.executable, "-m", "warpcli", str(inp), "--src", frame, "--dst", frame, out, "--interp", "nearest"]
+    done = subprocess.run(args, capture_output=True, text=True, cwd=full_disk, timeout=300)
     assert done.returncode == 1, done.stderr
     lines = done.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"warp: error: {out}: cannot write: No space left on device")
+    assert len(lines) == 1 and lines[0].startswith(f"warp: error: {out}: cannot write: No space left on device"), lines
     assert listing(full_disk) == []
 
 

@@ -560,7 +560,7 @@ class PendingOutputs:
     """
 
     def __init__(self) -> None:
-        self._pending: list[tuple[str, str]] = []
+        self._pending: list[tuple[str, str, str]] = []  # (pending, final, the user's name for it)
 
     def __enter__(self) -> PendingOutputs:
         return self
@@ -584,7 +584,7 @@ class PendingOutputs:
         fd, tmp = _new_temporary(f".{stem}{PENDING_MARKER}", ext, directory)
         os.close(fd)
         _finals[tmp] = os.fspath(final)
-        self._pending.append((tmp, name))
+        self._pending.append((tmp, name, os.fspath(final)))
         return tmp
 
     def __exit__(
@@ -592,30 +592,30 @@ class PendingOutputs:
     ) -> None:
         global _renaming, _end_after_renames
         pending, self._pending = self._pending, []
-        for tmp, _ in pending:
+        for tmp, _, _ in pending:
             _finals.pop(tmp, None)
         if exc_type is None:
             _renaming += 1
             try:
-                for k, (tmp, final) in enumerate(pending):
+                for k, (tmp, final, shown) in enumerate(pending):
                     os.chmod(tmp, output_mode(final))
                     os.replace(tmp, final)
                     _live.discard(tmp)
             except OSError as err:
-                _remove(tmp for tmp, _ in pending[k:])
-                raise ImageIOError(f"{final}: cannot move the output into place: {err.strerror or err}") from err
+                _remove(tmp for tmp, _, _ in pending[k:])
+                raise ImageIOError(f"{shown}: cannot move the output into place: {err.strerror or err}") from err
             finally:
                 _renaming -= 1
                 end, _end_after_renames = _end_after_renames, None
                 if end is not None and not _renaming:
                     end()
         else:
-            _remove(tmp for tmp, _ in pending)
+            _remove(tmp for tmp, _, _ in pending)
             # Messages name the user's paths, not the pending ones.
             text = str(exc)
             renamed = text
-            for tmp, final in pending:
-                renamed = renamed.replace(tmp, final)
+            for tmp, _, shown in pending:
+                renamed = renamed.replace(tmp, shown)
             if renamed != text and isinstance(exc, WarpError):
                 raise type(exc)(renamed) from exc
 
