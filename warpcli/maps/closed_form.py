@@ -10,16 +10,13 @@ graded towards the polygon's corners (`boundary_nodes`), by least squares
 
 from __future__ import annotations
 
-import importlib.machinery
-import importlib.util
-import os
-import sys
 import threading
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._extensions import scipy_extension
 from ..boundary import to_theta_parameter
 
 __all__ = [
@@ -490,28 +487,14 @@ _FLAPACK_LOCK = threading.Lock()
 
 
 def _flapack():
-    """scipy's Fortran LAPACK extension module, loaded from its file without importing scipy.linalg
-    (as `warpcli.maps.fem.sparse` loads SuperLU), registered under its own name so that a later
-    ``import scipy.linalg`` finds this module; None if it cannot be loaded so."""
+    """scipy's Fortran LAPACK extension module, loaded without importing scipy.linalg
+    (`warpcli._extensions.scipy_extension`); None if it cannot be loaded so."""
     with _FLAPACK_LOCK:
         if not _FLAPACK:
-            module = sys.modules.get(_FLAPACK_NAME)
-            if module is None:
-                try:
-                    spec = importlib.util.find_spec("scipy")
-                    folder = os.path.join(os.path.dirname(spec.origin), "linalg") if spec and spec.origin else ""
-                    path = next(
-                        (p for p in (os.path.join(folder, "_flapack" + x) for x in importlib.machinery.EXTENSION_SUFFIXES)
-                         if os.path.isfile(p)),
-                        None,
-                    )  # fmt: skip
-                    if path is not None:
-                        loader = importlib.machinery.ExtensionFileLoader(_FLAPACK_NAME, path)
-                        module = importlib.util.module_from_spec(importlib.util.spec_from_file_location(_FLAPACK_NAME, path, loader=loader))
-                        loader.exec_module(module)
-                        sys.modules[_FLAPACK_NAME] = module
-                except (ImportError, OSError):
-                    module = None
+            try:
+                module = scipy_extension(_FLAPACK_NAME)
+            except (ImportError, OSError):
+                module = None
             _FLAPACK.append(module if module is not None and hasattr(module, "dgelsd") and hasattr(module, "dgelsd_lwork") else None)
         return _FLAPACK[0]
 

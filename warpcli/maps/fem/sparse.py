@@ -23,16 +23,13 @@ cannot be loaded this way) goes through scipy.sparse as before.
 
 from __future__ import annotations
 
-import importlib.machinery
-import importlib.util
-import os
-import sys
 import threading
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..._extensions import scipy_extension
 from .mesh import triangle_areas
 from .topology import Edges, mesh_edges
 
@@ -206,33 +203,15 @@ _SUPERLU_NAME = "scipy.sparse.linalg._dsolve._superlu"
 
 
 def _superlu():
-    """scipy's SuperLU extension module, loaded without importing scipy.sparse.linalg.
-
-    Loaded from its file under its own name (and registered so), so a later
-    ``import scipy.sparse.linalg`` finds this module rather than another copy.
-    """
+    """scipy's SuperLU extension module, loaded without importing scipy.sparse.linalg
+    (`warpcli._extensions.scipy_extension`)."""
     global _SUPERLU
     with _SUPERLU_LOCK:
         if _SUPERLU is None:
-            module = sys.modules.get(_SUPERLU_NAME)
-            if module is None:
-                spec = importlib.util.find_spec("scipy")
-                if spec is None or not spec.origin:
-                    raise Unsupported("scipy not found")
-                folder = os.path.join(os.path.dirname(spec.origin), "sparse", "linalg", "_dsolve")
-                for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-                    path = os.path.join(folder, "_superlu" + suffix)
-                    if os.path.isfile(path):
-                        break
-                else:
-                    raise Unsupported(f"no SuperLU extension in {folder}")
-                loader = importlib.machinery.ExtensionFileLoader(_SUPERLU_NAME, path)
-                module_spec = importlib.util.spec_from_file_location(_SUPERLU_NAME, path, loader=loader)
-                if module_spec is None:
-                    raise Unsupported(f"cannot load {path}")
-                module = importlib.util.module_from_spec(module_spec)
-                loader.exec_module(module)
-                sys.modules[_SUPERLU_NAME] = module
+            try:
+                module = scipy_extension(_SUPERLU_NAME)
+            except ImportError as err:
+                raise Unsupported(str(err)) from err
             if not hasattr(module, "gstrf"):
                 raise Unsupported("SuperLU extension without gstrf")
             _SUPERLU = module
