@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..boundary import edge_points, from_theta_parameter, to_theta_parameter
+from ..errors import MeshingError
 from ..grid import inside_polygon, pixel_centres
 from ..mapping import Certificate, Mapped, as_points, matmul2
 from ..polygon import Polygon
@@ -238,3 +239,42 @@ def sliding_tables(theta: NDArray[np.float64], edge: ArrayLike, t: ArrayLike, im
     return tables
 
 
+
+
+class ForkedBuild:
+    """A map being built in a forked child (`warpcli._fork.Forked`); `result` gives it.
+
+    Parameters
+    ----------
+    name : str
+        The polygon's name, for messages.
+    doing : str
+        What the child does, for a message if it dies (``"meshing and solving"``).
+    fn, *args
+        What the child runs; its result (the map) must pickle.
+
+    Raises
+    ------
+    OSError
+        If no child can be forked (no memory or processes left).
+    """
+
+    def __init__(self, name: str, doing: str, fn, *args) -> None:
+        from .._fork import Forked
+
+        self.name = name
+        self._doing = doing
+        self._child = Forked(fn, *args)
+
+    def result(self) -> ThetaMap:
+        """The map, or `MeshingError` naming the polygon if the child died."""
+        from .._fork import ChildDied
+
+        try:
+            return self._child.result()
+        except ChildDied as err:
+            raise MeshingError(f"{self.name}: the process {self._doing} it {err}") from None
+
+    def cancel(self) -> None:
+        """Stop the child: its map is no longer wanted."""
+        self._child.cancel()

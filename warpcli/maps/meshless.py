@@ -42,7 +42,7 @@ from ..budget import MAX_IMAGE_BYTES_ENV, max_image_bytes
 from ..errors import InputError, MeshingError
 from ..files import format_bytes
 from ..polygon import Polygon
-from .base import Certificate, EdgeTables, Mapped, ThetaMap, as_points, inv2, sliding_tables
+from .base import Certificate, EdgeTables, ForkedBuild, Mapped, ThetaMap, as_points, inv2, sliding_tables
 from .boundary_certificate import BoundaryCertificate, certify_boundary, offset_band
 from .certificate import CellCertificate, band_floor, certify_cells, degenerate_vertices, vertex_ball
 from .collar import Collar
@@ -311,13 +311,11 @@ class SmoothMap(ThetaMap):
 
     @cached_property
     def _polygon_xy(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        v = np.asarray(self.polygon.points, dtype=np.float64)
-        return np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1])
+        return _columns(self.polygon.points)
 
     @cached_property
     def _theta_xy(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        v = np.asarray(self.theta.points, dtype=np.float64)
-        return np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1])
+        return _columns(self.theta.points)
 
     def _in_band(self, y: NDArray[np.float64]) -> NDArray[np.intp]:
         """Newton's pre-images (NaN: none found) that the collar must give instead: those in its
@@ -449,6 +447,12 @@ class SmoothMap(ThetaMap):
         return sliding_tables(self.theta.points, *self.solution.trace)
 
 
+def _columns(points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A polygon's x and y, each contiguous (what `_inside_points` takes)."""
+    v = np.asarray(points, dtype=np.float64)
+    return np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1])
+
+
 def _inside_points(points: ArrayLike, vx: NDArray[np.float64], vy: NDArray[np.float64]) -> NDArray[np.bool_]:
     """`warpcli.grid.inside_polygon`'s booleans against the polygon (vx, vy), compiled: one pass over
     the points rather than numpy's passes per edge (the pixel grid's test in the pull-back, 1 MP of
@@ -499,7 +503,7 @@ class _Method:
 
     def build_forked(
         self, polygon: Polygon, theta: Theta, options, role: str = "source", region=None, *, precompute: str | None = None,
-    ) -> _Forked | None:
+    ) -> ForkedBuild | None:
         """`build` in a forked child process, with `SmoothMap.precompute` for side ``precompute``
         (the certificate and collar whatever the side); None where that is not available
         (`warpcli._fork.available`). ``.result()`` is what `build` returns, bit for bit.
@@ -520,7 +524,7 @@ class _Method:
         _load_runtime()
         self._load_fit()
         try:
-            return _Forked(self, polygon, theta, options, role, region, precompute)
+            return ForkedBuild(polygon.name, "fitting and certifying", _built_to_send, self, polygon, theta, options, role, region, precompute)
         except OSError:  # no memory or processes left for a child: the caller builds on a thread
             return None
 
@@ -632,27 +636,6 @@ def _built_to_send(method: _Method, polygon: Polygon, theta: Theta, options, rol
     phi = method.build(polygon, theta, options, role, region)
     phi.precompute(side or "")
     return phi
-
-
-class _Forked:
-    """A BEM or MFS map being built in a forked child (`warpcli._fork`); `result` gives it."""
-
-    def __init__(self, method: _Method, polygon: Polygon, theta: Theta, options, role: str, region, side) -> None:
-        from .._fork import Forked
-
-        self.name = polygon.name
-        self._child = Forked(_built_to_send, method, polygon, theta, options, role, region, side)
-
-    def result(self) -> SmoothMap:
-        from .._fork import ChildDied
-
-        try:
-            return self._child.result()
-        except ChildDied as err:
-            raise MeshingError(f"{self.name}: the process fitting and certifying it {err}") from None
-
-    def cancel(self) -> None:
-        self._child.cancel()
 
 
 BEM = _Method("bem")

@@ -21,11 +21,10 @@ from numpy.typing import ArrayLike, NDArray
 from ..._cached import cached_property
 from ..._native import Kernels
 from ...boundary import nearest_edge
-from ...errors import MeshingError
 from ...options import MapOptions
 from ...polygon import Polygon
 from ...simplicial import PiecewiseLinear
-from ..base import Certificate, GridSample, Mapped, ThetaMap, as_points, inv2
+from ..base import Certificate, ForkedBuild, GridSample, Mapped, ThetaMap, as_points, inv2
 from ..straight import IdentityMap, straight_boundary
 from ..theta import TargetTheta, Theta
 from . import sparse, topology
@@ -406,32 +405,10 @@ def _built_to_send(
     return phi
 
 
-class _Forked:
-    """An FEM map being built in a forked child (`warpcli._fork`); `result` gives it."""
-
-    def __init__(self, polygon: Polygon, theta: Theta, options: MapOptions, role: str, region, side) -> None:
-        from ..._fork import Forked
-
-        self.name = polygon.name
-        sparse.load_superlu()  # in the parent, so the child imports nothing
-        self._child = Forked(_built_to_send, polygon, theta, options, role, region, side)
-
-    def result(self) -> FEMMap:
-        from ..._fork import ChildDied
-
-        try:
-            return self._child.result()
-        except ChildDied as err:
-            raise MeshingError(f"{self.name}: the process meshing and solving it {err}") from None
-
-    def cancel(self) -> None:
-        self._child.cancel()
-
-
 def build_forked(
     polygon: Polygon, theta: Theta, options: MapOptions, role: str = "source", region=None, *,
     precompute: str | None = None,
-) -> _Forked | None:
+) -> ForkedBuild | None:
     """`build` in a forked child process, so that it runs beside the other map's build
     (triangle and SuperLU hold the GIL, so threads take turns); None where that is
     not available (`warpcli._fork.available`) or not for these options (mixed
@@ -444,8 +421,9 @@ def build_forked(
         return None
     if role == "target" and isinstance(theta, TargetTheta):
         return None  # the identity (see `build`): nothing to build
+    sparse.load_superlu()  # in the parent, so the child imports nothing
     try:
-        return _Forked(polygon, theta, options, role, region, precompute)
+        return ForkedBuild(polygon.name, "meshing and solving", _built_to_send, polygon, theta, options, role, region, precompute)
     except OSError:  # no memory or processes left for a child: the caller builds on a thread
         return None
 
