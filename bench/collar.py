@@ -34,9 +34,9 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-from methods_table import bench_pairs, test_image, warm_up  # noqa: E402
+from methods_table import smooth_maps, test_image, warm_up  # noqa: E402
 
-from warpcli import MapOptions, build_map, warp_image  # noqa: E402
+from warpcli import warp_image  # noqa: E402
 from warpcli.grid import inside_polygon  # noqa: E402
 from warpcli.maps.newton import invert  # noqa: E402
 
@@ -84,30 +84,26 @@ def main(argv: list[str] | None = None) -> int:
     warm_up()
     print("| pair | method | m | band phi0 px | band phi1 px | certificate s | evaluations | band pixels | moved px | warp s |")
     print("|---|---|---|---:|---:|---:|---:|---:|---:|---:|")
-    for name, src, dst in bench_pairs(None):
-        for method in ("bem", "mfs"):
-            opts = MapOptions(method=method, src_boundary=args.behaviour, dst_boundary=args.behaviour)
-            try:
-                fm = build_map(src, dst, opts)
-            except Exception as err:  # a refusal is a result
-                print(f"| {name} | {method} | | refused: {err} |")
-                continue
-            cert_s, evals = [], 0
-            for _ in range(args.repeat):
-                t0 = time.perf_counter()
-                proofs = [phi.certify_boundary_at(phi.boundary_certificate.offset) for phi in (fm.phi0, fm.phi1)]
-                cert_s.append(time.perf_counter() - t0)
-                evals = sum(p.checked for p in proofs)
-            band = [p.offset if getattr(p, "band", False) else float("nan") for p in (fm.phi0.boundary_certificate, fm.phi1.boundary_certificate)]
-            count, moved = band_pixels(fm, size)
-            warps = []
-            for _ in range(args.repeat):
-                t0 = time.perf_counter()
-                warp_image(image, src, dst, map=opts)
-                warps.append(time.perf_counter() - t0)
-            m = fm.phi0.solution.m
-            print(f"| {name} | {method} | {m} | {band[0]:.3f} | {band[1]:.3f} | {statistics.median(cert_s):.2f} | {evals} | "
-                  f"{count} | {moved:.2e} | {statistics.median(warps):.2f} |", flush=True)  # fmt: skip
+    for name, method, src, dst, opts, fm in smooth_maps(args.behaviour):
+        if isinstance(fm, Exception):
+            print(f"| {name} | {method} | | refused: {fm} |")
+            continue
+        cert_s, evals = [], 0
+        for _ in range(args.repeat):
+            t0 = time.perf_counter()
+            proofs = [phi.certify_boundary_at(phi.boundary_certificate.offset) for phi in (fm.phi0, fm.phi1)]
+            cert_s.append(time.perf_counter() - t0)
+            evals = sum(p.checked for p in proofs)
+        band = [p.offset if getattr(p, "band", False) else float("nan") for p in (fm.phi0.boundary_certificate, fm.phi1.boundary_certificate)]
+        count, moved = band_pixels(fm, size)
+        warps = []
+        for _ in range(args.repeat):
+            t0 = time.perf_counter()
+            warp_image(image, src, dst, map=opts)
+            warps.append(time.perf_counter() - t0)
+        m = fm.phi0.solution.m
+        print(f"| {name} | {method} | {m} | {band[0]:.3f} | {band[1]:.3f} | {statistics.median(cert_s):.2f} | {evals} | "
+              f"{count} | {moved:.2e} | {statistics.median(warps):.2f} |", flush=True)  # fmt: skip
     print(f"\nload {os.getloadavg()[0]:.1f} at the end")
     return 0
 

@@ -131,6 +131,20 @@ def bench_pairs(names: tuple[str, ...] | None) -> list[tuple[str, Polygon, Polyg
     return out
 
 
+def smooth_maps(behaviour: str):
+    """BEM's and MFS's maps of every bench pair, with ``behaviour`` (``"linear"``, ``"quadratic"``)
+    at both ends: (name, method, src, dst, options, map) in turn, the map the exception where it
+    was refused (a refusal is a result)."""
+    for name, src, dst in bench_pairs(None):
+        for method in ("bem", "mfs"):
+            opts = MapOptions(method=method, src_boundary=behaviour, dst_boundary=behaviour)
+            try:
+                fm = build_map(src, dst, opts)
+            except Exception as err:
+                fm = err
+            yield name, method, src, dst, opts, fm
+
+
 def test_image() -> np.ndarray:
     """1118 x 894 RGB uint8: colour ramps and an 8 px checker."""
     y, x = np.mgrid[0:HEIGHT, 0:WIDTH]

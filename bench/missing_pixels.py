@@ -25,9 +25,8 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-from methods_table import HEIGHT, WIDTH, bench_pairs  # noqa: E402
+from methods_table import HEIGHT, WIDTH, smooth_maps  # noqa: E402
 
-from warpcli import MapOptions, build_map  # noqa: E402
 from warpcli.boundary import nearest_edge  # noqa: E402
 from warpcli.grid import inside_polygon, pixel_centres  # noqa: E402
 
@@ -40,24 +39,20 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.1f} at start\n")
     print("| pair | method | missing | outside the source | distances px (first 5) | pull-back s |")
     print("|---|---|---:|---:|---|---:|")
-    for name, src, dst in bench_pairs(None):
-        for method in ("bem", "mfs"):
-            opts = MapOptions(method=method, src_boundary=args.behaviour, dst_boundary=args.behaviour)
-            try:
-                fm = build_map(src, dst, opts)
-            except Exception as err:  # a refusal is a result
-                print(f"| {name} | {method} | refused: {err} |")
-                continue
-            t0 = time.perf_counter()
-            pts = fm.inverse_grid(WIDTH, HEIGHT).reshape(-1, 2)
-            seconds = time.perf_counter() - t0
-            inside = inside_polygon(centres, dst.points)
-            found = np.isfinite(pts).all(axis=1)
-            missing = np.flatnonzero(inside & ~found)
-            k = np.flatnonzero(inside & found)
-            outside = int((~inside_polygon(pts[k], src.points)).sum())
-            dist = nearest_edge(centres[missing[:5]], dst.points)[2] if missing.size else []
-            print(f"| {name} | {method} | {missing.size} | {outside} | {', '.join(f'{d:.4f}' for d in dist)} | {seconds:.1f} |", flush=True)
+    for name, method, src, dst, opts, fm in smooth_maps(args.behaviour):
+        if isinstance(fm, Exception):
+            print(f"| {name} | {method} | refused: {fm} |")
+            continue
+        t0 = time.perf_counter()
+        pts = fm.inverse_grid(WIDTH, HEIGHT).reshape(-1, 2)
+        seconds = time.perf_counter() - t0
+        inside = inside_polygon(centres, dst.points)
+        found = np.isfinite(pts).all(axis=1)
+        missing = np.flatnonzero(inside & ~found)
+        k = np.flatnonzero(inside & found)
+        outside = int((~inside_polygon(pts[k], src.points)).sum())
+        dist = nearest_edge(centres[missing[:5]], dst.points)[2] if missing.size else []
+        print(f"| {name} | {method} | {missing.size} | {outside} | {', '.join(f'{d:.4f}' for d in dist)} | {seconds:.1f} |", flush=True)
     print(f"\nload {os.getloadavg()[0]:.1f} at the end")
     return 0
 
