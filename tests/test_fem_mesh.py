@@ -118,13 +118,3 @@ def test_a_polygon_near_its_image_is_meshed_as_without_a_region():
     a = mesh_polygon(poly, auto_max_area(poly, region), region=region)
     b = mesh_polygon(poly, auto_max_area(poly))
     assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.triangles, b.triangles)
-
-
-@pytest.mark.parametrize("seed", range(6))
-def test_edge_parameters_are_unique_as_numpy_makes_them(seed):
-    from warpcli.maps.fem import mesh as fem_mesh
-
-    rng = np.random.default_rng(seed)
-    t = rng.choice(rng.random(20), size=int(rng.integers(1, 60)))  # repeats, unsorted
-    got = fem_mesh._unique(t.copy())
-    assert got.tobytes() == np.unique(t).tobytes()

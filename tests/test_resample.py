@@ -82,15 +82,6 @@ def test_unknown_filter_is_rejected():
         resample(np.zeros((2, 2, 1)), identity_map(2, 2), interp="lanczos")
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_sorted_unique_keys_are_numpys(seed):
-    from warpcli.raster import resample as rs
-
-    rng = np.random.default_rng(seed)
-    keys = rng.integers(0, 50, size=int(rng.integers(0, 80)), dtype=np.int64)
-    assert rs._sorted_unique(keys).tobytes() == np.unique(keys).tobytes()
-
-
 @pytest.mark.parametrize("seed", range(4))
 def test_border_coverage_of_a_patch_is_that_of_the_patched_points(seed):
     # A patch (pixels ascending, their points replaced) is the same as the points with the patch written in.

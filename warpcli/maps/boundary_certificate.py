@@ -105,6 +105,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from .._arrays import sorted_unique
 from ..boundary import nearest_edge
 from ..grid import inside_polygon
 from ..polygon.predicates import segments_touch, signed_area
@@ -654,7 +655,7 @@ def _crossing_candidates(col, noise: float) -> NDArray[np.intp]:
     forward = top.query(lo_i, hi_i) - bottom.query(lo_i, hi_i) < math.pi
     backward = top.query(hi_i, lo_i + n) - bottom.query(hi_i, lo_i + n) < math.pi
     bad = ~(forward | backward)
-    return _sorted_unique(np.concatenate([lo_i[bad], hi_i[bad]]))
+    return sorted_unique(np.concatenate([lo_i[bad], hi_i[bad]]))
 
 
 def _pairs_within(w: NDArray[np.complex128], radius: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -688,13 +689,6 @@ def _pairs_within(w: NDArray[np.complex128], radius: NDArray[np.float64]) -> tup
     return i[close].astype(np.intp), j[close].astype(np.intp)
 
 
-def _sorted_unique(keys: NDArray[np.integer]) -> NDArray[np.integer]:
-    """``np.unique(keys)`` for integers (sorted, each once), without its test for masked arrays:
-    that imports numpy.ma, 10-20 ms (quiet) of the map's build in each process that certifies."""
-    keys = np.sort(keys)
-    return keys[np.r_[True, keys[1:] != keys[:-1]]] if keys.size else keys
-
-
 class _SparseTable:
     """Range maxima (or minima) of a fixed array in O(1) per query, vectorised."""
 
@@ -712,7 +706,7 @@ class _SparseTable:
         span = hi - lo + 1
         level = np.floor(np.log2(span)).astype(np.int64)
         out = np.empty(len(lo))
-        for lv in _sorted_unique(level):  # loop over the (few) levels present
+        for lv in sorted_unique(level):  # loop over the (few) levels present
             k = level == lv
             table = self.levels[lv]
             out[k] = self.op(table[lo[k]], table[hi[k] - (1 << lv) + 1])

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from .._arrays import first_of_each
 from .._native import Kernels
 from ..boundary import BoundaryData
 from .boundary_certificate import OffsetBand
@@ -209,7 +210,7 @@ class Collar:
         s, t = self._roots(w[who], cell, lo, hi, h_lo, h_hi)
         good = np.flatnonzero(np.isfinite(t))
         # the first accepted bracket of each value (one, but for values on a shared segment)
-        first = good[np.unique(who[good], return_index=True)[1]] if good.size else good
+        first = good[first_of_each(who[good])]
         c, sh, th = cell[first], s[first][:, None], np.clip(t[first], 0.0, 1.0)[:, None]
         f = b.f0[c] + sh * (b.f1 - b.f0)[c]
         g = b.g0[c] + sh * (b.g1 - b.g0)[c]

@@ -609,9 +609,9 @@ class _Method:
 
         `warpcli.maps.compose.build_map` runs this on a thread of its own: the kernels'
         runtime (`_load_runtime`), the modules the maps (and their pickles, from forked
-        children) and the inverse need, and numpy.ma (``np.unique``'s test for masked
-        arrays imports it: 10-20 ms the collar's inverse would otherwise pay in the
-        pull-back).
+        children) and the inverse need, and numpy.ma (``np.median``'s test for masked
+        arrays imports it, in the first guess's triangle locator: 10-20 ms the pull-back
+        would otherwise pay).
         """
         import numpy.ma  # noqa: F401
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._arrays import sorted_unique
 from .._native import Kernels, cores, parallel
 from ..errors import InputError
 from ..grid import clip_segments
@@ -242,13 +243,6 @@ def _merged(patch, patch_xy, pixels, xy):
     return idx[last], np.ascontiguousarray(pts[last])
 
 
-def _sorted_unique(keys: NDArray[np.int64]) -> NDArray[np.int64]:
-    """``np.unique(keys)`` for integers (sorted, each once), without its test for masked
-    arrays: that imports numpy.ma, 10-20 ms of a warp's critical path."""
-    keys = np.sort(keys)
-    return keys[np.r_[True, keys[1:] != keys[:-1]]] if keys.size else keys
-
-
 def _border_coverage(points, jacobian, w: int, h: int, patch=None, patch_xy=None):
     """Output pixels crossed by the pre-image of the input's border, and the share of each inside.
 
@@ -276,9 +270,9 @@ def _border_coverage(points, jacobian, w: int, h: int, patch=None, patch_xy=None
     if patch.size:
         found = np.empty(len(patch), dtype=np.int64)
         moved = patch[found[: _compiled.near_border(patch_xy, float(w), float(h), found)]]
-        # np.union1d(near[~np.isin(near, patch)], moved), computed without np.unique (see `_sorted_unique`).
+        # np.union1d(near[~np.isin(near, patch)], moved), computed without np.unique (see `warpcli._arrays`).
         at = np.minimum(np.searchsorted(patch, near), patch.size - 1)
-        near = _sorted_unique(np.concatenate([near[patch[at] != near], moved]))
+        near = sorted_unique(np.concatenate([near[patch[at] != near], moved]))
     if near.size == 0:
         return None
     xy = _points_at(points, patch, patch_xy, near)
@@ -382,7 +376,7 @@ def edge_coverage(
     edge = np.repeat(edge, len(offs))
     ok = (col >= 0) & (col < width) & (row >= 0) & (row < height)
     pix = row[ok] * width + col[ok]
-    key = _sorted_unique(pix * n + edge[ok])
+    key = sorted_unique(pix * n + edge[ok])
     if key.size == 0:
         empty = np.zeros(0)
         return EdgeCoverage(np.zeros(0, dtype=np.int64), empty, np.zeros(0, dtype=np.intp), empty)

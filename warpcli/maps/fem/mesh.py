@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..._arrays import sorted_unique
 from ..._cached import cached_property
 from ...errors import InputError, MeshingError, PolygonError
 from ...polygon import Polygon
@@ -329,7 +330,7 @@ def _boundary_points(polygon: Polygon, max_area: float, grade: bool, quadratic: 
         length = float(np.hypot(*(b - a)))
         t = _edge_params(length, h, bool(reflex[i]), bool(reflex[(i + 1) % n]))
         if quadratic:
-            t = _unique(np.concatenate([t, np.sqrt(np.arange(1, QUADRATIC_NODES) / QUADRATIC_NODES)]))
+            t = sorted_unique(np.concatenate([t, np.sqrt(np.arange(1, QUADRATIC_NODES) / QUADRATIC_NODES)]))
         pieces.append(a + t[:, None] * (b - a))
         mk = np.full(len(t), 2 + n + i, dtype=np.int32)
         mk[0] = 2 + i
@@ -360,16 +361,4 @@ def _edge_params(length: float, h: float, grade_start: bool, grade_end: bool) ->
         ts.append(r / length)
     if grade_end:
         ts.append(1.0 - r[::-1] / length)
-    return _unique(np.concatenate(ts))
-
-
-def _unique(t: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``np.unique`` of finite floats, computed as it does (the same sort, the first of each run of
-    equal values), without its test for masked arrays: that imports numpy.ma, 10-20 ms of every
-    process that meshes (the forked child's too)."""
-    t = t.flatten()
-    t.sort()
-    keep = np.empty(t.shape, dtype=bool)
-    keep[:1] = True
-    np.not_equal(t[1:], t[:-1], out=keep[1:])
-    return t[keep]
+    return sorted_unique(np.concatenate(ts))
