@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from warpcli.grid import inside_polygon as points_in_polygon
 from warpcli.maps.bem import fit_bem
 from warpcli.maps.closed_form import distance_to_boundary
 from warpcli.maps.mfs import fit_mfs
+
+from helpers import simple_polygons
 
 # -- shapes -----------------------------------------------------------------
 
@@ -392,3 +396,32 @@ def test_the_grid_path_of_a_smooth_map_is_the_default_one():
     want = phi.evaluate(centres[keep])
     ok = np.isfinite(want.points[:, 0])
     assert np.array_equal(got.pixels, keep[ok]) and got.values.tobytes() == want.points[ok].tobytes()
+
+
+@settings(max_examples=15, deadline=None)
+@given(simple_polygons(7), st.floats(1e-9, 3.0), st.integers(0, 2**31))
+def test_the_pull_backs_nearest_edges_are_boundarys_bit_for_bit(poly, reach, seed):
+    """The pull-back asks `boundary.nearest_edge` only of the points its compiled filter
+    (`_smooth_kernels.near_boundary`) keeps (issue 24): those are a superset of the points within
+    reach, and nearest_edge of them alone gives what it gives them among all points, so indices,
+    edges, parameters and distances are nearest_edge's on every point, bit for bit. Generated
+    polygons; points near and on the edges and vertices, far away, NaN."""
+    from warpcli.boundary import nearest_edge, on_boundary
+    from warpcli.maps.meshless import _columns, _nearest_within, _on_boundary
+
+    rng = np.random.default_rng(seed)
+    k = rng.integers(0, len(poly), 600)
+    t = rng.random(600)
+    t[::5] = 0.0  # vertices
+    on = poly[k] + t[:, None] * (np.roll(poly, -1, axis=0)[k] - poly[k])
+    step = rng.normal(size=(600, 2)) * reach * rng.choice([0.0, 0.5, 1.0, 1.000001, 2.0], (600, 1))
+    p = np.concatenate([on + step, rng.uniform(-10.0, 140.0, (400, 2)), [[np.nan, 1.0], [1.0, np.nan]]])
+    edge, par, dist = nearest_edge(p, poly)
+    within = np.flatnonzero(dist <= reach)
+    cand, e2, t2, d2 = _nearest_within(p, poly, _columns(poly), reach)
+    assert set(within) <= set(cand)
+    assert e2.tobytes() == edge[cand].tobytes() and t2.tobytes() == par[cand].tobytes()
+    assert d2.tobytes() == dist[cand].tobytes()
+    want = on_boundary(p, poly, reach)
+    got = _on_boundary(p, poly, _columns(poly), reach)
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(got, want))

@@ -16,7 +16,7 @@ from numba.extending import intrinsic
 
 from .._jit import njit
 
-__all__ = ["fast_log", "inside_points", "mfs_bounds", "mfs_evaluate"]
+__all__ = ["fast_log", "inside_points", "mfs_bounds", "mfs_evaluate", "near_boundary"]
 
 
 @intrinsic
@@ -289,6 +289,47 @@ def inside_points(px, py, vx, vy, out):
     """
     for k in range(px.shape[0]):
         out[k] = _inside(px[k], py[k], vx, vy)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def near_boundary(px, py, vx, vy, reach, out):
+    """``out[k]`` = 1 where point k may lie within ``reach`` of the polygon's boundary (vx, vy), else 0.
+
+    A superset of `warpcli.boundary.nearest_edge`'s ``distance <= reach``:
+    the same distance (clamped projection onto each edge, then the
+    hypotenuse), with a margin of 1e-12 times the coordinates' size for its
+    rounding (numpy's dot product may fuse a multiply-add this one does not).
+    The pull-back asks it of every pixel and pre-image, where only a thin band
+    along the boundary can qualify: `nearest_edge` then runs on those few
+    (one pass here instead of numpy's passes per edge over every point).
+    NaN points are never flagged.
+    """
+    n = vx.shape[0]
+    size = 0.0
+    for i in range(n):
+        size = max(size, abs(vx[i]) + abs(vy[i]))
+    for k in range(px.shape[0]):
+        x = px[k]
+        y = py[k]
+        lim = reach + 1e-12 * (size + abs(x) + abs(y)) + 1e-12 * reach
+        lim2 = lim * lim
+        hit = 0
+        for i in range(n):
+            ax = vx[i]
+            ay = vy[i]
+            dx = vx[(i + 1) % n] - ax
+            dy = vy[(i + 1) % n] - ay
+            rx = x - ax
+            ry = y - ay
+            dd = dx * dx + dy * dy
+            t = (rx * dx + ry * dy) / dd if dd > 0.0 else 0.0
+            t = min(max(t, 0.0), 1.0)
+            ex = rx - t * dx
+            ey = ry - t * dy
+            if ex * ex + ey * ey <= lim2:
+                hit = 1
+                break
+        out[k] = hit
 
 
 # Not inlined at numba's level: an inlined body would take the caller's flags,

@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._cached import cached_property
 from .._native import Kernels
-from ..boundary import BoundaryData, nearest_edge, on_boundary, slide
+from ..boundary import BoundaryData, nearest_edge, slide
 from ..budget import MAX_IMAGE_BYTES_ENV, max_image_bytes
 from ..errors import InputError, MeshingError
 from ..files import format_bytes
@@ -115,20 +115,20 @@ class SmoothMap(ThetaMap):
         boundary (to ON_BOUNDARY) with their edge and parameter; then those of the first in the
         collar's band (`collar`), which are no longer among them."""
         finite = np.flatnonzero(np.isfinite(p).all(axis=1))
-        edge, t, dist = nearest_edge(p[finite], self.polygon.points)
-        near = np.flatnonzero(dist <= ON_BOUNDARY * self._size)
+        on = ON_BOUNDARY * self._size
+        cand, edge, t, dist = _nearest_within(p[finite], self.polygon.points, self._polygon_xy, max(on, self._band_width))
+        near = cand[dist <= on]
         inside = self._inside_polygon(p[finite])
         inside[near] = False
         k = finite[inside]
         band = np.zeros(0, dtype=np.intp)
-        close = inside & (dist <= self._band_width)
-        if close.any() and self.collar is not None:
+        close = cand[inside[cand] & (dist <= self._band_width)]
+        if close.size and self.collar is not None:
             in_band = ~self.collar.inside(p[finite[close]])
-            band = finite[close][in_band]
-            keep = np.ones(len(finite), dtype=bool)
-            keep[np.flatnonzero(close)[in_band]] = False
-            k = finite[inside & keep]
-        return k, finite[near], edge[near], t[near], band
+            band = finite[close[in_band]]
+            inside[close[in_band]] = False
+            k = finite[inside]
+        return k, finite[near], edge[dist <= on], t[dist <= on], band
 
     @cached_property
     def _band_width(self) -> float:
@@ -196,7 +196,7 @@ class SmoothMap(ThetaMap):
         jac_k = None
         if finite.size:
             scale = float(np.ptp(w, axis=0).max())
-            near, edge, s = on_boundary(q[finite], w, ON_BOUNDARY * scale)
+            near, edge, s = _on_boundary(q[finite], w, self._theta_xy, ON_BOUNDARY * scale)
             inside = _inside_points(q[finite], *self._theta_xy)
             inside[near] = False
             out[finite[near]] = self.boundary_from_theta(edge, s)
@@ -253,7 +253,7 @@ class SmoothMap(ThetaMap):
                     # phi's Jacobian at the pre-images Newton found (it
                     # evaluated them there), not a pass of its own; NaN within
                     # ON_BOUNDARY of the polygon's edges, as `evaluate` gives.
-                    near_y, _, _ = on_boundary(y[ok], self.polygon.points, ON_BOUNDARY * self._size)
+                    near_y, _, _ = _on_boundary(y[ok], self.polygon.points, self._polygon_xy, ON_BOUNDARY * self._size)
                     jac_k[np.flatnonzero(ok)[near_y]] = np.nan
                     jac_k[~ok] = np.nan
         jac = None
@@ -326,8 +326,8 @@ class SmoothMap(ThetaMap):
         found = np.isfinite(y).all(axis=1)
         close = np.zeros(len(y), dtype=bool)
         if found.any():
-            dist = nearest_edge(y[found], self.polygon.points)[2]
-            close[np.flatnonzero(found)[dist <= self._band_width]] = True
+            cand, _, _, dist = _nearest_within(y[found], self.polygon.points, self._polygon_xy, self._band_width)
+            close[np.flatnonzero(found)[cand[dist <= self._band_width]]] = True
         if not (close.any() or (~found).any()) or self.collar is None:
             return np.zeros(0, dtype=np.intp)
         c = np.flatnonzero(close)
@@ -462,6 +462,35 @@ def _inside_points(points: ArrayLike, vx: NDArray[np.float64], vy: NDArray[np.fl
     if len(p):
         _compiled.inside_points(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), vx, vy, out)
     return out
+
+
+def _nearest_within(
+    points: NDArray[np.float64], vertices: NDArray[np.float64], xy: tuple[NDArray[np.float64], NDArray[np.float64]], reach: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
+    """`warpcli.boundary.nearest_edge` of the points that may lie within ``reach`` of the polygon
+    (``vertices``, its columns ``xy``): their indices, then its edge, parameter and distance for them.
+
+    The compiled `near_boundary` picks a superset of the points within reach in one pass;
+    `nearest_edge` then runs on those alone (its values per point do not depend on the others: a
+    test compares them), so the distances and decisions are its own, bit for bit. The pull-back
+    asks this of every pixel (1 MP: a thin band along the boundary qualifies), where
+    `nearest_edge` on every point was a fifth of its time (measured: 0.40 of 1.9 s on one thread)."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    flag = np.zeros(len(p), dtype=np.uint8)
+    if len(p):
+        _compiled.near_boundary(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), *xy, float(reach), flag)
+    cand = np.flatnonzero(flag)
+    edge, t, dist = nearest_edge(p[cand], vertices)
+    return cand, edge, t, dist
+
+
+def _on_boundary(
+    points: NDArray[np.float64], vertices: NDArray[np.float64], xy: tuple[NDArray[np.float64], NDArray[np.float64]], tolerance: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+    """`warpcli.boundary.on_boundary`'s result, by `_nearest_within`."""
+    cand, edge, t, dist = _nearest_within(points, vertices, xy, tolerance)
+    close = dist <= tolerance
+    return cand[close], edge[close], t[close]
 
 
 def _nearest_triangles(mesh, points: NDArray[np.float64]) -> NDArray[np.intp]:
