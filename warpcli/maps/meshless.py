@@ -185,7 +185,6 @@ class SmoothMap(ThetaMap):
         return out
 
     def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
-        from .fem.locate import TriangleLocator, barycentric_combine
         from .newton import invert, thresholds
 
         q = as_points(points)
@@ -202,18 +201,18 @@ class SmoothMap(ThetaMap):
             out[finite[near]] = self.boundary_from_theta(edge, s)
             k = finite[inside]
             if k.size:
-                mesh, image = self._guess_mesh
-                tri, bary = TriangleLocator(image, mesh.triangles).locate(q[k])
-                guess = barycentric_combine(mesh.vertices, mesh.triangles, tri, bary)
-                # Points between the mapped triangulation and Theta's boundary
-                # (the approximation does not fit the boundary exactly): start
-                # from the nearest boundary point's pre-image, pulled inside.
-                lost = np.flatnonzero(tri < 0)
-                if lost.size:
-                    e2, s2, _ = nearest_edge(q[k[lost]], w)
-                    start = self.boundary_from_theta(e2, s2)
-                    centre = mesh.vertices[mesh.triangles[_nearest_triangles(mesh, start)]].mean(axis=1)
-                    guess[lost] = start + 0.01 * (centre - start)
+                mesh = self._guess_mesh[0]
+                compiled = getattr(self.solution, "invert_newton", None)
+                # MFS, coherent targets (a pull-back's pixels, row by row): a point in a run of
+                # evenly spaced targets starts from the extrapolation of the pre-images before
+                # it (`MFSSolution.invert_newton`'s ``chain``), the others from the first guess
+                chain = _steady(q[k]) if compiled is not None and coherent else None
+                if chain is None:
+                    guess = self._first_guess(q[k])
+                else:
+                    guess = np.full((len(k), 2), np.nan)
+                    need = np.flatnonzero(~chain)
+                    guess[need] = self._first_guess(q[k[need]])
                 # Converged when phi(y) is within rounding of x: relative to
                 # Theta, scaled by how far the polygon sits from the origin
                 # compared with its size (coordinates near 1e6 round at 1e-10).
@@ -227,13 +226,21 @@ class SmoothMap(ThetaMap):
                 # a third less evaluation). MFS's Jacobian alone costs a third
                 # of its value (no log): separate passes stay cheaper there.
                 tol = 1e-12 * max(1.0, 4.0 * far)
-                compiled = getattr(self.solution, "invert_newton", None)
                 if compiled is not None:
                     # MFS: the same iteration per point, compiled (measured at
                     # 1 MP: the numpy passes around its cheap sums cost as much
                     # as the sums)
                     thresh, noise = thresholds(q[k], tol, NEWTON_FLOOR)
-                    y, ok, j_mfs = compiled(q[k], guess, self.polygon.points, thresh, noise, jacobian=jacobian)
+                    y, ok, j_mfs = compiled(q[k], guess, self.polygon.points, thresh, noise, jacobian=jacobian, chain=chain)
+                    again = np.zeros(0, dtype=np.intp) if chain is None else np.flatnonzero(chain & ~ok)
+                    if again.size:
+                        # chained points whose run broke off (a predecessor not converged) or
+                        # whose extrapolation did not converge: again from the first guess
+                        guess[again] = self._first_guess(q[k[again]])
+                        y2, ok2, j2 = compiled(q[k[again]], guess[again], self.polygon.points, thresh, noise, jacobian=jacobian)
+                        y[again], ok[again] = y2, ok2
+                        if jacobian:
+                            j_mfs[again] = j2
                     jy = [j_mfs]
                 else:
                     fused = self.solution.value_and_jacobian if self.name == "bem" else None
@@ -246,6 +253,9 @@ class SmoothMap(ThetaMap):
                 jac_k = jy[0] if jacobian else None
                 redo = self._in_band(y)
                 if redo.size:
+                    unset = redo[np.isnan(guess[redo, 0])]
+                    if unset.size:  # chained points: the band's Newton starts from the first guess
+                        guess[unset] = self._first_guess(q[k[unset]])
                     self._band_inverse(q[k[redo]], guess[redo], y, jac_k, redo, tol, mesh)
                 ok = np.isfinite(y).all(axis=1)
                 out[k] = y
@@ -262,6 +272,25 @@ class SmoothMap(ThetaMap):
             if jac_k is not None:
                 jac[k] = inv2(jac_k)
         return Mapped(out, jac)
+
+    def _first_guess(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Newton's start for points q of Theta (§3.2): linear in the image of `_guess_mesh`'s
+        triangle that holds q; between that image and Theta's boundary (the approximation does not
+        fit the boundary exactly) the nearest boundary point's pre-image, pulled inside."""
+        from .fem.locate import barycentric_combine
+
+        mesh = self._guess_mesh[0]
+        if not len(q):
+            return np.zeros((0, 2))
+        tri, bary = self._guess_locator.locate(q)
+        guess = barycentric_combine(mesh.vertices, mesh.triangles, tri, bary)
+        lost = np.flatnonzero(tri < 0)
+        if lost.size:
+            e2, s2, _ = nearest_edge(q[lost], self.theta.points)
+            start = self.boundary_from_theta(e2, s2)
+            centre = mesh.vertices[mesh.triangles[_nearest_triangles(mesh, start)]].mean(axis=1)
+            guess[lost] = start + 0.01 * (centre - start)
+        return guess
 
     def _band_inverse(self, q, guess, y, jac_k, redo, tol, mesh) -> None:
         """Pre-images of values q whose Newton pre-image lies in the collar's band (or was not found):
@@ -343,15 +372,24 @@ class SmoothMap(ThetaMap):
         mesh = mesh_polygon(self.polygon, max(area / GUESS_TRIANGLES, 1e-12 * area))
         return mesh, self.evaluate(mesh.vertices).points
 
+    @cached_property
+    def _guess_locator(self):
+        """`warpcli.maps.fem.locate.TriangleLocator` of `_guess_mesh`'s image: made once (it was made
+        for every call of `inverse`, 0.04 s each at 1 MP: a pull-back calls it per band)."""
+        from .fem.locate import TriangleLocator
+
+        mesh, image = self._guess_mesh
+        return TriangleLocator(image, mesh.triangles)
+
     def precompute(self, side: str) -> None:
         """Make now what a pull-back asks first: the certificate with the collar's band (`collar`), and
-        for the ``"inverse"`` side the first guess's triangulation (`_guess_mesh`). Built in a forked
+        for the ``"inverse"`` side the first guess's triangulation (`_guess_mesh`) and its locator. Built in a forked
         child (`_Method.build_forked`), the map comes back with them: made there beside the other
         map's build, not by the parent on one GIL."""
         self.certify()
         _ = self.collar
         if side == "inverse":
-            _ = self._guess_mesh
+            _ = self._guess_locator
 
     def certify(self) -> Certificate:
         return self._certificate
@@ -461,6 +499,24 @@ def _inside_points(points: ArrayLike, vx: NDArray[np.float64], vy: NDArray[np.fl
     out = np.zeros(len(p), dtype=np.bool_)
     if len(p):
         _compiled.inside_points(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), vx, vy, out)
+    return out
+
+
+#: Largest change between consecutive steps of a run of targets, relative to the step, that
+#: `_steady` still calls even (consecutive pixels of a row change by far less).
+STEADY = 0.25
+
+
+def _steady(q: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Points k >= 3 whose three steps before them (q[k] - q[k-1], q[k-1] - q[k-2], q[k-2] - q[k-3])
+    change by at most `STEADY` of themselves from one to the next: a run of evenly spaced targets
+    (a row of pixels mapped into Theta), along which the pre-images are extrapolated."""
+    out = np.zeros(len(q), dtype=bool)
+    if len(q) > 3:
+        d = np.diff(q, axis=0)
+        dd = np.diff(d, axis=0)
+        even = np.einsum("ij,ij->i", dd, dd) <= STEADY**2 * np.einsum("ij,ij->i", d[:-1], d[:-1])
+        out[3:] = even[1:] & even[:-1]
     return out
 
 
