@@ -698,7 +698,10 @@ class _Method:
         arrays imports it, in the first guess's triangle locator: 10-20 ms the pull-back
         would otherwise pay).
         """
-        import numpy.ma  # noqa: F401
+        if self.name == "bem" or not _forks():
+            # MFS's locator comes from its forked child (`SmoothMap.precompute`): this process
+            # never calls np.median then (numpy.ma: 50-100 ms of CPU under load, beside the children)
+            import numpy.ma  # noqa: F401
 
         from . import newton  # noqa: F401
         from .fem import locate  # noqa: F401
@@ -707,6 +710,13 @@ class _Method:
             from . import bem_eval  # noqa: F401
         self._load_fit()
         _load_runtime()
+
+
+def _forks() -> bool:
+    """Whether MFS's maps are built in forked children here (`_Method.build_forked`)."""
+    from .._fork import available
+
+    return available()
 
 
 def _load_runtime() -> None:
