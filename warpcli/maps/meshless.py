@@ -223,8 +223,8 @@ class SmoothMap(ThetaMap):
                 # BEM's treecode evaluates the Jacobian with the value for
                 # little more than the value alone: every trial point gets
                 # both and Newton's next step reuses them (measured at 1 MP:
-                # a third less evaluation). MFS's Jacobian alone costs a third
-                # of its value (no log): separate passes stay cheaper there.
+                # a third less evaluation). MFS's compiled Newton does the same
+                # per point (`warpcli.maps._smooth_kernels.mfs_invert`).
                 tol = 1e-12 * max(1.0, 4.0 * far)
                 if compiled is not None:
                     # MFS: the same iteration per point, compiled (measured at
