@@ -244,7 +244,7 @@ def test_a_smooth_map_built_in_a_child_is_the_one_built_here_bit_for_bit(method,
             assert np.asarray(getattr(here.solution, name)).tobytes() == np.asarray(getattr(there.solution, name)).tobytes()
     # what the child made came with the map
     assert {"boundary_certificate", "collar", "_certificate"} <= set(vars(there))
-    assert ("_guess_mesh" in vars(there)) == (tables == "inverse")
+    assert ("_guess_mesh" in vars(there)) == ("_guess_locator" in vars(there)) == (tables == "inverse")
     assert there.certify() == here.certify()
     rng = np.random.default_rng(3)
     pts = rng.uniform(0.0, 40.0, (300, 2))

@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from warpcli.grid import inside_polygon as points_in_polygon
 from warpcli.maps.bem import fit_bem
 from warpcli.maps.closed_form import distance_to_boundary
 from warpcli.maps.mfs import fit_mfs
+
+from helpers import simple_polygons
 
 # -- shapes -----------------------------------------------------------------
 
@@ -392,3 +396,85 @@ def test_the_grid_path_of_a_smooth_map_is_the_default_one():
     want = phi.evaluate(centres[keep])
     ok = np.isfinite(want.points[:, 0])
     assert np.array_equal(got.pixels, keep[ok]) and got.values.tobytes() == want.points[ok].tobytes()
+
+
+@settings(max_examples=15, deadline=None)
+@given(simple_polygons(7), st.floats(1e-9, 3.0), st.integers(0, 2**31))
+def test_the_pull_backs_nearest_edges_are_boundarys_bit_for_bit(poly, reach, seed):
+    """The pull-back asks `boundary.nearest_edge` only of the points its compiled filter
+    (`_smooth_kernels.near_boundary`) keeps (issue 24): those are a superset of the points within
+    reach, and nearest_edge of them alone gives what it gives them among all points, so indices,
+    edges, parameters and distances are nearest_edge's on every point, bit for bit. Generated
+    polygons; points near and on the edges and vertices, far away, NaN."""
+    from warpcli.boundary import nearest_edge, on_boundary
+    from warpcli.maps.meshless import _columns, _nearest_within, _on_boundary
+
+    rng = np.random.default_rng(seed)
+    k = rng.integers(0, len(poly), 600)
+    t = rng.random(600)
+    t[::5] = 0.0  # vertices
+    on = poly[k] + t[:, None] * (np.roll(poly, -1, axis=0)[k] - poly[k])
+    step = rng.normal(size=(600, 2)) * reach * rng.choice([0.0, 0.5, 1.0, 1.000001, 2.0], (600, 1))
+    p = np.concatenate([on + step, rng.uniform(-10.0, 140.0, (400, 2)), [[np.nan, 1.0], [1.0, np.nan]]])
+    edge, par, dist = nearest_edge(p, poly)
+    within = np.flatnonzero(dist <= reach)
+    cand, e2, t2, d2 = _nearest_within(p, poly, _columns(poly), reach)
+    assert set(within) <= set(cand)
+    assert e2.tobytes() == edge[cand].tobytes() and t2.tobytes() == par[cand].tobytes()
+    assert d2.tobytes() == dist[cand].tobytes()
+    want = on_boundary(p, poly, reach)
+    got = _on_boundary(p, poly, _columns(poly), reach)
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(got, want))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_coherent_inverse_finds_the_plain_ones_pre_images(seed):
+    """`SmoothMap.inverse(coherent=True)` of an MFS map starts Newton from the extrapolated pre-images
+    of the points before (`_steady` runs: rows of a grid) rather than from the first guess (issue 24):
+    every pre-image the plain inverse finds it finds too, to Newton's tolerance, with phi(y) = q
+    checked by `evaluate`, and the same points without one; rows of different lengths, repeated
+    points, jumps, points outside Theta. Generated star-shaped polygons."""
+    from warpcli import MapOptions, Polygon
+    from warpcli.maps.meshless import MFS
+    from warpcli.maps.theta import regular
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(5, 9))
+    th = np.sort(rng.uniform(0, 2 * np.pi, n))
+    r = rng.uniform(20.0, 45.0, n)
+    poly = Polygon(np.stack([60 + r * np.cos(th), 60 + r * np.sin(th)], axis=1))
+    opts = MapOptions(method="mfs", nodes=96, check=False)
+    phi = MFS.build(poly, regular(poly, poly, opts), opts, "source")
+    lo, span = phi.theta.points.min(axis=0), np.ptp(phi.theta.points, axis=0)
+    rows = []
+    for y in np.linspace(-0.05, 1.05, 23):  # rows running out of Theta at both ends
+        x = np.linspace(-0.05, 1.05, int(rng.integers(20, 60)))
+        rows.append(lo + np.stack([x, np.full_like(x, y)], axis=1) * span)
+    q = np.concatenate(rows + [rows[3][:5], rows[3][:5], rows[7][::-1]])  # a repeat, a row backwards
+    q[::41] = q[::41][::-1]  # jumps
+    got = phi.inverse(q, jacobian=True, coherent=True)
+    plain = phi.inverse(q, jacobian=True)
+    ok = np.isfinite(plain.points).all(axis=1)
+    assert ok.sum() > 300
+    assert np.array_equal(np.isfinite(got.points).all(axis=1), ok)
+    assert np.abs(got.points[ok] - plain.points[ok]).max() <= 1e-8 * phi._size
+    inside = ok & (phi.collar.inside(np.where(ok[:, None], got.points, 0.0)) if phi.collar is not None else ok)
+    back = phi.evaluate(got.points[inside]).points
+    assert np.abs(back - q[inside]).max() <= 1e-9 * span.max()
+    fin = np.isfinite(plain.jacobian)
+    assert np.array_equal(fin, np.isfinite(got.jacobian))
+    assert np.abs(got.jacobian[fin] - plain.jacobian[fin]).max() <= 1e-6 * np.abs(plain.jacobian[fin]).max()
+
+
+def test_steady_runs_are_evenly_spaced_targets():
+    """`_steady` keeps a point when the three steps before it are nearly equal (a row of pixels),
+    and only then: a row's first three points, and three after a jump, start from the first guess."""
+    from warpcli.maps.meshless import _steady
+
+    row = np.stack([np.linspace(0.0, 1.0, 10), np.linspace(0.0, 0.2, 10) ** 2], axis=1)
+    q = np.concatenate([row, row + [0.0, 1.0]])
+    got = _steady(q)
+    want = np.ones(len(q), dtype=bool)
+    want[[0, 1, 2, 10, 11, 12]] = False
+    assert np.array_equal(got, want)
+    assert not _steady(q[:3]).any() and _steady(np.zeros((5, 2)))[3:].all()

@@ -217,6 +217,17 @@ def test_mfs_kernel_matches_numba_bitwise():
         _same("warpcli.maps._smooth_kernels", "mfs_evaluate", args)
 
 
+def test_near_boundary_filter_matches_numba_bitwise():
+    P = star() * 40.0 + 64.0
+    rng = np.random.default_rng(4)
+    p = np.concatenate([rng.uniform(0.0, 128.0, (400, 2)), P + rng.normal(0.0, 1e-3, P.shape), [[np.nan, 3.0]]])
+
+    def args():
+        return (p[:, 0].copy(), p[:, 1].copy(), P[:, 0].copy(), P[:, 1].copy(), 2.5, np.zeros(len(p), dtype=np.uint8))
+
+    _same("warpcli.maps._smooth_kernels", "near_boundary", args)
+
+
 def test_compiled_mfs_newton_matches_numba_bitwise():
     from warpcli.maps.mfs import fit_mfs
 
@@ -228,10 +239,11 @@ def test_compiled_mfs_newton_matches_numba_bitwise():
     x = sol.value(g[::-1].copy())
     f = sol.frame
     frame = np.array([f.centre[0], f.centre[1], f.scale, f.tcentre[0], f.tcentre[1], f.tscale])
+    chain = (np.arange(300) % 3 == 0).astype(np.uint8)  # some points start from their predecessors
 
     def args():
         return (
-            x[:, 0].copy(), x[:, 1].copy(), g[:, 0].copy(), g[:, 1].copy(), sol.sites[:, 0].copy(),
+            x[:, 0].copy(), x[:, 1].copy(), g[:, 0].copy(), g[:, 1].copy(), chain.copy(), sol.sites[:, 0].copy(),
             sol.sites[:, 1].copy(), sol.weights[:, 0].copy(), sol.weights[:, 1].copy(), sol.affine.copy(), frame,
             P[:, 0].copy(), P[:, 1].copy(), 1e-12, 1e-9, 20, 40, 1e-4, True, np.zeros((300, 2)),
             np.zeros(300, dtype=np.uint8), np.zeros((300, 2, 2)),

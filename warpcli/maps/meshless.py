@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._cached import cached_property
 from .._native import Kernels
-from ..boundary import BoundaryData, nearest_edge, on_boundary, slide
+from ..boundary import BoundaryData, nearest_edge, slide
 from ..budget import MAX_IMAGE_BYTES_ENV, max_image_bytes
 from ..errors import InputError, MeshingError
 from ..files import format_bytes
@@ -115,20 +115,20 @@ class SmoothMap(ThetaMap):
         boundary (to ON_BOUNDARY) with their edge and parameter; then those of the first in the
         collar's band (`collar`), which are no longer among them."""
         finite = np.flatnonzero(np.isfinite(p).all(axis=1))
-        edge, t, dist = nearest_edge(p[finite], self.polygon.points)
-        near = np.flatnonzero(dist <= ON_BOUNDARY * self._size)
+        on = ON_BOUNDARY * self._size
+        cand, edge, t, dist = _nearest_within(p[finite], self.polygon.points, self._polygon_xy, max(on, self._band_width))
+        near = cand[dist <= on]
         inside = self._inside_polygon(p[finite])
         inside[near] = False
         k = finite[inside]
         band = np.zeros(0, dtype=np.intp)
-        close = inside & (dist <= self._band_width)
-        if close.any() and self.collar is not None:
+        close = cand[inside[cand] & (dist <= self._band_width)]
+        if close.size and self.collar is not None:
             in_band = ~self.collar.inside(p[finite[close]])
-            band = finite[close][in_band]
-            keep = np.ones(len(finite), dtype=bool)
-            keep[np.flatnonzero(close)[in_band]] = False
-            k = finite[inside & keep]
-        return k, finite[near], edge[near], t[near], band
+            band = finite[close[in_band]]
+            inside[close[in_band]] = False
+            k = finite[inside]
+        return k, finite[near], edge[dist <= on], t[dist <= on], band
 
     @cached_property
     def _band_width(self) -> float:
@@ -185,7 +185,6 @@ class SmoothMap(ThetaMap):
         return out
 
     def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
-        from .fem.locate import TriangleLocator, barycentric_combine
         from .newton import invert, thresholds
 
         q = as_points(points)
@@ -196,24 +195,24 @@ class SmoothMap(ThetaMap):
         jac_k = None
         if finite.size:
             scale = float(np.ptp(w, axis=0).max())
-            near, edge, s = on_boundary(q[finite], w, ON_BOUNDARY * scale)
+            near, edge, s = _on_boundary(q[finite], w, self._theta_xy, ON_BOUNDARY * scale)
             inside = _inside_points(q[finite], *self._theta_xy)
             inside[near] = False
             out[finite[near]] = self.boundary_from_theta(edge, s)
             k = finite[inside]
             if k.size:
-                mesh, image = self._guess_mesh
-                tri, bary = TriangleLocator(image, mesh.triangles).locate(q[k])
-                guess = barycentric_combine(mesh.vertices, mesh.triangles, tri, bary)
-                # Points between the mapped triangulation and Theta's boundary
-                # (the approximation does not fit the boundary exactly): start
-                # from the nearest boundary point's pre-image, pulled inside.
-                lost = np.flatnonzero(tri < 0)
-                if lost.size:
-                    e2, s2, _ = nearest_edge(q[k[lost]], w)
-                    start = self.boundary_from_theta(e2, s2)
-                    centre = mesh.vertices[mesh.triangles[_nearest_triangles(mesh, start)]].mean(axis=1)
-                    guess[lost] = start + 0.01 * (centre - start)
+                mesh = self._guess_mesh[0]
+                compiled = getattr(self.solution, "invert_newton", None)
+                # MFS, coherent targets (a pull-back's pixels, row by row): a point in a run of
+                # evenly spaced targets starts from the extrapolation of the pre-images before
+                # it (`MFSSolution.invert_newton`'s ``chain``), the others from the first guess
+                chain = _steady(q[k]) if compiled is not None and coherent else None
+                if chain is None:
+                    guess = self._first_guess(q[k])
+                else:
+                    guess = np.full((len(k), 2), np.nan)
+                    need = np.flatnonzero(~chain)
+                    guess[need] = self._first_guess(q[k[need]])
                 # Converged when phi(y) is within rounding of x: relative to
                 # Theta, scaled by how far the polygon sits from the origin
                 # compared with its size (coordinates near 1e6 round at 1e-10).
@@ -224,16 +223,24 @@ class SmoothMap(ThetaMap):
                 # BEM's treecode evaluates the Jacobian with the value for
                 # little more than the value alone: every trial point gets
                 # both and Newton's next step reuses them (measured at 1 MP:
-                # a third less evaluation). MFS's Jacobian alone costs a third
-                # of its value (no log): separate passes stay cheaper there.
+                # a third less evaluation). MFS's compiled Newton does the same
+                # per point (`warpcli.maps._smooth_kernels.mfs_invert`).
                 tol = 1e-12 * max(1.0, 4.0 * far)
-                compiled = getattr(self.solution, "invert_newton", None)
                 if compiled is not None:
                     # MFS: the same iteration per point, compiled (measured at
                     # 1 MP: the numpy passes around its cheap sums cost as much
                     # as the sums)
                     thresh, noise = thresholds(q[k], tol, NEWTON_FLOOR)
-                    y, ok, j_mfs = compiled(q[k], guess, self.polygon.points, thresh, noise, jacobian=jacobian)
+                    y, ok, j_mfs = compiled(q[k], guess, self.polygon.points, thresh, noise, jacobian=jacobian, chain=chain)
+                    again = np.zeros(0, dtype=np.intp) if chain is None else np.flatnonzero(chain & ~ok)
+                    if again.size:
+                        # chained points whose run broke off (a predecessor not converged) or
+                        # whose extrapolation did not converge: again from the first guess
+                        guess[again] = self._first_guess(q[k[again]])
+                        y2, ok2, j2 = compiled(q[k[again]], guess[again], self.polygon.points, thresh, noise, jacobian=jacobian)
+                        y[again], ok[again] = y2, ok2
+                        if jacobian:
+                            j_mfs[again] = j2
                     jy = [j_mfs]
                 else:
                     fused = self.solution.value_and_jacobian if self.name == "bem" else None
@@ -246,6 +253,9 @@ class SmoothMap(ThetaMap):
                 jac_k = jy[0] if jacobian else None
                 redo = self._in_band(y)
                 if redo.size:
+                    unset = redo[np.isnan(guess[redo, 0])]
+                    if unset.size:  # chained points: the band's Newton starts from the first guess
+                        guess[unset] = self._first_guess(q[k[unset]])
                     self._band_inverse(q[k[redo]], guess[redo], y, jac_k, redo, tol, mesh)
                 ok = np.isfinite(y).all(axis=1)
                 out[k] = y
@@ -253,7 +263,7 @@ class SmoothMap(ThetaMap):
                     # phi's Jacobian at the pre-images Newton found (it
                     # evaluated them there), not a pass of its own; NaN within
                     # ON_BOUNDARY of the polygon's edges, as `evaluate` gives.
-                    near_y, _, _ = on_boundary(y[ok], self.polygon.points, ON_BOUNDARY * self._size)
+                    near_y, _, _ = _on_boundary(y[ok], self.polygon.points, self._polygon_xy, ON_BOUNDARY * self._size)
                     jac_k[np.flatnonzero(ok)[near_y]] = np.nan
                     jac_k[~ok] = np.nan
         jac = None
@@ -262,6 +272,25 @@ class SmoothMap(ThetaMap):
             if jac_k is not None:
                 jac[k] = inv2(jac_k)
         return Mapped(out, jac)
+
+    def _first_guess(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Newton's start for points q of Theta (§3.2): linear in the image of `_guess_mesh`'s
+        triangle that holds q; between that image and Theta's boundary (the approximation does not
+        fit the boundary exactly) the nearest boundary point's pre-image, pulled inside."""
+        from .fem.locate import barycentric_combine
+
+        mesh = self._guess_mesh[0]
+        if not len(q):
+            return np.zeros((0, 2))
+        tri, bary = self._guess_locator.locate(q)
+        guess = barycentric_combine(mesh.vertices, mesh.triangles, tri, bary)
+        lost = np.flatnonzero(tri < 0)
+        if lost.size:
+            e2, s2, _ = nearest_edge(q[lost], self.theta.points)
+            start = self.boundary_from_theta(e2, s2)
+            centre = mesh.vertices[mesh.triangles[_nearest_triangles(mesh, start)]].mean(axis=1)
+            guess[lost] = start + 0.01 * (centre - start)
+        return guess
 
     def _band_inverse(self, q, guess, y, jac_k, redo, tol, mesh) -> None:
         """Pre-images of values q whose Newton pre-image lies in the collar's band (or was not found):
@@ -326,8 +355,8 @@ class SmoothMap(ThetaMap):
         found = np.isfinite(y).all(axis=1)
         close = np.zeros(len(y), dtype=bool)
         if found.any():
-            dist = nearest_edge(y[found], self.polygon.points)[2]
-            close[np.flatnonzero(found)[dist <= self._band_width]] = True
+            cand, _, _, dist = _nearest_within(y[found], self.polygon.points, self._polygon_xy, self._band_width)
+            close[np.flatnonzero(found)[cand[dist <= self._band_width]]] = True
         if not (close.any() or (~found).any()) or self.collar is None:
             return np.zeros(0, dtype=np.intp)
         c = np.flatnonzero(close)
@@ -343,15 +372,24 @@ class SmoothMap(ThetaMap):
         mesh = mesh_polygon(self.polygon, max(area / GUESS_TRIANGLES, 1e-12 * area))
         return mesh, self.evaluate(mesh.vertices).points
 
+    @cached_property
+    def _guess_locator(self):
+        """`warpcli.maps.fem.locate.TriangleLocator` of `_guess_mesh`'s image: made once (it was made
+        for every call of `inverse`, 0.04 s each at 1 MP: a pull-back calls it per band)."""
+        from .fem.locate import TriangleLocator
+
+        mesh, image = self._guess_mesh
+        return TriangleLocator(image, mesh.triangles)
+
     def precompute(self, side: str) -> None:
         """Make now what a pull-back asks first: the certificate with the collar's band (`collar`), and
-        for the ``"inverse"`` side the first guess's triangulation (`_guess_mesh`). Built in a forked
+        for the ``"inverse"`` side the first guess's triangulation (`_guess_mesh`) and its locator. Built in a forked
         child (`_Method.build_forked`), the map comes back with them: made there beside the other
         map's build, not by the parent on one GIL."""
         self.certify()
         _ = self.collar
         if side == "inverse":
-            _ = self._guess_mesh
+            _ = self._guess_locator
 
     def certify(self) -> Certificate:
         return self._certificate
@@ -462,6 +500,53 @@ def _inside_points(points: ArrayLike, vx: NDArray[np.float64], vy: NDArray[np.fl
     if len(p):
         _compiled.inside_points(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), vx, vy, out)
     return out
+
+
+#: Largest change between consecutive steps of a run of targets, relative to the step, that
+#: `_steady` still calls even (consecutive pixels of a row change by far less).
+STEADY = 0.25
+
+
+def _steady(q: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Points k >= 3 whose three steps before them (q[k] - q[k-1], q[k-1] - q[k-2], q[k-2] - q[k-3])
+    change by at most `STEADY` of themselves from one to the next: a run of evenly spaced targets
+    (a row of pixels mapped into Theta), along which the pre-images are extrapolated."""
+    out = np.zeros(len(q), dtype=bool)
+    if len(q) > 3:
+        d = np.diff(q, axis=0)
+        dd = np.diff(d, axis=0)
+        even = np.einsum("ij,ij->i", dd, dd) <= STEADY**2 * np.einsum("ij,ij->i", d[:-1], d[:-1])
+        out[3:] = even[1:] & even[:-1]
+    return out
+
+
+def _nearest_within(
+    points: NDArray[np.float64], vertices: NDArray[np.float64], xy: tuple[NDArray[np.float64], NDArray[np.float64]], reach: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
+    """`warpcli.boundary.nearest_edge` of the points that may lie within ``reach`` of the polygon
+    (``vertices``, its columns ``xy``): their indices, then its edge, parameter and distance for them.
+
+    The compiled `near_boundary` picks a superset of the points within reach in one pass;
+    `nearest_edge` then runs on those alone (its values per point do not depend on the others: a
+    test compares them), so the distances and decisions are its own, bit for bit. The pull-back
+    asks this of every pixel (1 MP: a thin band along the boundary qualifies), where
+    `nearest_edge` on every point was a fifth of its time (measured: 0.40 of 1.9 s on one thread)."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    flag = np.zeros(len(p), dtype=np.uint8)
+    if len(p):
+        _compiled.near_boundary(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), *xy, float(reach), flag)
+    cand = np.flatnonzero(flag)
+    edge, t, dist = nearest_edge(p[cand], vertices)
+    return cand, edge, t, dist
+
+
+def _on_boundary(
+    points: NDArray[np.float64], vertices: NDArray[np.float64], xy: tuple[NDArray[np.float64], NDArray[np.float64]], tolerance: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+    """`warpcli.boundary.on_boundary`'s result, by `_nearest_within`."""
+    cand, edge, t, dist = _nearest_within(points, vertices, xy, tolerance)
+    close = dist <= tolerance
+    return cand[close], edge[close], t[close]
 
 
 def _nearest_triangles(mesh, points: NDArray[np.float64]) -> NDArray[np.intp]:
@@ -613,7 +698,10 @@ class _Method:
         arrays imports it, in the first guess's triangle locator: 10-20 ms the pull-back
         would otherwise pay).
         """
-        import numpy.ma  # noqa: F401
+        if self.name == "bem" or not _forks():
+            # MFS's locator comes from its forked child (`SmoothMap.precompute`): this process
+            # never calls np.median then (numpy.ma: 50-100 ms of CPU under load, beside the children)
+            import numpy.ma  # noqa: F401
 
         from . import newton  # noqa: F401
         from .fem import locate  # noqa: F401
@@ -622,6 +710,13 @@ class _Method:
             from . import bem_eval  # noqa: F401
         self._load_fit()
         _load_runtime()
+
+
+def _forks() -> bool:
+    """Whether MFS's maps are built in forked children here (`_Method.build_forked`)."""
+    from .._fork import available
+
+    return available()
 
 
 def _load_runtime() -> None:

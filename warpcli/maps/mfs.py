@@ -147,6 +147,7 @@ class MFSSolution(ClosedForm):
         *,
         max_iter: int = 20,
         jacobian: bool = False,
+        chain: NDArray[np.bool_] | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64] | None]:
         """`warpcli.maps.newton.invert` of this map, compiled: the same damped iteration per point.
 
@@ -167,6 +168,13 @@ class MFSSolution(ClosedForm):
         max_iter : int
         jacobian : bool
             Also return phi's Jacobian at converged points (NaN elsewhere).
+        chain : (K,) ndarray of bool, optional
+            Points that start from the quadratic extrapolation of the three
+            pre-images before them (when those converged) instead of ``guess``
+            (which may then be NaN): runs of evenly spaced targets, such as
+            consecutive pixels of a row (`warpcli.maps._smooth_kernels.mfs_invert`).
+            A chained point whose three predecessors did not converge, with a
+            NaN guess, is returned unconverged.
 
         Returns
         -------
@@ -185,10 +193,11 @@ class MFSSolution(ClosedForm):
         f = self.frame
         frame = np.array([f.centre[0], f.centre[1], f.scale, f.tcentre[0], f.tcentre[1], f.tscale], dtype=np.float64)
         v = np.asarray(polygon, dtype=np.float64)
+        links = np.zeros(K, dtype=np.uint8) if chain is None else np.ascontiguousarray(chain, dtype=np.uint8)
         if K:
             _compiled.mfs_invert(
                 np.ascontiguousarray(q[:, 0]), np.ascontiguousarray(q[:, 1]),
-                np.ascontiguousarray(g[:, 0]), np.ascontiguousarray(g[:, 1]),
+                np.ascontiguousarray(g[:, 0]), np.ascontiguousarray(g[:, 1]), links,
                 np.ascontiguousarray(self.sites[:, 0]), np.ascontiguousarray(self.sites[:, 1]),
                 np.ascontiguousarray(self.weights[:, 0]), np.ascontiguousarray(self.weights[:, 1]),
                 np.ascontiguousarray(self.affine, dtype=np.float64), frame,
