@@ -46,6 +46,9 @@ _BLOCK = 256
 #: ~ order^2 _FAR^-(order-1) for Hessians, ~1e-14 at most (measured: faster
 #: than _FAR = 4 or 5 with orders 28 or 24).
 _FAR = 3.0
+#: Blocks wider than this many (median) element lengths are halved, down to ``_MIN_BLOCK`` points.
+_SPLIT_RADIUS = 4.0
+_MIN_BLOCK = 32
 _ORDER = 36
 
 #: The compiled kernels (`warpcli.maps._bem_kernels`; `fast_log` is inlined from `_smooth_kernels`).
@@ -220,11 +223,7 @@ def evaluate(
         return val, jac, hess
     order = _morton_order(p)
     ps = p[order]
-    bstart = np.append(np.arange(0, K, _BLOCK), K).astype(np.int64)
-    lo = np.minimum.reduceat(ps, bstart[:-1], axis=0)
-    hi = np.maximum.reduceat(ps, bstart[:-1], axis=0)
-    bc = 0.5 * (lo + hi)
-    brad = 0.5 * np.hypot(*(hi - lo).T)
+    bstart, bc, brad = _blocks(ps, _SPLIT_RADIUS * float(np.median(sources.length)))
     ax, ay, bx, by, ecx, ecy, elen, orders, offsets, sx, sy, alpha, bre, bim = sources
     # the kernel's work arrays (it allocates nothing): G far Gauss nodes at most, blocks of B points
     G = len(ax) * int(orders[-1])
@@ -241,6 +240,28 @@ def evaluate(
     inv = np.empty_like(order)
     inv[order] = np.arange(K)
     return val[inv] if want_val else val, jac[inv] if want_jac else jac, hess[inv] if want_hess else hess
+
+
+def _blocks(ps: NDArray[np.float64], cap: float) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """Blocks of Z-ordered points: their starts (and the end), bounding-box centres and radii.
+
+    Blocks of ``_BLOCK`` points, halved while their radius exceeds ``cap``
+    and they hold more than ``_MIN_BLOCK``: points along a curve (the
+    certificate's) or a jump of the Z-order curve make wide blocks, which
+    leave most elements near, summed per point instead of in one expansion.
+    """
+    K = len(ps)
+    size = _BLOCK
+    bstart = np.append(np.arange(0, K, size), K).astype(np.int64)
+    while True:
+        lo = np.minimum.reduceat(ps, bstart[:-1], axis=0)
+        hi = np.maximum.reduceat(ps, bstart[:-1], axis=0)
+        brad = 0.5 * np.hypot(*(hi - lo).T)
+        wide = np.flatnonzero((brad > cap) & (np.diff(bstart) > _MIN_BLOCK))
+        if not wide.size:
+            return bstart, 0.5 * (lo + hi), brad
+        mid = bstart[wide] + np.diff(bstart)[wide] // 2
+        bstart = np.insert(bstart, wide + 1, mid)
 
 
 def _morton_order(p: NDArray[np.float64]) -> NDArray[np.int64]:
