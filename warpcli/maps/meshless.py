@@ -514,10 +514,7 @@ class _Method:
         both). In two children they run on two cores while the parent reads the image."""
         from .._fork import available
 
-        if not available() or self.name == "bem":
-            # BEM's kernels are numba's own (not `warpcli._native`'s): each child loaded them
-            # from numba's cache again, and the parent once more for the pull-back (measured at
-            # 1 MP under load: 6.77 s of CPU against 5.63 s on threads, the wall time worse too)
+        if not available():
             return None
         # Before the fork (beside the image's decoding), loaded once for the children and this process
         # (which unpickles the maps) rather than in each.
