@@ -205,6 +205,13 @@ class SmoothMap(ThetaMap):
                 mesh, image = self._guess_mesh
                 tri, bary = TriangleLocator(image, mesh.triangles).locate(q[k])
                 guess = barycentric_combine(mesh.vertices, mesh.triangles, tri, bary)
+                if self.name == "bem":
+                    # the quadratic patches' guess (`warpcli.maps.quadratic_guess`): 2.3 of BEM's
+                    # costly evaluations per point instead of 2.9 (1 MP, measured)
+                    found = np.flatnonzero(tri >= 0)
+                    guess[found] = self._quadratic_guess.guess(
+                        q[k[found]], tri[found], bary[found], guess[found], self._inside_polygon
+                    )
                 # Points between the mapped triangulation and Theta's boundary
                 # (the approximation does not fit the boundary exactly): start
                 # from the nearest boundary point's pre-image, pulled inside.
@@ -343,6 +350,14 @@ class SmoothMap(ThetaMap):
         mesh = mesh_polygon(self.polygon, max(area / GUESS_TRIANGLES, 1e-12 * area))
         return mesh, self.evaluate(mesh.vertices).points
 
+    @cached_property
+    def _quadratic_guess(self):
+        """`_guess_mesh`'s triangles as quadratic patches in Theta (BEM's first guess)."""
+        from .quadratic_guess import QuadraticGuess
+
+        mesh, image = self._guess_mesh
+        return QuadraticGuess.of(mesh.vertices, mesh.triangles, image, lambda p: self.evaluate(p).points)
+
     def precompute(self, side: str) -> None:
         """Make now what a pull-back asks first: the certificate with the collar's band (`collar`), and
         for the ``"inverse"`` side the first guess's triangulation (`_guess_mesh`). Built in a forked
@@ -351,7 +366,7 @@ class SmoothMap(ThetaMap):
         self.certify()
         _ = self.collar
         if side == "inverse":
-            _ = self._guess_mesh
+            _ = self._quadratic_guess if self.name == "bem" else self._guess_mesh
 
     def certify(self) -> Certificate:
         return self._certificate
