@@ -48,14 +48,14 @@ class QuadraticGuess:
     vertices : (V, 2) ndarray of float
         The triangulation's vertices (in the polygon).
     triangles : (T, 3) ndarray of int
-    coef : (T, 12) ndarray of float
+    coef_rows : (12, T) ndarray of float
         Per triangle, T(l1, l2) = A + B1 l1 + B2 l2 + C11 l1^2 + C12 l1 l2 +
-        C22 l2^2 as the (x, y) pairs A, B1, B2, C11, C12, C22.
+        C22 l2^2: the rows are the x and y of A, B1, B2, C11, C12, C22.
     """
 
     vertices: NDArray[np.float64]
     triangles: NDArray[np.int64]
-    coef: NDArray[np.float64]
+    coef_rows: NDArray[np.float64]
 
     @classmethod
     def of(
@@ -109,7 +109,7 @@ class QuadraticGuess:
             ],
             axis=1,
         )
-        return cls(np.asarray(vertices, dtype=np.float64), tri, coef)
+        return cls(np.asarray(vertices, dtype=np.float64), tri, np.ascontiguousarray(coef.T))
 
     def guess(
         self,
@@ -139,20 +139,30 @@ class QuadraticGuess:
         -------
         (K, 2) ndarray of float
         """
-        c = self.coef[tri]
-        a, b1, b2, c11, c12, c22 = (c[:, 2 * i : 2 * i + 2] for i in range(6))
-        l1 = bary[:, 1:2].copy()
-        l2 = bary[:, 2:3].copy()
+        # per point the rows of its patch's coefficients: ax, ay, b1x, b1y, ... (one gather)
+        ax, ay, b1x, b1y, b2x, b2y, c11x, c11y, c12x, c12y, c22x, c22y = self.coef_rows[:, tri]
+        qx = q[:, 0]
+        qy = q[:, 1]
+        l1 = bary[:, 1].copy()
+        l2 = bary[:, 2].copy()
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             for _ in range(STEPS):
-                r = q - (a + l1 * (b1 + c11 * l1 + c12 * l2) + l2 * (b2 + c22 * l2))
-                j1 = b1 + 2.0 * c11 * l1 + c12 * l2
-                j2 = b2 + c12 * l1 + 2.0 * c22 * l2
-                det = j1[:, 0:1] * j2[:, 1:2] - j2[:, 0:1] * j1[:, 1:2]
-                l1 += (r[:, 0:1] * j2[:, 1:2] - j2[:, 0:1] * r[:, 1:2]) / det
-                l2 += (j1[:, 0:1] * r[:, 1:2] - r[:, 0:1] * j1[:, 1:2]) / det
+                # the patch T and its derivatives along l1 (j1) and l2 (j2) at (l1, l2)
+                j1x = b1x + c11x * l1
+                j1y = b1y + c11y * l1
+                j2x = b2x + c22x * l2
+                j2y = b2y + c22y * l2
+                rx = qx - (ax + l1 * (j1x + c12x * l2) + l2 * j2x)
+                ry = qy - (ay + l1 * (j1y + c12y * l2) + l2 * j2y)
+                j1x += c11x * l1 + c12x * l2
+                j1y += c11y * l1 + c12y * l2
+                j2x += c12x * l1 + c22x * l2
+                j2y += c12y * l1 + c22y * l2
+                det = j1x * j2y - j2x * j1y
+                l1 += (rx * j2y - j2x * ry) / det
+                l2 += (j1x * ry - rx * j1y) / det
             v = self.vertices[self.triangles[tri]]
-            out = v[:, 0] + l1 * (v[:, 1] - v[:, 0]) + l2 * (v[:, 2] - v[:, 0])
+            out = v[:, 0] + l1[:, None] * (v[:, 1] - v[:, 0]) + l2[:, None] * (v[:, 2] - v[:, 0])
         ok = np.isfinite(out).all(axis=1)
         ok[ok] = inside(out[ok])
         out[~ok] = linear[~ok]
