@@ -474,7 +474,7 @@ def _add_local_expansion(px, py, s0, nb, cx, cy, c0r, c0i, c1r, c1i, want_val, w
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def bem_evaluate(
-    px, py, bstart, bcx, bcy, brad,
+    px, py, rows, bstart, bcx, bcy, brad,
     ax, ay, bx, by, ecx, ecy, elen, qc, cc,
     orders, offsets, sx, sy, alpha, beta_re, beta_im,
     near, far_radii, want_val, want_jac, want_hess, val, jac, hess,
@@ -483,7 +483,8 @@ def bem_evaluate(
     """Sum the BEM representation formula over elements, for blocks of points.
 
     Points (local coordinates) come in spatially coherent blocks
-    ``bstart[b]:bstart[b+1]`` with bounding circle (bcx, bcy, brad).  Per block
+    ``bstart[b]:bstart[b+1]`` with bounding circle (bcx, bcy, brad); point i
+    is stored at row ``rows[i]`` of ``val``, ``jac``, ``hess``.  Per block
     and element, by distance:
 
     - far (``far_radii`` block radii): the element's Gauss charges and dipoles go
@@ -568,7 +569,7 @@ def bem_evaluate(
                           invk, want_val, c0r, c0i, c1r, c1i, sort_index, counts, sorted_nodes)  # fmt: skip
             _add_local_expansion(px, py, s0, nb, bcx[b], bcy[b], c0r, c0i, c1r, c1i,
                                  want_val, want_jac, want_hess, sums, horner)  # fmt: skip
-        _store_block(s0, nb, sums, want_val, want_jac, want_hess, val, jac, hess)
+        _store_block(s0, nb, rows, sums, want_val, want_jac, want_hess, val, jac, hess)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -784,10 +785,10 @@ def _add_closed_form(k, e, zeta, zm, idelta, L, logL, qc, cc, acc):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _store_block(s0, nb, acc, want_val, want_jac, want_hess, val, jac, hess):
-    """Store a block's sums as value, Jacobian (Re Phi', -Im Phi') and Hessian (Re Phi'', -Im Phi'')."""
+def _store_block(s0, nb, rows, acc, want_val, want_jac, want_hess, val, jac, hess):
+    """Store a block's sums as value, Jacobian (Re Phi', -Im Phi') and Hessian (Re Phi'', -Im Phi'') at their rows."""
     for k in range(nb):
-        i = s0 + k
+        i = rows[s0 + k]
         if want_val:
             val[i, 0] = acc[_V0, k]
             val[i, 1] = acc[_V1, k]
