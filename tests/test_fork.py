@@ -224,9 +224,12 @@ def test_no_module_uses_the_locking_cached_property_of_the_standard_library():
     assert offenders == []
 
 
-@pytest.mark.parametrize("method, side", [("mfs", ("source", "inverse")), ("mfs", ("target", "grid"))])
+@pytest.mark.parametrize(
+    "method, side",
+    [("mfs", ("source", "inverse")), ("mfs", ("target", "grid")), ("bem", ("source", "inverse")), ("bem", ("target", "grid"))],
+)
 def test_a_smooth_map_built_in_a_child_is_the_one_built_here_bit_for_bit(method, side):
-    """MFS in a forked child (`warpcli.maps.meshless`): the same fit, certificate, collar,
+    """MFS and BEM in a forked child (`warpcli.maps.meshless`): the same fit, certificate, collar,
     first-guess mesh (inverse side), and the same values and pre-images."""
     from warpcli.maps.meshless import BEM, MFS
 
@@ -252,15 +255,6 @@ def test_a_smooth_map_built_in_a_child_is_the_one_built_here_bit_for_bit(method,
     assert a.points.tobytes() == b.points.tobytes() and a.jacobian.tobytes() == b.jacobian.tobytes()
     q = a.points[np.isfinite(a.points).all(axis=1)]
     assert here.inverse(q).points.tobytes() == there.inverse(q).points.tobytes()
-
-
-def test_bem_is_built_on_a_thread_not_forked():
-    """BEM's numba kernels would be loaded again in every child: its maps stay on threads."""
-    from warpcli.maps.meshless import BEM
-
-    sq = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), name="sq")
-    opts = MapOptions(method="bem")
-    assert BEM.build_forked(sq, theta_for(sq, sq, opts), opts) is None
 
 
 def test_a_smooth_build_that_dies_in_its_child_names_the_polygon(monkeypatch):

@@ -250,3 +250,77 @@ def test_compiled_mfs_newton_matches_numba_bitwise():
         )  # fmt: skip
 
     _same("warpcli.maps._smooth_kernels", "mfs_invert", args)
+
+
+BEM = "warpcli.maps._bem_kernels"
+
+
+def test_bem_kernels_match_numba_bitwise():
+    """The collocation integrals, the evaluation's block sums (near, Gauss and far fields, all three
+    quantities) and the certificate's bounds, natively and as numba's functions."""
+    from warpcli.maps.bem import fit_bem
+    from warpcli.maps.bem_eval import _FAR, _GAUSS_ORDERS, _ORDER, NEAR, _morton_order, gauss01
+
+    P = star() * 40.0 + 64.0
+    sol = fit_bem(P, P[::-1] * 0.5, m=48)
+    a = sol.nodes
+    b = np.roll(a, -1, axis=0)
+    m = len(a)
+    rng = np.random.default_rng(12)
+    c = a + rng.uniform(0.1, 0.9, (m, 1)) * (b - a)  # on the elements, and beside them
+    c = np.concatenate([c, 0.6 * c, c + 1e-4])
+    inc_e = np.full((len(c), 2), -1, dtype=np.int64)
+    inc_t = np.full((len(c), 2), -1.0)
+    inc_e[:m, 0] = np.arange(m)
+    inc_t[:m, 0] = np.linalg.norm(c[:m] - a, axis=1) / np.linalg.norm(b - a, axis=1)
+    gt, gw = gauss01(16)
+
+    def assemble():
+        return (
+            c[:, 0].copy(), c[:, 1].copy(), inc_e, inc_t, a[:, 0].copy(), a[:, 1].copy(), b[:, 0].copy(),
+            b[:, 1].copy(), gt, gw, NEAR, np.zeros((len(c), m, 2)), np.zeros((len(c), m, 2)),
+        )  # fmt: skip
+
+    _same(BEM, "bem_assemble", assemble, ("_smooth_kernels.py",))
+
+    # points of a grid and next to the boundary, in blocks of 64: all three fields of the evaluation
+    g = np.stack(np.meshgrid(np.linspace(-0.5, 0.5, 60), np.linspace(-0.5, 0.5, 60)), axis=-1).reshape(-1, 2)
+    p = np.concatenate([g, 0.999 * a, 0.98 * c])
+    p = p[_morton_order(p)]
+    bstart = np.append(np.arange(0, len(p), 64), len(p)).astype(np.int64)
+    lo = np.minimum.reduceat(p, bstart[:-1], axis=0)
+    hi = np.maximum.reduceat(p, bstart[:-1], axis=0)
+    bc = 0.5 * (lo + hi)
+    brad = 0.5 * np.hypot(*(hi - lo).T)
+    src = sol._sources
+    G = m * int(_GAUSS_ORDERS[-1])
+    K = len(p)
+    rows = rng.permutation(K)  # where each point's results go
+
+    def evaluate():
+        return (
+            p[:, 0].copy(), p[:, 1].copy(), rows, bstart, bc[:, 0].copy(), bc[:, 1].copy(), brad,
+            *src[:7], sol.flux, sol.data, *src[7:], NEAR, _FAR, True, True, True,
+            np.zeros((K, 2)), np.zeros((K, 2, 2)), np.zeros((K, 2, 2, 2)),
+            np.zeros((5, _ORDER + 1)), np.zeros((9, G)), np.zeros(G, dtype=np.int64), np.zeros((14, 64)),
+            np.zeros(G, dtype=np.int64), np.zeros((2, _ORDER + 2), dtype=np.int64), np.zeros((10, G)),
+        )  # fmt: skip
+
+    _same(BEM, "bem_evaluate", evaluate, ("_smooth_kernels.py",))
+    want = evaluate()
+    importlib.import_module(BEM).bem_evaluate(*want)
+    assert np.isfinite(want[-8]).all() and np.abs(want[-8]).max() > 0  # every point got its Hessian
+
+    reach = rng.uniform(0.0, 0.05, K)
+    ga, gb = sol._poles
+    gg = np.concatenate([ga.T, gb.T])
+    size = rng.uniform(0.0, 1.0, m)
+
+    def bounds():
+        return (
+            p[:, 0].copy(), p[:, 1].copy(), reach, a[:, 0].copy(), a[:, 1].copy(), gg.real.copy(),
+            gg.imag.copy(), np.abs(gg[:3]).real.copy() + 1.0, (b - a)[:, 0].copy(), (b - a)[:, 1].copy(),
+            1.0 / ((b - a) ** 2).sum(axis=1), size, np.zeros((K, 3)),
+        )  # fmt: skip
+
+    _same(BEM, "bem_bounds", bounds, ("_smooth_kernels.py",))

@@ -36,7 +36,7 @@ Conventions and choices (each is justified where it is implemented):
   cannot represent the jump of q = grad(phi).n at a corner (measured: 10-100x
   larger boundary deviation with the paper's continuous hats).
 - Integrals of log|x - y| and of its derivatives against linear functions on
-  a straight element have closed forms (`warpcli.maps.bem_eval.near_integrals`);
+  a straight element have closed forms (`warpcli.maps._bem_kernels.near_integrals`);
   they are used for the singular integrals of the collocation system and,
   in evaluation, for every (point, element) pair closer than two element
   lengths, so values and derivatives stay accurate arbitrarily close to the
@@ -51,10 +51,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from .._jit import njit
 from numpy.typing import ArrayLike, NDArray
 
-from .bem_eval import NEAR, ElementSources, crecip, evaluate, gauss01, gauss_sources, local_pair, near_integrals
+from .._native import Kernels
+from .bem_eval import NEAR, ElementSources, evaluate, gauss01, gauss_sources
 from .closed_form import (
     TWO_PI,
     ClosedForm,
@@ -71,102 +71,14 @@ from .closed_form import (
 
 __all__ = ["BEMSolution", "default_bem_nodes", "fit_bem"]
 
-
-# --------------------------------------------------------------------------
-# The collocation system
-# --------------------------------------------------------------------------
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _xlogx(x):
-    """x log|x| with the limit 0 at x = 0."""
-    if x == 0.0:
-        return 0.0
-    return x * np.log(abs(x))
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _on_element_log(r):
-    """(int (1-t) log|r - t| dt, int t log|r - t| dt) over [0, 1] for r in [0, 1] (weak singularity)."""
-    l0 = _xlogx(r) - _xlogx(r - 1.0) - 1.0
-    l1 = r * l0 - (0.5 * r * _xlogx(r) - 0.5 * (r - 1.0) * _xlogx(r - 1.0) - 0.25 * (2.0 * r - 1.0))
-    return l0 - l1, l1
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _assemble(cx, cy, inc_e, inc_t, ax, ay, bx, by, gt, gw):
-    """Single- and double-layer integrals of each hat half at each collocation point.
-
-    Parameters
-    ----------
-    cx, cy : (P,) float arrays
-        Collocation points (local coordinates).
-    inc_e, inc_t : (P, 2) int / float arrays
-        Elements that contain each point (-1 if none) and the point's
-        parameter on them.
-    ax, ay, bx, by : (E,) float arrays
-        Element start and end points.
-    gt, gw : (G,) float arrays
-        Gauss rule on [0, 1] for the regular integrals.
-
-    Returns
-    -------
-    S : (P, E, 2) float array
-        S[p, e, s] = int_e phi_s G_{x_p} ds, G_x(y) = -1/(2 pi) log|x - y|.
-    D : (P, E, 2) float array
-        D[p, e, s] = -int_e phi_s dG_{x_p}/dn_y ds (principal value; 0 on
-        the element itself, where the kernel vanishes on a straight segment).
-    """
-    P = cx.shape[0]
-    E = ax.shape[0]
-    S = np.zeros((P, E, 2))
-    D = np.zeros((P, E, 2))
-    for p in range(P):
-        for e in range(E):
-            delta = complex(bx[e] - ax[e], by[e] - ay[e])
-            L = abs(delta)
-            logL = np.log(L)
-            own = -1.0
-            if inc_e[p, 0] == e:
-                own = inc_t[p, 0]
-            elif inc_e[p, 1] == e:
-                own = inc_t[p, 1]
-            if own >= 0.0:
-                l0, l1 = _on_element_log(own)
-                S[p, e, 0] = -L / TWO_PI * (0.5 * logL + l0)
-                S[p, e, 1] = -L / TWO_PI * (0.5 * logL + l1)
-                continue
-            idelta = crecip(delta)
-            zeta, zm = local_pair(cx[p], cy[p], ax[e], ay[e], bx[e], by[e], idelta)
-            if abs(2.0 * zeta - 1.0) < NEAR:
-                l0, l1, a0, a1, _b0, _b1, _c0, _c1 = near_integrals(zeta, zm)
-            else:
-                l0 = 0.0
-                l1 = 0.0
-                a0 = 0.0j
-                a1 = 0.0j
-                for j in range(gt.shape[0]):
-                    w = zeta - gt[j]
-                    lg = 0.5 * np.log(w.real * w.real + w.imag * w.imag)
-                    iw = crecip(w)
-                    l0 += gw[j] * (1.0 - gt[j]) * lg
-                    l1 += gw[j] * gt[j] * lg
-                    a0 += gw[j] * (1.0 - gt[j]) * iw
-                    a1 += gw[j] * gt[j] * iw
-            S[p, e, 0] = -L / TWO_PI * (0.5 * logL + l0)
-            S[p, e, 1] = -L / TWO_PI * (0.5 * logL + l1)
-            D[p, e, 0] = -a0.imag / TWO_PI
-            D[p, e, 1] = -a1.imag / TWO_PI
-    return S, D
+#: The compiled kernels: the collocation's integrals (`warpcli.maps._bem_kernels.bem_assemble`) and the
+#: certificate's bounds (`warpcli.maps._bem_kernels.bem_bounds`).
+_compiled = Kernels("warpcli.maps._bem_kernels", depends=("_smooth_kernels.py",))
 
 
 # --------------------------------------------------------------------------
 # Bounds of the derivatives over discs (the certificate's)
 # --------------------------------------------------------------------------
-
-#: The representation formula is evaluated with closed forms, Gauss rules and a treecode whose errors
-#: are ~1e-14 of the terms' sizes (`warpcli.maps.bem_eval`); the certificate's slack is this times their sum.
-_EVAL_ERROR = 1e-13
 
 
 def _node_poles(nodes, flux, data):
@@ -210,81 +122,6 @@ def _node_poles(nodes, flux, data):
         np.add.at(g, (nxt, 2), 2.0 * kd * c[:, 1])
         out.append(g)
     return out[0], out[1]
-
-
-@njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "contract"})
-def _bounds(px, py, reach, yx, yy, gr, gi, w, ex, ey, il2, size, out):
-    """Per disc (centre p, radius r): the evaluation error of A and B at p and bounds of their Taylor remainders.
-
-    A'' = sum_n sum_k gamma_nk / (z - y_n)^k (`_node_poles`; ``gr``, ``gi``
-    (6, m): real and imaginary parts, rows k = 1, 2, 3 of A then of B), so
-    A''(p) and A^(3)(p) are summed exactly, and over the disc
-
-        |A^(4)| = |sum_n sum_k k (k+1) gamma_nk / (z - y_n)^(k+2)| <= sum_n sum_k w_nk / (d_n - r)^(k+2)
-
-    (d_n = |p - y_n|; ``w`` (3, m): k (k+1) max(|gamma_nk| of A, of B)), whence
-
-        |A(p + h) - A(p) - A'(p) h| <= |A''(p)| r^2 / 2 + |A^(3)(p)| r^3 / 6 + sup|A^(4)| r^4 / 24
-
-    wherever the segment from p to p + h lies in the polygon (the caller
-    checks that). Element n runs from node n along (``ex``, ``ey``)
-    (``il2``: 1 / its squared length); ``size`` holds per element L (|q_0|
-    + |q_1| + |c_0| + |c_1|) / (2 pi): the evaluation error at p is
-    `_EVAL_ERROR` times its sum over elements weighted by 1/d + 1/d^2 (d:
-    p's distance to the element).
-    """
-    K = px.shape[0]
-    m = yx.shape[0]
-    for k in range(K):
-        x = px[k]
-        y = py[k]
-        r = reach[k]
-        a2r = 0.0
-        a2i = 0.0
-        a3r = 0.0
-        a3i = 0.0
-        b2r = 0.0
-        b2i = 0.0
-        b3r = 0.0
-        b3i = 0.0
-        sup = 0.0
-        t0 = 0.0
-        for n in range(m):
-            dx = x - yx[n]
-            dy = y - yy[n]
-            d2 = dx * dx + dy * dy
-            inv = 1.0 / d2
-            ur = dx * inv  # u = 1 / (z - y_n)
-            ui = -dy * inv
-            u2r = ur * ur - ui * ui
-            u2i = 2.0 * ur * ui
-            u3r = u2r * ur - u2i * ui
-            u3i = u2r * ui + u2i * ur
-            u4r = u3r * ur - u3i * ui
-            u4i = u3r * ui + u3i * ur
-            # A'' = sum g_k u^k, A^(3) = -sum k g_k u^(k+1) (moduli below)
-            a2r += gr[0, n] * ur - gi[0, n] * ui + gr[1, n] * u2r - gi[1, n] * u2i + gr[2, n] * u3r - gi[2, n] * u3i
-            a2i += gr[0, n] * ui + gi[0, n] * ur + gr[1, n] * u2i + gi[1, n] * u2r + gr[2, n] * u3i + gi[2, n] * u3r
-            a3r += gr[0, n] * u2r - gi[0, n] * u2i + 2.0 * (gr[1, n] * u3r - gi[1, n] * u3i) + 3.0 * (gr[2, n] * u4r - gi[2, n] * u4i)
-            a3i += gr[0, n] * u2i + gi[0, n] * u2r + 2.0 * (gr[1, n] * u3i + gi[1, n] * u3r) + 3.0 * (gr[2, n] * u4i + gi[2, n] * u4r)
-            b2r += gr[3, n] * ur - gi[3, n] * ui + gr[4, n] * u2r - gi[4, n] * u2i + gr[5, n] * u3r - gi[5, n] * u3i
-            b2i += gr[3, n] * ui + gi[3, n] * ur + gr[4, n] * u2i + gi[4, n] * u2r + gr[5, n] * u3i + gi[5, n] * u3r
-            b3r += gr[3, n] * u2r - gi[3, n] * u2i + 2.0 * (gr[4, n] * u3r - gi[4, n] * u3i) + 3.0 * (gr[5, n] * u4r - gi[5, n] * u4i)
-            b3i += gr[3, n] * u2i + gi[3, n] * u2r + 2.0 * (gr[4, n] * u3i + gi[4, n] * u3r) + 3.0 * (gr[5, n] * u4i + gi[5, n] * u4r)
-            g = max(np.sqrt(d2) - r, 0.0)  # 0: the disc holds the node, 1/0 = inf
-            iv = 1.0 / g
-            sup += iv * iv * iv * (w[0, n] + iv * (w[1, n] + iv * w[2, n]))
-            # the terms' sizes at p, for the evaluation error
-            t = min(1.0, max(0.0, (dx * ex[n] + dy * ey[n]) * il2[n]))
-            fx = dx - t * ex[n]
-            fy = dy - t * ey[n]
-            de = 1.0 / np.sqrt(fx * fx + fy * fy)
-            t0 += size[n] * (1.0 + de) * de
-        r2 = r * r
-        tail = sup * r2 * r2 / 24.0
-        out[k, 0] = _EVAL_ERROR * t0
-        out[k, 1] = 0.5 * np.hypot(a2r, a2i) * r2 + np.hypot(a3r, a3i) * r2 * r / 6.0 + tail
-        out[k, 2] = 0.5 * np.hypot(b2r, b2i) * r2 + np.hypot(b3r, b3i) * r2 * r / 6.0 + tail
 
 
 def _star_shaped(p, r, V):
@@ -366,7 +203,7 @@ class BEMSolution(ClosedForm):
                 np.hypot(self.flux[:, 0, 0], self.flux[:, 0, 1]) + np.hypot(self.flux[:, 1, 0], self.flux[:, 1, 1])
                 + np.hypot(self.data[:, 0, 0], self.data[:, 0, 1]) + np.hypot(self.data[:, 1, 0], self.data[:, 1, 1])
             ) / TWO_PI  # fmt: skip
-            _bounds(
+            _compiled.bem_bounds(
                 np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), reach,
                 np.ascontiguousarray(a[:, 0]), np.ascontiguousarray(a[:, 1]),
                 np.ascontiguousarray(g.real), np.ascontiguousarray(g.imag), np.ascontiguousarray(w),
@@ -525,10 +362,12 @@ def fit_bem(
     inc_t = np.array(inc_t, dtype=np.float64)
 
     gt, gw = gauss01(16)
-    S, D = _assemble(
+    S = np.empty((len(cpts), m, 2))
+    D = np.empty((len(cpts), m, 2))
+    _compiled.bem_assemble(
         np.ascontiguousarray(cpts[:, 0]), np.ascontiguousarray(cpts[:, 1]), inc_e, inc_t,
         np.ascontiguousarray(a[:, 0]), np.ascontiguousarray(a[:, 1]),
-        np.ascontiguousarray(a[nxt, 0]), np.ascontiguousarray(a[nxt, 1]), gt, gw,
+        np.ascontiguousarray(a[nxt, 0]), np.ascontiguousarray(a[nxt, 1]), gt, gw, NEAR, S, D,
     )  # fmt: skip
 
     # Unknown flux values: uidx[e, s] for the start (s=0) / end (s=1) of element e.
