@@ -145,6 +145,41 @@ def test_a_worker_answers_call_after_call_with_large_arrays_its_errors_and_its_r
             w.close()  # returns: the child saw the end of its requests (or was gone)
 
 
+@settings(max_examples=5, deadline=None)
+@given(calls=st.lists(st.sampled_from([3, 70_000, "fail", "die"]), min_size=2, max_size=5))
+def test_calls_queued_on_a_worker_come_back_in_order_and_a_death_fails_those_behind_it(calls):
+    """Calls submitted before the earlier ones are taken (70_000 values: out of band, in shared
+    memory, a region each): each result is its own call's, in order; a call that kills the child
+    raises `ChildDied`, and so does every call queued behind it, whose regions are free again."""
+    shared = _fork.SharedMemory(len(calls), 70_000 * 8 + 4096)
+    worker = _fork.Worker(_echo_or, shared)
+    try:
+        for x in calls:
+            worker.submit(x)
+        assert worker.pending == len(calls)
+        died = False
+        for x in calls:
+            if died or x == "die":
+                with pytest.raises(_fork.ChildDied, match="SIGSEGV"):
+                    worker.result()
+                died = True
+            elif x == "fail":
+                with pytest.raises(InputError, match="nothing to mesh"):
+                    worker.result()
+            else:
+                out = worker.result()
+                assert out["twice"] == 2 * x and np.array_equal(out["array"], np.arange(x))
+                assert _in_shared(shared, out["array"], len(calls)) == (x == 70_000)
+                del out
+        assert worker.pending == 0
+        if died:
+            with pytest.raises(_fork.ChildDied):
+                worker.submit(3)
+        assert sorted(shared.lend() for _ in calls) == list(range(len(calls)))  # every region given back
+    finally:
+        worker.close()
+
+
 def test_a_target_that_dies_in_its_child_fails_the_build_and_names_it(monkeypatch):
     from warpcli.maps.compose import build_map
 

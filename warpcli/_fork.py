@@ -22,6 +22,7 @@ turns it off (the work then runs on a thread, with the same result).
 
 from __future__ import annotations
 
+import collections
 import logging
 import mmap
 import os
@@ -220,15 +221,19 @@ _ALIGN = 64
 
 
 class Worker:
-    """A forked child that runs ``fn(*args)`` for each `submit`, one call at a time; `result`
-    returns or raises what the last call did, as `Forked` does.
+    """A forked child that runs ``fn(*args)`` for each `submit`, one call at a time, in the
+    order submitted; `result` returns or raises what the oldest call not yet taken did, as
+    `Forked` does.
 
     For many calls of one function (the maps of an animated sequence): the
     process is forked once, not once per call, so the parent's pages are
     copied on write once, not after every fork. ``fn`` is the child's from
     the fork on; the arguments and results must pickle. With ``shared`` (made
     before the worker), a result's large arrays come back through shared
-    memory instead of the pipe (`SharedMemory`).
+    memory instead of the pipe (`SharedMemory`). Calls may be submitted
+    before the earlier ones' results are taken (`pending`): the child starts
+    the next as soon as it has written a result, without waiting for the
+    parent to take it.
     """
 
     def __init__(self, fn: Callable[..., Any], shared: SharedMemory | None = None) -> None:
@@ -252,11 +257,23 @@ class Worker:
         self._to, self._from = requests[1], answers[0]
         _WORKER_FDS.update((self._to, self._from))
         self._shared = shared
-        self._region: int | None = None
-        self.busy = False
+        self._regions: collections.deque[int | None] = collections.deque()  # of the calls not yet taken, in order
+        self._died: str | None = None
+
+    @property
+    def pending(self) -> int:
+        """Calls submitted whose result has not been taken."""
+        return len(self._regions)
+
+    @property
+    def busy(self) -> bool:
+        """Whether a call's result is still to be taken."""
+        return bool(self._regions)
 
     def submit(self, *args: Any) -> None:
-        """Start ``fn(*args)`` (the worker must not be busy); `ChildDied` if it has ended."""
+        """Queue ``fn(*args)`` after the calls submitted before; `ChildDied` if the child has ended."""
+        if self._died is not None:
+            raise ChildDied(self._died)
         region = None if self._shared is None else self._shared.lend()
         data = pickle.dumps((region, args), protocol=pickle.HIGHEST_PROTOCOL)
         try:
@@ -264,29 +281,36 @@ class Worker:
         except OSError as err:  # a broken pipe: the child is gone
             if self._shared is not None:
                 self._shared.give_back(region)
-            status = self._reap()
-            self.close()
-            raise ChildDied(_describe(status)) from err
-        self._region = region
-        self.busy = True
+            raise ChildDied(self._gone()) from err
+        self._regions.append(region)
 
     def result(self) -> Any:
-        """Wait for the call `submit` started: its return value or exception (`ChildDied` if the child died)."""
-        self.busy = False
-        region, self._region = self._region, None
+        """Wait for the oldest call not yet taken: its return value or exception (`ChildDied`
+        if the child died; then every call still pending raises it too)."""
+        region = self._regions.popleft()
+        if self._died is not None:
+            raise ChildDied(self._died)
         try:
             outcome = _receive(self._from, self._shared, region)
         finally:  # the child has written the region (or is gone)
             if self._shared is not None:
                 self._shared.give_back(region)
         if outcome is None:  # its end of the pipe closed: the child is gone
-            status = self._reap()
-            self.close()
-            raise ChildDied(_describe(status))
+            raise ChildDied(self._gone())
         return _unpack(*outcome)
 
+    def _gone(self) -> str:
+        """The child has ended: reaped, the pipes closed, the regions of its pending calls given back."""
+        self._died = _describe(self._reap())
+        if self._shared is not None:
+            for region in self._regions:
+                self._shared.give_back(region)
+        self.close()
+        return self._died
+
     def close(self, kill: bool = False) -> None:
-        """End the child: at once with ``kill``, else when it has finished its call."""
+        """End the child: at once with ``kill``, else when it has finished the call it runs (the
+        calls queued behind that one are not run)."""
         if kill and self._pid is not None:
             try:
                 os.kill(self._pid, signal.SIGKILL)

@@ -795,56 +795,68 @@ def _plans_in_child(
 
 
 def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) -> list[BatchItem]:
-    """An animated sequence on all cores: the maps of the next ``width`` runs are
-    built in forked worker processes while this process reads, resamples and
+    """An animated sequence on all cores: the maps of the next runs are built in
+    ``width`` forked worker processes while this process reads, resamples and
     writes the frames of the run whose map has arrived.
 
     A map holds the GIL while it is built (triangle, SuperLU), so the builds go
     to forked children, each with a GIL of its own (`warpcli._fork.Worker`:
     forked once, not per map); only the sampling plans (arrays) come back,
     through memory shared with the workers (`warpcli._fork.SharedMemory`: no
-    copy through a pipe). Runs are taken in frame order, so items, ``on_item``
-    calls and log records (a child's are logged when its plans are taken, as
-    `warp_run` would have logged them while building) come in the order of
-    ``jobs=1``, and the plans are those `warp_run` makes, bit for bit.
+    copy through a pipe). Each worker has the next run queued behind the one
+    it builds (``_QUEUED`` calls in all, as the memory budget allows), so that
+    it goes on as soon as it has sent a run's plans, however long this process
+    takes to warp the frames before. Runs are taken in frame order, so items,
+    ``on_item`` calls and log records (a child's are logged when its plans are
+    taken, as `warp_run` would have logged them while building) come in the
+    order of ``jobs=1``, and the plans are those `warp_run` makes, bit for bit.
     """
     from collections import deque
 
     from ._fork import ChildDied, Worker
 
     items: list[BatchItem] = []
-    queue: deque = deque()  # (tasks, the worker building their plans or None), in run order
+    # [tasks, output sizes, the worker building their plans or None: built here], in run order
+    queue: deque[list] = deque()
     workers: list[Worker] = []
     todo = iter(zip(runs, sizes))
-    shared = _plan_memory(sizes, opts, width)
+    shared, depth = _plan_memory(sizes, opts, width)
 
-    def idle() -> Worker | None:
-        for worker in workers:
-            if not worker.busy:
-                return worker
-        if len(workers) < width:
+    def least_busy() -> Worker | None:
+        if len(workers) < width:  # a worker of its own first
             try:
                 workers.append(Worker(_plans_in_child, shared))
-            except OSError:  # no process left: the runs are built here, when their turn comes
-                return None
-            return workers[-1]
-        return None
+            except OSError:  # no process left: the runs go to the workers there are, or are built here
+                pass
+            else:
+                return workers[-1]
+        free = [w for w in workers if w.pending < depth]
+        return min(free, key=lambda w: w.pending) if free else None
+
+    def submit(entry: list) -> None:
+        tasks, run_sizes = entry[0], entry[1]
+        src, dst = _pair_of(tasks, pairs, missing)
+        while src is not None and run_sizes:
+            job = least_busy()
+            if job is None:
+                break
+            try:
+                job.submit(src, dst, opts, run_sizes, max(1, jobs // width))
+            except ChildDied:
+                workers.remove(job)
+                continue
+            entry[2] = job
+            return
+        entry[2] = None
 
     def fill() -> None:
-        while sum(job is not None for _, job in queue) < width:
+        while sum(entry[2] is not None for entry in queue) < width * depth:
             nxt = next(todo, None)
             if nxt is None:
                 return
             (_, tasks), run_sizes = nxt
-            src, dst = _pair_of(tasks, pairs, missing)
-            job = idle() if src is not None and run_sizes else None
-            if job is not None:
-                try:
-                    job.submit(src, dst, opts, run_sizes, max(1, jobs // width))
-                except ChildDied:
-                    workers.remove(job)
-                    job = None
-            queue.append((tasks, job))
+            queue.append([tasks, run_sizes, None])
+            submit(queue[-1])
 
     def done(batch: list[BatchItem]) -> None:
         for item in batch:
@@ -876,7 +888,7 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
     try:
         fill()
         while queue:
-            tasks, job = queue.popleft()
+            tasks, _, job = queue.popleft()
             if job is None:  # every image missing, or none readable, or no worker: as with jobs=1
                 fill()
                 items.extend(warp_run(*_pair_of(tasks, pairs, missing), tasks, opts, maps=maps, jobs=jobs,
@@ -890,6 +902,11 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
                 continue
             except ChildDied as err:
                 workers.remove(job)
+                # The runs queued behind this one on the same worker are built here, when their
+                # turn comes: given to another worker, they could come back out of order.
+                for entry in queue:
+                    if entry[2] is job:
+                        entry[2] = None
                 fill()
                 done([missing.get(f) or BatchItem(inp, out, WarpError(f"{inp}: the process building its map ended: {err}"))
                       for inp, out, f in tasks])  # fmt: skip
@@ -904,11 +921,18 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
     return items
 
 
+#: Calls queued on each of `_pipelined`'s workers at most: the run it builds and the next, so that
+#: it never waits for this process to take a result before it starts the next build.
+_QUEUED = 2
+
+
 def _plan_memory(sizes, opts: WarpOptions, width: int):
     """Shared memory for the sampling plans of `_pipelined`'s workers (`warpcli._fork.SharedMemory`),
-    or None where it would not fit in the memory budget (the plans then come through pipes).
+    and how many calls each worker may have queued: ``(None, 1)`` where even one call each would
+    not fit in the memory budget (the plans then come through pipes).
 
-    A region per worker and one more (the plans this process warps with while
+    A region per call in flight (``_QUEUED`` per worker, or one if that many
+    would not fit) and one more (the plans this process warps with while
     the workers build the next); each holds a run's plans: the points and
     Jacobians of every pixel of each output size (48 bytes a pixel, the most
     a window takes) and their edge coverage (a few values per pixel of the
@@ -922,13 +946,16 @@ def _plan_memory(sizes, opts: WarpOptions, width: int):
         return w * h * per_pixel + 64 * (w + h) * 8 + (1 << 20)
 
     capacity = max((sum(plan_bytes(w, h) for w, h in run_sizes) for run_sizes in sizes), default=0)
-    count = width + 1
-    if capacity == 0 or count * capacity > max_image_bytes():
-        return None
-    try:
-        return SharedMemory(count, capacity)
-    except (OSError, ValueError):  # no shared memory to be had: the pipes
-        return None
+    if capacity == 0:
+        return None, 1
+    for depth in range(_QUEUED, 0, -1):
+        count = width * depth + 1
+        if count * capacity <= max_image_bytes():
+            try:
+                return SharedMemory(count, capacity), depth
+            except (OSError, ValueError):  # no shared memory to be had: the pipes
+                return None, 1
+    return None, 1
 
 
 def _in_processes(units, pairs, opts, maps, width, on_item, missing) -> list[BatchItem]:
