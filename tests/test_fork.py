@@ -149,14 +149,16 @@ def test_a_worker_answers_call_after_call_with_large_arrays_its_errors_and_its_r
 @given(calls=st.lists(st.sampled_from([3, 70_000, "fail", "die"]), min_size=2, max_size=5))
 def test_calls_queued_on_a_worker_come_back_in_order_and_a_death_fails_those_behind_it(calls):
     """Calls submitted before the earlier ones are taken (70_000 values: out of band, in shared
-    memory, a region each): each result is its own call's, in order; a call that kills the child
-    raises `ChildDied`, and so does every call queued behind it, whose regions are free again."""
+    memory, a region each): each result is its own call's, in order, also after `finish` (no more
+    calls); a call that kills the child raises `ChildDied`, and so does every call queued behind
+    it, whose regions are free again."""
     shared = _fork.SharedMemory(len(calls), 70_000 * 8 + 4096)
     worker = _fork.Worker(_echo_or, shared)
     try:
         for x in calls:
             worker.submit(x)
         assert worker.pending == len(calls)
+        worker.finish()
         died = False
         for x in calls:
             if died or x == "die":
@@ -172,9 +174,8 @@ def test_calls_queued_on_a_worker_come_back_in_order_and_a_death_fails_those_beh
                 assert _in_shared(shared, out["array"], len(calls)) == (x == 70_000)
                 del out
         assert worker.pending == 0
-        if died:
-            with pytest.raises(_fork.ChildDied):
-                worker.submit(3)
+        with pytest.raises(_fork.ChildDied if died else RuntimeError):
+            worker.submit(3)
         assert sorted(shared.lend() for _ in calls) == list(range(len(calls)))  # every region given back
     finally:
         worker.close()

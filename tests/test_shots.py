@@ -376,7 +376,7 @@ def _count_builders(monkeypatch):
                 queued[0] -= 1
 
         def close(self, kill=False):
-            if self._to >= 0:
+            if self._from >= 0:
                 alive[0] -= 1
             super().close(kill)
 

@@ -274,6 +274,8 @@ class Worker:
         """Queue ``fn(*args)`` after the calls submitted before; `ChildDied` if the child has ended."""
         if self._died is not None:
             raise ChildDied(self._died)
+        if self._to < 0:
+            raise RuntimeError("a worker takes no call after finish or close")
         region = None if self._shared is None else self._shared.lend()
         data = pickle.dumps((region, args), protocol=pickle.HIGHEST_PROTOCOL)
         try:
@@ -307,6 +309,14 @@ class Worker:
                 self._shared.give_back(region)
         self.close()
         return self._died
+
+    def finish(self) -> None:
+        """No more calls: the child ends once it has answered those submitted (their results are
+        still to be taken), in the background; `close` then only reaps it."""
+        if self._to >= 0:
+            _WORKER_FDS.discard(self._to)
+            os.close(self._to)
+            self._to = -1
 
     def close(self, kill: bool = False) -> None:
         """End the child: at once with ``kill``, else when it has finished the call it runs (the

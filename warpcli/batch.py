@@ -853,6 +853,11 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
         while sum(entry[2] is not None for entry in queue) < width * depth:
             nxt = next(todo, None)
             if nxt is None:
+                # No run left to build: the workers with none queued end now, on the
+                # other cores, while this process warps the last frames.
+                for worker in workers:
+                    if not worker.busy:
+                        worker.finish()
                 return
             (_, tasks), run_sizes = nxt
             queue.append([tasks, run_sizes, None])
