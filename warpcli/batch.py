@@ -655,9 +655,8 @@ def warp_sequence(
             runs[-1] = (key, runs[-1][1])
         runs[-1][1].append((inp, out, f))
     width = _processes(jobs, len(runs), ins, opts)
-    sizes = _pipeline_sizes(runs, opts, maps, missing) if width > 1 else None
-    if sizes is not None:  # maps built in forked children, frames warped here as they arrive
-        return _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing)
+    if width > 1 and _pipelines(runs, opts, maps, missing):  # maps built in forked children, frames warped here as they arrive
+        return _pipelined(runs, pairs, opts, maps, width, jobs, on_item, missing)
     if width <= 1:  # the frames of a run go to the threads
         items: list[BatchItem] = []
         for _, tasks in runs:
@@ -743,37 +742,43 @@ def _processes(jobs: int, runs: int, ins: list[tuple[int, str]], opts: WarpOptio
     return max(1, min(jobs, runs, max_image_bytes() // max(1, need)))
 
 
-def _pipeline_sizes(runs, opts, maps, missing) -> list[list[tuple[int, int]]] | None:
-    """The output sizes of each run's frames, if the runs can go through `_pipelined`, else None.
+def _pipelines(runs, opts, maps, missing) -> bool:
+    """Whether the runs go through `_pipelined`.
 
     Not without forked children (`warpcli._fork.available`), nor with
     forward maps to write (they need the map itself, which stays in the
-    child), nor when a frame would be warped in strips (that needs the map
-    too): those runs go to worker processes whole (`_in_processes`).
+    child), nor when the first run's frames are warped in strips (that needs
+    the map too; frames that large go to worker processes whole,
+    `_in_processes`). Only the first run's headers are read here: the others'
+    are read when their turn comes (`_run_sizes`), beside the workers' builds.
     """
     from ._fork import available
 
     if not available() or (maps is not None and maps.forward is not None):
-        return None
-    sizes = []
-    for _, tasks in runs:
-        found: list[tuple[int, int]] = []
-        for inp, _, f in tasks:
-            if f in missing:
-                continue
-            header = read_header_or_none(inp)
-            if header is None:
-                continue  # its read says why, in its item
-            try:
-                if in_parts(inp, header, opts.size, None):
-                    return None
-            except WarpError:
+        return False
+    first = next((tasks for _, tasks in runs if any(f not in missing for _, _, f in tasks)), None)
+    return first is None or _run_sizes(first, opts, missing) is not None
+
+
+def _run_sizes(tasks, opts, missing) -> list[tuple[int, int]] | None:
+    """The output sizes of a run's frames, from their headers; None when a frame is warped in
+    strips (`_pipelined` then warps the run here, with its map, as `warp_run` does)."""
+    found: list[tuple[int, int]] = []
+    for inp, _, f in tasks:
+        if f in missing:
+            continue
+        header = read_header_or_none(inp)
+        if header is None:
+            continue  # its read says why, in its item
+        try:
+            if in_parts(inp, header, opts.size, None):
                 return None
-            size = tuple(opts.size) if opts.size is not None else (header.width, header.height)
-            if size not in found:
-                found.append(size)
-        sizes.append(found)
-    return sizes
+        except WarpError:
+            return None
+        size = tuple(opts.size) if opts.size is not None else (header.width, header.height)
+        if size not in found:
+            found.append(size)
+    return found
 
 
 def _plans_in_child(
@@ -794,7 +799,7 @@ def _plans_in_child(
     return {size: plan_for(fmap, size[0], size[1], opts) for size in sizes}
 
 
-def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) -> list[BatchItem]:
+def _pipelined(runs, pairs, opts, maps, width, jobs, on_item, missing) -> list[BatchItem]:
     """An animated sequence on all cores: the maps of the next runs are built in
     ``width`` forked worker processes while this process reads, resamples and
     writes the frames of the run whose map has arrived.
@@ -819,8 +824,11 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
     # [tasks, output sizes, the worker building their plans or None: built here], in run order
     queue: deque[list] = deque()
     workers: list[Worker] = []
-    todo = iter(zip(runs, sizes))
-    shared, depth = _plan_memory(sizes, opts, width)
+    todo = iter(runs)
+    # Made when the first run's sizes are known, before the first worker is forked (the
+    # workers inherit it); its regions hold plans of that size (a larger one comes through
+    # the pipe).
+    shared, depth, planned = None, _QUEUED, False
 
     def least_busy() -> Worker | None:
         if len(workers) < width:  # a worker of its own first
@@ -834,8 +842,12 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
         return min(free, key=lambda w: w.pending) if free else None
 
     def submit(entry: list) -> None:
+        nonlocal shared, depth, planned
         tasks, run_sizes = entry[0], entry[1]
         src, dst = _pair_of(tasks, pairs, missing)
+        if src is not None and run_sizes and not planned:
+            shared, depth = _plan_memory([run_sizes], opts, width)
+            planned = True
         while src is not None and run_sizes:
             job = least_busy()
             if job is None:
@@ -859,8 +871,9 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
                     if not worker.busy:
                         worker.finish()
                 return
-            (_, tasks), run_sizes = nxt
-            queue.append([tasks, run_sizes, None])
+            _, tasks = nxt
+            # None: a frame in strips, warped here with the map (an empty list: no frame readable)
+            queue.append([tasks, _run_sizes(tasks, opts, missing) or [], None])
             submit(queue[-1])
 
     def done(batch: list[BatchItem]) -> None:
