@@ -408,6 +408,37 @@ def test_results_come_through_shared_memory_never_written_over_while_alive(sizes
         worker.close()
 
 
+def _made_in_place(n, fill):
+    """Arrays made by `_fork.empty` (one too large for what is left of the region), and one by numpy."""
+    a = _fork.empty((n, 2))
+    a[:] = fill
+    b = _fork.empty(n * 4, np.float32)
+    b[:] = -fill
+    c = np.full(n, 2 * fill)
+    return {"a": a, "b": b, "c": c, "none": _fork.empty(0)}
+
+
+@settings(max_examples=5, deadline=None)
+@given(n=st.integers(9_000, 30_000), fill=st.floats(-1e6, 1e6))
+def test_arrays_made_in_the_lent_region_come_back_without_a_copy_and_the_rest_after_them(n, fill):
+    """`_fork.empty` in a worker's call makes its large arrays in the region lent to the call: the
+    parent's arrays are those, at their place; a numpy array of the result is copied after them,
+    over none of them; an array that does not fit is numpy's, sent as before."""
+    shared = _fork.SharedMemory(1, n * 16 + n * 16 + 1024)  # a, b; not c as well
+    worker = _fork.Worker(_made_in_place, shared)
+    try:
+        worker.submit(n, fill)
+        out = worker.result()
+        assert np.all(out["a"] == fill) and np.all(out["b"] == np.float32(-fill)) and np.all(out["c"] == 2 * fill)
+        assert _in_shared(shared, out["a"], 1) and _in_shared(shared, out["b"], 1)
+        base = np.frombuffer(shared.region(0), dtype=np.uint8).ctypes.data
+        assert out["a"].ctypes.data == base  # made first, at the region's start
+        assert not _in_shared(shared, out["c"], 1) and out["none"].size == 0  # no room left for c: the pipe
+    finally:
+        worker.close()
+    assert _fork.empty((3, 2)).shape == (3, 2)  # outside a worker's call: numpy's
+
+
 def test_an_array_larger_than_a_region_comes_through_the_pipe():
     shared = _fork.SharedMemory(1, 1 << 17)
     worker = _fork.Worker(_arrays, shared)
