@@ -408,6 +408,21 @@ def test_results_come_through_shared_memory_never_written_over_while_alive(sizes
         worker.close()
 
 
+def test_a_call_submitted_to_a_worker_that_has_died_raises_and_so_do_those_queued():
+    worker = _fork.Worker(_echo_or)
+    try:
+        worker.submit(3)
+        os.kill(worker._pid, signal.SIGKILL)
+        os.waitid(os.P_PID, worker._pid, os.WEXITED | os.WNOWAIT)  # dead, not yet reaped
+        with pytest.raises(_fork.ChildDied, match="SIGKILL"):
+            worker.submit(4)
+        with pytest.raises(_fork.ChildDied, match="SIGKILL"):
+            worker.result()  # the call queued before its death
+        assert worker.pending == 0
+    finally:
+        worker.close()
+
+
 def _made_in_place(n, fill):
     """Arrays made by `_fork.empty` (one too large for what is left of the region), and one by numpy."""
     a = _fork.empty((n, 2))

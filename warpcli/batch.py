@@ -809,7 +809,7 @@ def _pipelined(runs, pairs, opts, maps, width, jobs, on_item, missing) -> list[B
     forked once, not per map); only the sampling plans (arrays) come back,
     through memory shared with the workers (`warpcli._fork.SharedMemory`: no
     copy through a pipe). Each worker has the next run queued behind the one
-    it builds (``_QUEUED`` calls in all, as the memory budget allows), so that
+    it builds (``_QUEUED`` calls a worker, as the memory budget allows), so that
     it goes on as soon as it has sent a run's plans, however long this process
     takes to warp the frames before. Runs are taken in frame order, so items,
     ``on_item`` calls and log records (a child's are logged when its plans are
@@ -919,7 +919,8 @@ def _pipelined(runs, pairs, opts, maps, width, jobs, on_item, missing) -> list[B
                 done([missing.get(f) or BatchItem(inp, out, err.with_traceback(None)) for inp, out, f in tasks])
                 continue
             except ChildDied as err:
-                workers.remove(job)
+                if job in workers:  # (a submit may have found it gone already)
+                    workers.remove(job)
                 # The runs queued behind this one on the same worker are built here, when their
                 # turn comes: given to another worker, they could come back out of order.
                 for entry in queue:
