@@ -12,6 +12,10 @@ of its own: the case that only processes make parallel (with --jobs N, N forked 
 the next frames' maps while the main process warps the frames whose maps have arrived).
 ``--shot single`` runs ``warp IN OUT`` once per frame, one image each: the single-image run.
 
+warpcli's bytecode (and the other checkout's) is compiled first, as ``pip install`` does: in a
+shell with ``PYTHONDONTWRITEBYTECODE`` every run would compile its modules again (0.26 s, serial,
+in every row alike), which is no cost of an installed ``warp``.
+
 Each round runs `warp` as a subprocess once per row, in alternating order (after one untimed
 warm-up run of each row on the first frames), on the same generated frames (a colour ramp and
 a checker, different per frame; a 12-vertex star onto a rotated one). The rows are ``--jobs``
@@ -29,11 +33,17 @@ Two more rows put the speed-up in context, measured in the same rounds:
 does): an independent check that ``--jobs 1`` is the serial cost of the shot (the two rows
 should agree). ``--checkout DIR`` runs another checkout's ``warpcli`` (e.g. the release an
 issue was measured on, or the code before a change) with its default ``--jobs``.
+``--pair`` runs two ``--jobs 1`` shots at once, each pinned to a CPU of its own, and gives
+each shot half the wall time and half the CPU: what two independent serial processes get out
+of the machine, the ceiling of any process-level parallelism on it. Its CPU against ``--jobs 1``
+is what the machine charges for running two at once (shared caches and memory bandwidth, and
+on a virtual machine the host's sharing of its cores), which no code of ours causes.
 """
 
 from __future__ import annotations
 
 import argparse
+import compileall
 import hashlib
 import json
 import math
@@ -93,16 +103,25 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--shot", choices=("batch", "animated", "single"), default="batch")
     parser.add_argument("--one-core", action="store_true", help="add --jobs 1 pinned to one CPU")
     parser.add_argument("--checkout", metavar="DIR", help="add a row running DIR's warpcli with its default --jobs")
+    parser.add_argument("--pair", action="store_true", help="add two --jobs 1 shots at once, each pinned to a CPU (per shot)")
     args = parser.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     jobs = [None if j == "default" else int(j) for j in args.jobs.split(",")]
-    # Rows: (label, jobs value or None for the default, extra environment, CPUs to pin the process to).
+    # Rows: (label, jobs value or None for the default, extra environment, CPUs to pin the process
+    # to; for the pair, one set of CPUs per shot).
     rows = [(f"{j or 'default'}", j, {}, None) for j in jobs]
+    cpus = sorted(os.sched_getaffinity(0))
+    if args.pair and len(cpus) >= 2:
+        rows.append(("1, two shots at once", 1, {}, ({cpus[0]}, {cpus[1]})))
     if args.one_core:
         rows.append(("1, taskset one core", 1, {}, {min(os.sched_getaffinity(0))}))
     if args.checkout:
         rows.append((f"default, {os.path.basename(os.path.abspath(args.checkout))}", None, {"PYTHONPATH": os.path.abspath(args.checkout)}, None))
     warp = os.path.join(os.path.dirname(sys.executable), "warp")
+    import warpcli
+
+    for package in (os.path.dirname(warpcli.__file__), *((os.path.join(args.checkout, "warpcli"),) if args.checkout else ())):
+        compileall.compile_dir(package, quiet=1)  # as an installation does (see above)
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         frames = write_frames(tmp, args.frames, w, h, args.format)
@@ -132,6 +151,16 @@ def main(argv: list[str] | None = None) -> None:
             return [[warp, *frames[:count], *polys, "--out-dir", out, *flag, "-q"]]
 
         def run(label: str, j: int | None, env: dict, pin, out: str, count: int) -> None:
+            if isinstance(pin, tuple):  # the pair: both shots at once, each in a directory and on a CPU of its own
+                os.makedirs(out, exist_ok=True)
+                procs = []
+                for k, one in enumerate(pin):
+                    os.makedirs(os.path.join(out, f"shot{k}"), exist_ok=True)
+                    procs += [subprocess.Popen(cmd, env={**os.environ, **env}, preexec_fn=lambda one=one: os.sched_setaffinity(0, one))
+                              for cmd in commands(os.path.join(out, f"shot{k}"), j, count)]  # fmt: skip
+                if any(p.wait() for p in procs):
+                    raise subprocess.CalledProcessError(1, "warp")
+                return
             os.makedirs(out, exist_ok=True)
             for cmd in commands(out, j, count):
                 if env.get("PYTHONPATH"):  # another checkout's code, through the same interpreter
@@ -147,12 +176,13 @@ def main(argv: list[str] | None = None) -> None:
                 out = os.path.join(tmp, f"out{[row[0] for row in rows].index(label)}")
                 t0, (u0, s0) = time.perf_counter(), _children_cpu()
                 run(label, j, env, pin, out, args.frames)
-                times[label].append(time.perf_counter() - t0)
+                shots = len(pin) if isinstance(pin, tuple) else 1  # the pair's figures are per shot
+                times[label].append((time.perf_counter() - t0) / shots)
                 u1, s1 = _children_cpu()
-                cpu[label].append(u1 - u0 + s1 - s0)
-                sys_cpu[label].append(s1 - s0)
+                cpu[label].append((u1 - u0 + s1 - s0) / shots)
+                sys_cpu[label].append((s1 - s0) / shots)
                 loads.append(os.getloadavg()[0])
-                hashes[label] = digest(out)
+                hashes[label] = digest(os.path.join(out, "shot1") if shots > 1 else out)
                 print(f"round {r + 1} jobs {label}: {times[label][-1]:.2f} s, {cpu[label][-1]:.2f} s of CPU ({sys_cpu[label][-1]:.2f} system), "
                       f"load {loads[-1]:.2f}", file=sys.stderr, flush=True)  # fmt: skip
     first = rows[0][0]

@@ -145,6 +145,42 @@ def test_a_worker_answers_call_after_call_with_large_arrays_its_errors_and_its_r
             w.close()  # returns: the child saw the end of its requests (or was gone)
 
 
+@settings(max_examples=5, deadline=None)
+@given(calls=st.lists(st.sampled_from([3, 70_000, "fail", "die"]), min_size=2, max_size=5))
+def test_calls_queued_on_a_worker_come_back_in_order_and_a_death_fails_those_behind_it(calls):
+    """Calls submitted before the earlier ones are taken (70_000 values: out of band, in shared
+    memory, a region each): each result is its own call's, in order, also after `finish` (no more
+    calls); a call that kills the child raises `ChildDied`, and so does every call queued behind
+    it, whose regions are free again."""
+    shared = _fork.SharedMemory(len(calls), 70_000 * 8 + 4096)
+    worker = _fork.Worker(_echo_or, shared)
+    try:
+        for x in calls:
+            worker.submit(x)
+        assert worker.pending == len(calls)
+        worker.finish()
+        died = False
+        for x in calls:
+            if died or x == "die":
+                with pytest.raises(_fork.ChildDied, match="SIGSEGV"):
+                    worker.result()
+                died = True
+            elif x == "fail":
+                with pytest.raises(InputError, match="nothing to mesh"):
+                    worker.result()
+            else:
+                out = worker.result()
+                assert out["twice"] == 2 * x and np.array_equal(out["array"], np.arange(x))
+                assert _in_shared(shared, out["array"], len(calls)) == (x == 70_000)
+                del out
+        assert worker.pending == 0
+        with pytest.raises(_fork.ChildDied if died else RuntimeError):
+            worker.submit(3)
+        assert sorted(shared.lend() for _ in calls) == list(range(len(calls)))  # every region given back
+    finally:
+        worker.close()
+
+
 def test_a_target_that_dies_in_its_child_fails_the_build_and_names_it(monkeypatch):
     from warpcli.maps.compose import build_map
 
@@ -364,6 +400,52 @@ def test_results_come_through_shared_memory_never_written_over_while_alive(sizes
             assert _is(out, sizes[k], float(k + 1))  # none written over
     finally:
         worker.close()
+
+
+def test_a_call_submitted_to_a_worker_that_has_died_raises_and_so_do_those_queued():
+    worker = _fork.Worker(_echo_or)
+    try:
+        worker.submit(3)
+        os.kill(worker._pid, signal.SIGKILL)
+        os.waitid(os.P_PID, worker._pid, os.WEXITED | os.WNOWAIT)  # dead, not yet reaped
+        with pytest.raises(_fork.ChildDied, match="SIGKILL"):
+            worker.submit(4)
+        with pytest.raises(_fork.ChildDied, match="SIGKILL"):
+            worker.result()  # the call queued before its death
+        assert worker.pending == 0
+    finally:
+        worker.close()
+
+
+def _made_in_place(n, fill):
+    """Arrays made by `_fork.empty` (one too large for what is left of the region), and one by numpy."""
+    a = _fork.empty((n, 2))
+    a[:] = fill
+    b = _fork.empty(n * 4, np.float32)
+    b[:] = -fill
+    c = np.full(n, 2 * fill)
+    return {"a": a, "b": b, "c": c, "none": _fork.empty(0)}
+
+
+@settings(max_examples=5, deadline=None)
+@given(n=st.integers(9_000, 30_000), fill=st.floats(-1e6, 1e6))
+def test_arrays_made_in_the_lent_region_come_back_without_a_copy_and_the_rest_after_them(n, fill):
+    """`_fork.empty` in a worker's call makes its large arrays in the region lent to the call: the
+    parent's arrays are those, at their place; a numpy array of the result is copied after them,
+    over none of them; an array that does not fit is numpy's, sent as before."""
+    shared = _fork.SharedMemory(1, n * 16 + n * 16 + 1024)  # a, b; not c as well
+    worker = _fork.Worker(_made_in_place, shared)
+    try:
+        worker.submit(n, fill)
+        out = worker.result()
+        assert np.all(out["a"] == fill) and np.all(out["b"] == np.float32(-fill)) and np.all(out["c"] == 2 * fill)
+        assert _in_shared(shared, out["a"], 1) and _in_shared(shared, out["b"], 1)
+        base = np.frombuffer(shared.region(0), dtype=np.uint8).ctypes.data
+        assert out["a"].ctypes.data == base  # made first, at the region's start
+        assert not _in_shared(shared, out["c"], 1) and out["none"].size == 0  # no room left for c: the pipe
+    finally:
+        worker.close()
+    assert _fork.empty((3, 2)).shape == (3, 2)  # outside a worker's call: numpy's
 
 
 def test_an_array_larger_than_a_region_comes_through_the_pipe():

@@ -329,7 +329,7 @@ def test_worker_processes_stay_within_the_memory_budget(tmp_path, monkeypatch, b
     monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", str(budget))
     code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / "out.#.png", "--src", src, "--dst", dst, "--frames", "1-3", "--jobs", 2])
     assert code == 0, err
-    assert peak == ([2] if processes else [0])
+    assert peak == ([2, 3, 3] if processes else [0, 0, 0])  # two workers, the three maps queued on them at once
 
 
 def test_a_feathered_retouch_of_an_animated_cage_is_each_frame_s_single_retouch(tmp_path):
@@ -352,22 +352,34 @@ def test_a_feathered_retouch_of_an_animated_cage_is_each_frame_s_single_retouch(
 
 
 def _count_builders(monkeypatch):
-    """The most maps of a sequence built at once by worker processes (`warpcli.batch._pipelined`), as a one-item list."""
+    """The most worker processes of a sequence alive at once (`warpcli.batch._pipelined`), the
+    most maps queued on them at once, and the maps submitted, as a three-item list."""
     import warpcli._fork as fork
 
-    alive, peak = [0], [0]
+    alive, queued, peak = [0], [0], [0, 0, 0]
 
     class Counting(fork.Worker):
-        def submit(self, *args):
-            super().submit(*args)
+        def __init__(self, *args):
+            super().__init__(*args)
             alive[0] += 1
             peak[0] = max(peak[0], alive[0])
+
+        def submit(self, *args):
+            super().submit(*args)
+            queued[0] += 1
+            peak[1] = max(peak[1], queued[0])
+            peak[2] += 1
 
         def result(self):
             try:
                 return super().result()
             finally:
+                queued[0] -= 1
+
+        def close(self, kill=False):
+            if self._from >= 0:
                 alive[0] -= 1
+            super().close(kill)
 
     monkeypatch.setattr(fork, "Worker", Counting)
     return peak
@@ -433,11 +445,32 @@ def test_pipelined_maps_give_the_items_bytes_and_messages_of_one_job(tmp_path, m
         finally:
             log.removeHandler(handler)
         runs[jobs] = ([(os.path.basename(i.input_path), str(i.error).replace(f"o{jobs}.", "o.")) for i in items], records, _outputs(tmp_path, f"o{jobs}."))
-    assert peak[0] == 2  # the pipeline ran, two maps in flight
+    assert peak[0] == 2 and peak[1] > 2  # the pipeline ran: two workers, a map queued behind the one built
     assert runs[1] == runs[2]
     errors = dict(runs[1][0])
     assert "refused by the test" in errors[f"shot.{bad:04d}.png"]
     assert len(runs[1][2]) == sum(e == "None" for e in errors.values()) > 0
+
+
+@pytest.mark.parametrize("large", [3])  # between runs the workers build
+def test_a_frame_in_strips_is_warped_here_and_the_rest_pipelined(tmp_path, monkeypatch, large):
+    """Headers are read run by run as the runs are queued: a later frame too large for memory
+    (warped in strips, which needs the map) has its run built in the main process; jobs 2 gives
+    jobs 1's bytes and messages."""
+    frames = range(1, 6)
+    _frames(tmp_path / "in", [f for f in frames if f != large])
+    big = np.random.default_rng(large).integers(0, 256, (SIZE[0] * 3, SIZE[1] * 3, 3), dtype=np.uint8)
+    write_png(tmp_path / "in" / f"shot.{large:04d}.png", big)
+    src, dst = _animated(tmp_path, large, 1, 5)
+    monkeypatch.setenv("WARPCLI_MAX_IMAGE_BYTES", "1000000")  # 96 x 72 fits; 288 x 216 goes in strips
+    peak = _count_builders(monkeypatch)
+    runs = {}
+    for jobs in (1, 2):
+        code, err = run_cli([tmp_path / "in" / "shot.#.png", tmp_path / f"o{jobs}.#.png", "--src", src, "--dst", dst,
+                             "--frames", "1-5", "--jobs", jobs, "-v"])  # fmt: skip
+        runs[jobs] = (code, err.replace(f"o{jobs}.", "o."), _outputs(tmp_path, f"o{jobs}."))
+    assert runs[1] == runs[2] and runs[1][0] == 0 and len(runs[1][2]) == 5
+    assert peak[0] == 2 and peak[2] == 4  # pipelined: the four other frames' maps built by the workers
 
 
 def test_a_builder_that_dies_fails_its_frames_and_the_others_go_on(tmp_path, monkeypatch):
@@ -466,4 +499,4 @@ def test_pipelined_plans_come_through_shared_memory_every_time(tmp_path, monkeyp
     src, dst = _animated(tmp_path, 5, 1, 6)
     items = warp_sequence(tmp_path / "in" / "shot.#.png", str(tmp_path / "o.#.png"), range(1, 7), src, dst, jobs=2)
     assert all(i.error is None for i in items)
-    assert len(lent) == 6 and None not in lent and len(set(lent)) <= 3  # a region per worker and one more
+    assert len(lent) == 6 and None not in lent and len(set(lent)) <= 5  # a region per queued call (2 a worker) and one more

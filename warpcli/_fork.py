@@ -22,6 +22,7 @@ turns it off (the work then runs on a thread, with the same result).
 
 from __future__ import annotations
 
+import collections
 import logging
 import mmap
 import os
@@ -220,15 +221,19 @@ _ALIGN = 64
 
 
 class Worker:
-    """A forked child that runs ``fn(*args)`` for each `submit`, one call at a time; `result`
-    returns or raises what the last call did, as `Forked` does.
+    """A forked child that runs ``fn(*args)`` for each `submit`, one call at a time, in the
+    order submitted; `result` returns or raises what the oldest call not yet taken did, as
+    `Forked` does.
 
     For many calls of one function (the maps of an animated sequence): the
     process is forked once, not once per call, so the parent's pages are
     copied on write once, not after every fork. ``fn`` is the child's from
     the fork on; the arguments and results must pickle. With ``shared`` (made
     before the worker), a result's large arrays come back through shared
-    memory instead of the pipe (`SharedMemory`).
+    memory instead of the pipe (`SharedMemory`). Calls may be submitted
+    before the earlier ones' results are taken (`pending`): the child starts
+    the next as soon as it has written a result, without waiting for the
+    parent to take it.
     """
 
     def __init__(self, fn: Callable[..., Any], shared: SharedMemory | None = None) -> None:
@@ -252,11 +257,25 @@ class Worker:
         self._to, self._from = requests[1], answers[0]
         _WORKER_FDS.update((self._to, self._from))
         self._shared = shared
-        self._region: int | None = None
-        self.busy = False
+        self._regions: collections.deque[int | None] = collections.deque()  # of the calls not yet taken, in order
+        self._died: str | None = None
+
+    @property
+    def pending(self) -> int:
+        """Calls submitted whose result has not been taken."""
+        return len(self._regions)
+
+    @property
+    def busy(self) -> bool:
+        """Whether a call's result is still to be taken."""
+        return bool(self._regions)
 
     def submit(self, *args: Any) -> None:
-        """Start ``fn(*args)`` (the worker must not be busy); `ChildDied` if it has ended."""
+        """Queue ``fn(*args)`` after the calls submitted before; `ChildDied` if the child has ended."""
+        if self._died is not None:
+            raise ChildDied(self._died)
+        if self._to < 0:
+            raise RuntimeError("a worker takes no call after finish or close")
         region = None if self._shared is None else self._shared.lend()
         data = pickle.dumps((region, args), protocol=pickle.HIGHEST_PROTOCOL)
         try:
@@ -264,29 +283,44 @@ class Worker:
         except OSError as err:  # a broken pipe: the child is gone
             if self._shared is not None:
                 self._shared.give_back(region)
-            status = self._reap()
-            self.close()
-            raise ChildDied(_describe(status)) from err
-        self._region = region
-        self.busy = True
+            raise ChildDied(self._gone()) from err
+        self._regions.append(region)
 
     def result(self) -> Any:
-        """Wait for the call `submit` started: its return value or exception (`ChildDied` if the child died)."""
-        self.busy = False
-        region, self._region = self._region, None
+        """Wait for the oldest call not yet taken: its return value or exception (`ChildDied`
+        if the child died; then every call still pending raises it too)."""
+        region = self._regions.popleft()
+        if self._died is not None:
+            raise ChildDied(self._died)
         try:
             outcome = _receive(self._from, self._shared, region)
         finally:  # the child has written the region (or is gone)
             if self._shared is not None:
                 self._shared.give_back(region)
         if outcome is None:  # its end of the pipe closed: the child is gone
-            status = self._reap()
-            self.close()
-            raise ChildDied(_describe(status))
+            raise ChildDied(self._gone())
         return _unpack(*outcome)
 
+    def _gone(self) -> str:
+        """The child has ended: reaped, the pipes closed, the regions of its pending calls given back."""
+        self._died = _describe(self._reap())
+        if self._shared is not None:
+            for region in self._regions:
+                self._shared.give_back(region)
+        self.close()
+        return self._died
+
+    def finish(self) -> None:
+        """No more calls: the child ends once it has answered those submitted (their results are
+        still to be taken), in the background; `close` then only reaps it."""
+        if self._to >= 0:
+            _WORKER_FDS.discard(self._to)
+            os.close(self._to)
+            self._to = -1
+
     def close(self, kill: bool = False) -> None:
-        """End the child: at once with ``kill``, else when it has finished its call."""
+        """End the child: at once with ``kill``, else when it has finished the call it runs (the
+        calls queued behind that one are not run)."""
         if kill and self._pid is not None:
             try:
                 os.kill(self._pid, signal.SIGKILL)
@@ -412,11 +446,63 @@ def _keep_freed_memory() -> None:
     mallopt(m_trim_threshold, 256 << 20)
 
 
+class _Lent:
+    """The region lent to the call a worker runs now, from which `empty` makes arrays."""
+
+    def __init__(self, region: mmap.mmap) -> None:
+        import numpy as np
+
+        self.bytes = np.frombuffer(region, dtype=np.uint8)
+        self.start = self.bytes.ctypes.data
+        self.used = 0
+
+    def offset(self, part: memoryview) -> int | None:
+        """Where ``part`` lies in the region, or None if it lies elsewhere."""
+        import numpy as np
+
+        if not part.nbytes:
+            return None
+        at = np.frombuffer(part, dtype=np.uint8).ctypes.data - self.start
+        return at if 0 <= at and at + part.nbytes <= self.bytes.size else None
+
+
+#: The region of the call a worker runs now (`_respond`); None elsewhere.
+_LENT: _Lent | None = None
+
+
+def empty(shape: int | tuple[int, ...], dtype: Any = float) -> Any:
+    """``numpy.empty(shape, dtype)``; in a `Worker`'s call with shared memory lent to it, a large
+    array is made in that memory, where the result it is part of is sent from without a copy.
+
+    For the large arrays of a worker's result (a sampling plan's points and
+    Jacobians, made by `warpcli.maps.compose.BijectiveMap.pull_back`): made
+    anywhere else, they are copied into the region when the call returns
+    (20 MB a 1280x720 plan). An array of less than 64 KiB (sent in the
+    pickle), or one that does not fit in what is left of the region, is
+    numpy's.
+    """
+    import numpy as np
+
+    lent = _LENT
+    if lent is not None:
+        dt = np.dtype(dtype)
+        dims = (shape,) if isinstance(shape, int) else tuple(shape)
+        n = dt.itemsize * int(np.prod(dims, dtype=np.int64))
+        start = -(-lent.used // _ALIGN) * _ALIGN
+        if n >= 1 << 16 and start + n <= lent.bytes.size:
+            lent.used = start + n
+            return lent.bytes[start : start + n].view(dt).reshape(dims)
+    return np.empty(shape, dtype)
+
+
 def _respond(fn: Callable[..., Any], args: tuple, fd: int, keep: KeptRecords, region: mmap.mmap | None = None) -> None:
     """``fn(*args)``'s outcome and log records, written to ``fd`` for `_receive`; with ``region``,
-    the large arrays that fit written there (`SharedMemory`), their places through ``fd``."""
+    the large arrays that fit written there (`SharedMemory`; those `empty` made there already
+    are not copied), their places through ``fd``."""
+    global _LENT
     keep.records = []
     buffers: list[memoryview] = []
+    lent = _LENT = None if region is None else _Lent(region)
     try:
         payload = _dumps(("ok", fn(*args), keep.records), buffers)
     except BaseException as err:  # handed to the parent
@@ -426,10 +512,16 @@ def _respond(fn: Callable[..., Any], args: tuple, fd: int, keep: KeptRecords, re
         except Exception:
             buffers.clear()
             payload = _dumps(("error", RuntimeError(f"{type(err).__name__}: {err}"), keep.records), buffers)
+    finally:
+        _LENT = None
     parts = [memoryview(payload), *buffers]
     places = [_IN_PIPE] * len(parts)
-    end = 0
+    end = 0 if lent is None else lent.used  # the arrays made in the region end here
     for k, part in enumerate(parts[1:], 1):
+        at = None if lent is None else lent.offset(part)
+        if at is not None:  # made there by `empty`: no copy
+            places[k] = at
+            continue
         start = -(-end // _ALIGN) * _ALIGN
         if region is not None and start + part.nbytes <= len(region):
             region[start : start + part.nbytes] = part

@@ -655,9 +655,8 @@ def warp_sequence(
             runs[-1] = (key, runs[-1][1])
         runs[-1][1].append((inp, out, f))
     width = _processes(jobs, len(runs), ins, opts)
-    sizes = _pipeline_sizes(runs, opts, maps, missing) if width > 1 else None
-    if sizes is not None:  # maps built in forked children, frames warped here as they arrive
-        return _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing)
+    if width > 1 and _pipelines(runs, opts, maps, missing):  # maps built in forked children, frames warped here as they arrive
+        return _pipelined(runs, pairs, opts, maps, width, jobs, on_item, missing)
     if width <= 1:  # the frames of a run go to the threads
         items: list[BatchItem] = []
         for _, tasks in runs:
@@ -743,37 +742,43 @@ def _processes(jobs: int, runs: int, ins: list[tuple[int, str]], opts: WarpOptio
     return max(1, min(jobs, runs, max_image_bytes() // max(1, need)))
 
 
-def _pipeline_sizes(runs, opts, maps, missing) -> list[list[tuple[int, int]]] | None:
-    """The output sizes of each run's frames, if the runs can go through `_pipelined`, else None.
+def _pipelines(runs, opts, maps, missing) -> bool:
+    """Whether the runs go through `_pipelined`.
 
     Not without forked children (`warpcli._fork.available`), nor with
     forward maps to write (they need the map itself, which stays in the
-    child), nor when a frame would be warped in strips (that needs the map
-    too): those runs go to worker processes whole (`_in_processes`).
+    child), nor when the first run's frames are warped in strips (that needs
+    the map too; frames that large go to worker processes whole,
+    `_in_processes`). Only the first run's headers are read here: the others'
+    are read when their turn comes (`_run_sizes`), beside the workers' builds.
     """
     from ._fork import available
 
     if not available() or (maps is not None and maps.forward is not None):
-        return None
-    sizes = []
-    for _, tasks in runs:
-        found: list[tuple[int, int]] = []
-        for inp, _, f in tasks:
-            if f in missing:
-                continue
-            header = read_header_or_none(inp)
-            if header is None:
-                continue  # its read says why, in its item
-            try:
-                if in_parts(inp, header, opts.size, None):
-                    return None
-            except WarpError:
+        return False
+    first = next((tasks for _, tasks in runs if any(f not in missing for _, _, f in tasks)), None)
+    return first is None or _run_sizes(first, opts, missing) is not None
+
+
+def _run_sizes(tasks, opts, missing) -> list[tuple[int, int]] | None:
+    """The output sizes of a run's frames, from their headers; None when a frame is warped in
+    strips (`_pipelined` then warps the run here, with its map, as `warp_run` does)."""
+    found: list[tuple[int, int]] = []
+    for inp, _, f in tasks:
+        if f in missing:
+            continue
+        header = read_header_or_none(inp)
+        if header is None:
+            continue  # its read says why, in its item
+        try:
+            if in_parts(inp, header, opts.size, None):
                 return None
-            size = tuple(opts.size) if opts.size is not None else (header.width, header.height)
-            if size not in found:
-                found.append(size)
-        sizes.append(found)
-    return sizes
+        except WarpError:
+            return None
+        size = tuple(opts.size) if opts.size is not None else (header.width, header.height)
+        if size not in found:
+            found.append(size)
+    return found
 
 
 def _plans_in_child(
@@ -794,57 +799,82 @@ def _plans_in_child(
     return {size: plan_for(fmap, size[0], size[1], opts) for size in sizes}
 
 
-def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) -> list[BatchItem]:
-    """An animated sequence on all cores: the maps of the next ``width`` runs are
-    built in forked worker processes while this process reads, resamples and
+def _pipelined(runs, pairs, opts, maps, width, jobs, on_item, missing) -> list[BatchItem]:
+    """An animated sequence on all cores: the maps of the next runs are built in
+    ``width`` forked worker processes while this process reads, resamples and
     writes the frames of the run whose map has arrived.
 
     A map holds the GIL while it is built (triangle, SuperLU), so the builds go
     to forked children, each with a GIL of its own (`warpcli._fork.Worker`:
     forked once, not per map); only the sampling plans (arrays) come back,
     through memory shared with the workers (`warpcli._fork.SharedMemory`: no
-    copy through a pipe). Runs are taken in frame order, so items, ``on_item``
-    calls and log records (a child's are logged when its plans are taken, as
-    `warp_run` would have logged them while building) come in the order of
-    ``jobs=1``, and the plans are those `warp_run` makes, bit for bit.
+    copy through a pipe). Each worker has the next run queued behind the one
+    it builds (``_QUEUED`` calls a worker, as the memory budget allows), so that
+    it goes on as soon as it has sent a run's plans, however long this process
+    takes to warp the frames before. Runs are taken in frame order, so items,
+    ``on_item`` calls and log records (a child's are logged when its plans are
+    taken, as `warp_run` would have logged them while building) come in the
+    order of ``jobs=1``, and the plans are those `warp_run` makes, bit for bit.
     """
     from collections import deque
 
     from ._fork import ChildDied, Worker
 
     items: list[BatchItem] = []
-    queue: deque = deque()  # (tasks, the worker building their plans or None), in run order
+    # [tasks, output sizes, the worker building their plans or None: built here], in run order
+    queue: deque[list] = deque()
     workers: list[Worker] = []
-    todo = iter(zip(runs, sizes))
-    shared = _plan_memory(sizes, opts, width)
+    todo = iter(runs)
+    # Made when the first run's sizes are known, before the first worker is forked (the
+    # workers inherit it); its regions hold plans of that size (a larger one comes through
+    # the pipe).
+    shared, depth, planned = None, _QUEUED, False
 
-    def idle() -> Worker | None:
-        for worker in workers:
-            if not worker.busy:
-                return worker
-        if len(workers) < width:
+    def least_busy() -> Worker | None:
+        if len(workers) < width:  # a worker of its own first
             try:
                 workers.append(Worker(_plans_in_child, shared))
-            except OSError:  # no process left: the runs are built here, when their turn comes
-                return None
-            return workers[-1]
-        return None
+            except OSError:  # no process left: the runs go to the workers there are, or are built here
+                pass
+            else:
+                return workers[-1]
+        free = [w for w in workers if w.pending < depth]
+        return min(free, key=lambda w: w.pending) if free else None
+
+    def submit(entry: list) -> None:
+        nonlocal shared, depth, planned
+        tasks, run_sizes = entry[0], entry[1]
+        src, dst = _pair_of(tasks, pairs, missing)
+        if src is not None and run_sizes and not planned:
+            shared, depth = _plan_memory([run_sizes], opts, width)
+            planned = True
+        while src is not None and run_sizes:
+            job = least_busy()
+            if job is None:
+                break
+            try:
+                job.submit(src, dst, opts, run_sizes, max(1, jobs // width))
+            except ChildDied:
+                workers.remove(job)
+                continue
+            entry[2] = job
+            return
+        entry[2] = None
 
     def fill() -> None:
-        while sum(job is not None for _, job in queue) < width:
+        while sum(entry[2] is not None for entry in queue) < width * depth:
             nxt = next(todo, None)
             if nxt is None:
+                # No run left to build: the workers with none queued end now, on the
+                # other cores, while this process warps the last frames.
+                for worker in workers:
+                    if not worker.busy:
+                        worker.finish()
                 return
-            (_, tasks), run_sizes = nxt
-            src, dst = _pair_of(tasks, pairs, missing)
-            job = idle() if src is not None and run_sizes else None
-            if job is not None:
-                try:
-                    job.submit(src, dst, opts, run_sizes, max(1, jobs // width))
-                except ChildDied:
-                    workers.remove(job)
-                    job = None
-            queue.append((tasks, job))
+            _, tasks = nxt
+            # None: a frame in strips, warped here with the map (an empty list: no frame readable)
+            queue.append([tasks, _run_sizes(tasks, opts, missing) or [], None])
+            submit(queue[-1])
 
     def done(batch: list[BatchItem]) -> None:
         for item in batch:
@@ -876,7 +906,7 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
     try:
         fill()
         while queue:
-            tasks, job = queue.popleft()
+            tasks, _, job = queue.popleft()
             if job is None:  # every image missing, or none readable, or no worker: as with jobs=1
                 fill()
                 items.extend(warp_run(*_pair_of(tasks, pairs, missing), tasks, opts, maps=maps, jobs=jobs,
@@ -889,7 +919,13 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
                 done([missing.get(f) or BatchItem(inp, out, err.with_traceback(None)) for inp, out, f in tasks])
                 continue
             except ChildDied as err:
-                workers.remove(job)
+                if job in workers:  # (a submit may have found it gone already)
+                    workers.remove(job)
+                # The runs queued behind this one on the same worker are built here, when their
+                # turn comes: given to another worker, they could come back out of order.
+                for entry in queue:
+                    if entry[2] is job:
+                        entry[2] = None
                 fill()
                 done([missing.get(f) or BatchItem(inp, out, WarpError(f"{inp}: the process building its map ended: {err}"))
                       for inp, out, f in tasks])  # fmt: skip
@@ -904,11 +940,18 @@ def _pipelined(runs, sizes, pairs, opts, maps, width, jobs, on_item, missing) ->
     return items
 
 
+#: Calls queued on each of `_pipelined`'s workers at most: the run it builds and the next, so that
+#: it never waits for this process to take a result before it starts the next build.
+_QUEUED = 2
+
+
 def _plan_memory(sizes, opts: WarpOptions, width: int):
     """Shared memory for the sampling plans of `_pipelined`'s workers (`warpcli._fork.SharedMemory`),
-    or None where it would not fit in the memory budget (the plans then come through pipes).
+    and how many calls each worker may have queued: ``(None, 1)`` where even one call each would
+    not fit in the memory budget (the plans then come through pipes).
 
-    A region per worker and one more (the plans this process warps with while
+    A region per call in flight (``_QUEUED`` per worker, or one if that many
+    would not fit) and one more (the plans this process warps with while
     the workers build the next); each holds a run's plans: the points and
     Jacobians of every pixel of each output size (48 bytes a pixel, the most
     a window takes) and their edge coverage (a few values per pixel of the
@@ -922,13 +965,16 @@ def _plan_memory(sizes, opts: WarpOptions, width: int):
         return w * h * per_pixel + 64 * (w + h) * 8 + (1 << 20)
 
     capacity = max((sum(plan_bytes(w, h) for w, h in run_sizes) for run_sizes in sizes), default=0)
-    count = width + 1
-    if capacity == 0 or count * capacity > max_image_bytes():
-        return None
-    try:
-        return SharedMemory(count, capacity)
-    except (OSError, ValueError):  # no shared memory to be had: the pipes
-        return None
+    if capacity == 0:
+        return None, 1
+    for depth in range(_QUEUED, 0, -1):
+        count = width * depth + 1
+        if count * capacity <= max_image_bytes():
+            try:
+                return SharedMemory(count, capacity), depth
+            except (OSError, ValueError):  # no shared memory to be had: the pipes
+                return None, 1
+    return None, 1
 
 
 def _in_processes(units, pairs, opts, maps, width, on_item, missing) -> list[BatchItem]:

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._fork import empty
 from .._native import Kernels, parallel
 from ..cores import budget
 from ..errors import InputError
@@ -273,8 +274,9 @@ def _through_theta(
         r0 = min(max(rows[0], w0), w1)
         r1 = max(min(rows[1], w1), r0)
     ww = c1 - c0
-    points = np.empty(((r1 - r0) * ww, 2))
-    jac = np.empty(((r1 - r0) * ww, 2, 2)) if jacobian else None
+    # In a sequence's map worker, made in the memory the plan is sent back through (no copy there).
+    points = empty(((r1 - r0) * ww, 2))
+    jac = empty(((r1 - r0) * ww, 2, 2)) if jacobian else None
 
     def band_values(first: int, last: int) -> tuple:
         g = phi_grid.evaluate_grid(width, height, (first, last), jacobian=jacobian)
