@@ -14,6 +14,8 @@ from helpers import read_pixels, star, write_png, write_polygon, run_cli
 from warpcli import BijectiveMap, MapOptions, Polygon
 from warpcli.cli.progress import Progress
 
+pytestmark = pytest.mark.forks  # batches on forked workers and builders, as `warp` runs them
+
 SIZE = (72, 96)  # rows, columns
 
 
