@@ -16,6 +16,8 @@ from helpers import run_cli, star, write_png, write_polygon
 import warpcli
 from warpcli import cores
 
+pytestmark = pytest.mark.forks  # the budget decides whether maps are built in forked children
+
 
 def _shapes(tmp_path, rng, w, h):
     """A generated star pair inside a w x h image."""

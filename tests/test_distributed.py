@@ -14,7 +14,16 @@ from warpcli.cli import main
 distributed = pytest.importorskip("dask.distributed")
 
 
-def test_a_batch_on_a_local_cluster_matches_the_local_batch(tmp_path):
+@pytest.fixture(scope="module")
+def cluster():
+    """Two worker processes, started once for the tests that only send work (each start
+    imports dask and warpcli in every worker: seconds of CPU), in the directory the run
+    began in, not in any test's."""
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
+        yield c
+
+
+def test_a_batch_on_a_local_cluster_matches_the_local_batch(tmp_path, cluster):
     rng = np.random.default_rng(9)
     inputs = [
         write_png(tmp_path / f"in{k}.png", rng.integers(0, 256, (72, 96, 3) if k != 2 else (60, 80, 4), dtype=np.uint8))
@@ -29,10 +38,9 @@ def test_a_batch_on_a_local_cluster_matches_the_local_batch(tmp_path):
     with contextlib.redirect_stderr(err):
         assert main([*inputs, "--src", src, "--dst", dst, "--out-dir", str(tmp_path / "local")]) == 2
     local_err = err.getvalue()
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        err = io.StringIO()
-        with contextlib.redirect_stderr(err):
-            code = main([*inputs, "--src", src, "--dst", dst, "--out-dir", str(tmp_path / "dask"), "--scheduler", cluster.scheduler_address])
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main([*inputs, "--src", src, "--dst", dst, "--out-dir", str(tmp_path / "dask"), "--scheduler", cluster.scheduler_address])
     assert code == 2
     assert err.getvalue() == local_err and local_err.count("warp: error:") == 1
     local = {p.name: p.read_bytes() for p in (tmp_path / "local").iterdir()}
@@ -40,7 +48,7 @@ def test_a_batch_on_a_local_cluster_matches_the_local_batch(tmp_path):
     assert local == remote and len(local) == 3
 
 
-def test_relative_paths_reach_workers_that_run_in_another_directory(tmp_path, monkeypatch):
+def test_relative_paths_reach_workers_that_run_in_another_directory(tmp_path, monkeypatch, cluster):
     """Workers started elsewhere (a `dask worker` in its own directory) get the images the names
     given here mean, and errors name them as given (every image was "no such file")."""
     rng = np.random.default_rng(4)
@@ -51,11 +59,10 @@ def test_relative_paths_reach_workers_that_run_in_another_directory(tmp_path, mo
     write_polygon(tmp_path / "d.json", star(cx=28, cy=20, r_in=5, r_out=17, phase=0.3))
     (tmp_path / "out").mkdir()
     args = ["in0.png", "in1.png", "in2.png", "--src", "s.json", "--dst", "d.json", "--out-dir", "out"]
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        monkeypatch.chdir(tmp_path)  # after the worker started: it runs in the directory the test began in
-        err = io.StringIO()
-        with contextlib.redirect_stderr(err):
-            code = main([*args, "--scheduler", cluster.scheduler_address])
+    monkeypatch.chdir(tmp_path)  # the workers started before: they run in the directory the run began in
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main([*args, "--scheduler", cluster.scheduler_address])
     assert code == 2 and sorted(p.name for p in (tmp_path / "out").iterdir()) == ["in0.png", "in1.png"]
     lines = [line for line in err.getvalue().splitlines() if "error" in line]
     assert len(lines) == 1 and lines[0].startswith("warp: error: in2.png:"), err.getvalue()

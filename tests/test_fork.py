@@ -21,7 +21,7 @@ from warpcli.polygon import Polygon
 
 from .helpers import simple_polygons
 
-pytestmark = pytest.mark.skipif(not _fork.available(), reason="no fork here")
+pytestmark = [pytest.mark.skipif(not _fork.available(), reason="no fork here"), pytest.mark.forks]
 
 
 def _die():

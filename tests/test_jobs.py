@@ -4,8 +4,11 @@ from __future__ import annotations
 
 
 import numpy as np
+import pytest
 
 from helpers import star, write_png, write_polygon, run_cli
+
+pytestmark = pytest.mark.forks  # --jobs 3 runs batches on forked workers, as `warp` does
 
 
 

@@ -324,3 +324,78 @@ def test_bem_kernels_match_numba_bitwise():
         )  # fmt: skip
 
     _same(BEM, "bem_bounds", bounds, ("_smooth_kernels.py",))
+def test_processes_needing_a_kernel_at_once_compile_it_once(tmp_path):
+    """Two processes starting together on an empty cache (a farm, ``pytest -n``) need the same kernel:
+    one compiles it (slowed down here, so that the other arrives meanwhile), the other waits for
+    its file and loads it; both compute the right thing."""
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent(
+        """
+        import sys, time
+        import numpy as np
+        from warpcli import _native
+
+        compile_ = _native._compile
+        def slow_compile(*args):
+            with open(sys.argv[1], "a") as fh:
+                fh.write("compiled\\n")
+            time.sleep(1.0)
+            return compile_(*args)
+        _native._compile = slow_compile
+        k = _native.Kernels("warpcli.maps._kernels")
+        out = np.zeros((1, 2, 2))
+        eye = np.eye(2)[None]
+        k.scatter_products(eye, eye * 2.0, np.zeros(1, dtype=np.int64), out)
+        assert all(hasattr(f, "_native") for f in k._calls.values())  # the native route, not numba's
+        print(out.tolist())
+        """
+    )
+    log = tmp_path / "compiles.txt"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "WARPCLI_NATIVE": "1"}
+    runs = [subprocess.Popen([sys.executable, "-c", script, str(log)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]  # fmt: skip
+    for run in runs:
+        out, err = run.communicate(timeout=300)
+        assert run.returncode == 0, err
+        assert out.strip() == "[[[2.0, 0.0], [0.0, 2.0]]]"
+    assert log.read_text() == "compiled\n"
+    assert len(list((tmp_path / "cache" / "warpcli").glob("*.native"))) == 1
+
+
+def test_processes_needing_a_numba_function_at_once_compile_it_once(tmp_path):
+    """The same for the kernels numba calls itself (``@njit(cache=True)`` from `warpcli._jit`): one
+    process compiles (slowed down here), the other waits and loads it from numba's cache."""
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent(
+        """
+        import sys, time
+        import numpy as np
+        import warpcli._jit
+        from numba.core import dispatcher
+
+        compile_ = dispatcher._FunctionCompiler.compile
+        def slow_compile(self, *args, **kwargs):
+            with open(sys.argv[1], "a") as fh:
+                fh.write("compiled\\n")
+            time.sleep(1.0)
+            return compile_(self, *args, **kwargs)
+        dispatcher._FunctionCompiler.compile = slow_compile
+        from warpcli.raster import _kernels
+        out = np.zeros(2, dtype=np.int64)
+        _kernels.near_border(np.array([[0.5, 0.5], [40.0, 3.0]]), 31.0, 23.0, out)
+        print(out.tolist())
+        """
+    )
+    log = tmp_path / "compiles.txt"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    runs = [subprocess.Popen([sys.executable, "-c", script, str(log)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]  # fmt: skip
+    for run in runs:
+        out, err = run.communicate(timeout=300)
+        assert run.returncode == 0, err
+        assert out.strip() == "[0, 1]"
+    assert log.read_text() == "compiled\n"

@@ -33,7 +33,14 @@ def python_blocks(path: str) -> list[str]:
     return re.findall(r"```python\n(.*?)```", open(path).read(), flags=re.S)
 
 
-COMMANDS = [(os.path.relpath(p, ROOT), c) for p in pages() for c in commands(p)]
+def _first_of_each(pairs: list[tuple[str, str]]) -> list[tuple[str, str]]:
+    """Each command once, named by the first page that shows it (a page repeating the README's
+    command as written would run the same thing again, to the same file)."""
+    seen: set[str] = set()
+    return [(p, c) for p, c in pairs if not (c in seen or seen.add(c))]
+
+
+COMMANDS = _first_of_each([(os.path.relpath(p, ROOT), c) for p in pages() for c in commands(p)])
 
 
 def test_the_readme_has_examples():

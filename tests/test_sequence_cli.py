@@ -149,6 +149,7 @@ def test_maps_are_built_only_for_frames_with_images_and_missing_ones_are_summari
     assert sorted(p.name for p in tmp_path.glob("out.*.png")) == [f"out.{f:04d}.png" for f in present]
 
 
+@pytest.mark.forks  # the frames' maps are built by the pipelined builders, as `warp` builds them
 def test_the_maps_of_failed_frames_are_not_kept(tmp_path, monkeypatch):
     # Frames whose image exists but cannot be read fail in warp_one: their
     # items (errors) outlive the run, the maps must not.

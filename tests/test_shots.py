@@ -47,6 +47,7 @@ def _outputs(directory, prefix):
 
 
 @pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.forks  # batches on forked workers and builders, as `warp` runs them
 def test_an_animated_shot_gives_the_same_bytes_and_messages_on_one_or_two_jobs(tmp_path, seed):
     frames = list(range(1, 8))
     _frames(tmp_path / "in", [f for f in frames if f != 4], seed=seed)  # frame 4 missing: one error line, in place
@@ -283,6 +284,7 @@ def test_the_progress_line_is_drawn_and_cleared_on_a_terminal():
 
 
 @pytest.mark.parametrize("jobs", [1, 3])
+@pytest.mark.forks  # batches on forked workers and builders, as `warp` runs them
 def test_still_polygons_write_one_map_for_the_whole_sequence_on_any_number_of_threads(tmp_path, jobs):
     _frames(tmp_path / "in", range(1, 6))
     src = write_polygon(tmp_path / "s.json", star(n=5, cx=48, cy=36, r_in=11, r_out=30))
@@ -321,6 +323,7 @@ def test_an_output_pattern_with_hash_runs_is_warned_about(tmp_path):
 
 
 @pytest.mark.parametrize("budget, processes", [(600_000, False), (10_000_000, True)])
+@pytest.mark.forks  # batches on forked workers and builders, as `warp` runs them
 def test_worker_processes_stay_within_the_memory_budget(tmp_path, monkeypatch, budget, processes):
     """A frame of 96 x 72 RGB needs 0.44 MB (its pixels, the output and its map): 0.6 MB holds one at a time."""
     _frames(tmp_path / "in", range(1, 4))
@@ -407,6 +410,7 @@ def _failing_between(monkeypatch, fail_x, die_x=None):
 
 
 @pytest.mark.parametrize("seed", [3, 4])
+@pytest.mark.forks  # batches on forked workers and builders, as `warp` runs them
 def test_pipelined_maps_give_the_items_bytes_and_messages_of_one_job(tmp_path, monkeypatch, seed):
     """Generated shots: keyframes at random frames (holds make runs of several frames), missing frames,
     an output size or not, a map that cannot be built: jobs 2 gives jobs 1's items, log and bytes."""
@@ -452,6 +456,7 @@ def test_pipelined_maps_give_the_items_bytes_and_messages_of_one_job(tmp_path, m
     assert len(runs[1][2]) == sum(e == "None" for e in errors.values()) > 0
 
 
+@pytest.mark.forks  # batches on forked workers and builders, as `warp` runs them
 @pytest.mark.parametrize("large", [3])  # between runs the workers build
 def test_a_frame_in_strips_is_warped_here_and_the_rest_pipelined(tmp_path, monkeypatch, large):
     """Headers are read run by run as the runs are queued: a later frame too large for memory
@@ -473,6 +478,7 @@ def test_a_frame_in_strips_is_warped_here_and_the_rest_pipelined(tmp_path, monke
     assert peak[0] == 2 and peak[2] == 4  # pipelined: the four other frames' maps built by the workers
 
 
+@pytest.mark.forks  # batches on forked workers and builders, as `warp` runs them
 def test_a_builder_that_dies_fails_its_frames_and_the_others_go_on(tmp_path, monkeypatch):
     from warpcli.batch import warp_sequence
     from warpcli.keyframes import read_animated
@@ -485,6 +491,7 @@ def test_a_builder_that_dies_fails_its_frames_and_the_others_go_on(tmp_path, mon
     assert "shot.0003.png: the process building its map ended: killed by SIGKILL" in str(items[2].error)
 
 
+@pytest.mark.forks  # batches on forked workers and builders, as `warp` runs them
 def test_pipelined_plans_come_through_shared_memory_every_time(tmp_path, monkeypatch):
     """Every map the workers build sends its plans through shared memory (`warpcli._fork.SharedMemory`):
     the main process lets each run's plans go before it lends their region again, so no plan falls back

@@ -10,9 +10,16 @@ read-modify-write holds a lock file beside the index (``fcntl.flock``; where
 there is no ``fcntl``, numba's own behaviour). warpcli's own cache of machine
 code (`warpcli._native`) has one file per kernel and signature, written by
 atomic rename and checked by digest: it needs no lock.
+
+Processes starting together on a fresh install also compiled the same kernel
+each (BEM's kernels: about 15 s of CPU per process): here a process about to
+compile a kernel another one is compiling waits for it (a second lock file
+beside the index), then loads its machine code from the cache.
 """
 
 from __future__ import annotations
+
+import os
 
 from numba import njit
 
@@ -43,3 +50,51 @@ def _serialize_cache_writes() -> None:
 
 
 _serialize_cache_writes()
+
+
+#: Index files whose compile lock this process holds (a kernel compiling itself, or another
+#: kernel it calls, does not wait for itself). Read and written under numba's compiler lock.
+_COMPILING: set[str] = set()
+
+
+def _one_compile_across_processes() -> None:
+    try:
+        import fcntl
+
+        from numba.core.compiler_lock import global_compiler_lock
+        from numba.core.dispatcher import Dispatcher
+    except ImportError:  # pragma: no cover - not on POSIX, or another numba
+        return
+    compile_ = Dispatcher.compile
+    if getattr(compile_, "serialized", False):
+        return
+
+    def compile_once(self, sig):
+        path = getattr(getattr(getattr(self, "_cache", None), "_cache_file", None), "_index_path", None)
+        if path is None:  # not cached on disk: nothing to share
+            return compile_(self, sig)
+        with global_compiler_lock:  # one thread of this process at a time, as numba compiles
+            if path in _COMPILING:
+                return compile_(self, sig)
+            try:
+                os.makedirs(os.path.dirname(path), exist_ok=True)
+                lock = open(path + ".compiling", "a")  # noqa: SIM115  (closed below)
+            except OSError:  # a cache directory numba cannot write either
+                return compile_(self, sig)
+            with lock:
+                try:
+                    fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
+                except OSError:  # a file system without locks
+                    pass
+                _COMPILING.add(path)
+                try:
+                    # Finds in the cache what another process compiled while this one waited.
+                    return compile_(self, sig)
+                finally:
+                    _COMPILING.discard(path)
+
+    compile_once.serialized = True
+    Dispatcher.compile = compile_once
+
+
+_one_compile_across_processes()

@@ -32,18 +32,21 @@ The cache lives beside numba's: ``__pycache__`` next to the kernel module, or
 is not writable. Each entry is keyed by the kernel's source (and the sources
 it names), the argument types, numba's and llvmlite's versions and this CPU,
 so an edit, an upgrade or another machine compiles anew; files are written
-atomically, so concurrent processes are safe.
+atomically, so concurrent processes are safe, and a process about to compile
+a kernel another one is compiling waits for that one's file (a lock file
+beside it) instead of compiling it too.
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import importlib.util
 import logging
 import os
 import sys
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -226,18 +229,19 @@ class Kernels:
             kind = hashlib.sha256(json.dumps([self.module, name, variant]).encode()).hexdigest()[:8]
             filename = f"{self.module.rsplit('.', 1)[-1]}.{name}.{kind}-{key.hexdigest()[:24]}.native"
             dirs = _cache_dirs(folder)
-            entry = None
-            for d in dirs:
-                entry = _read_entry(os.path.join(d, filename))
-                if entry is not None and entry.get("symbol") == symbol:
-                    break
-                entry = None
+            entry = _cached_entry(dirs, filename, symbol)
             if entry is None:
-                entry = _compile(self.module, name, variant, symbol, jit)
-                jit.add(entry)  # kept only if it loads
-                _write_entry(dirs, filename, entry)
-            else:
-                jit.add(entry)
+                # Processes starting together on a fresh install (a farm, ``pytest -n``) would each
+                # compile the same kernel (seconds of CPU each): one compiles, the others wait for
+                # it and load its file.
+                with _compiling(dirs, filename):
+                    entry = _cached_entry(dirs, filename, symbol)
+                    if entry is None:
+                        entry = _compile(self.module, name, variant, symbol, jit)
+                        jit.add(entry)  # kept only if it loads
+                        _write_entry(dirs, filename, entry)
+                        return jit.function(symbol, variant)
+            jit.add(entry)
         return jit.function(symbol, variant)
 
 
@@ -396,6 +400,47 @@ def _cache_dirs(folder: str) -> list[str]:
     return [os.path.join(folder, "__pycache__"), os.path.join(base, "warpcli", "native")]
 
 
+def _cached_entry(dirs: list[str], filename: str, symbol: str) -> dict | None:
+    """The cache's entry ``filename`` for ``symbol`` in the first of ``dirs`` that has it, or None."""
+    for d in dirs:
+        entry = _read_entry(os.path.join(d, filename))
+        if entry is not None and entry.get("symbol") == symbol:
+            return entry
+    return None
+
+
+@contextlib.contextmanager
+def _compiling(dirs: list[str], filename: str) -> Iterator[None]:
+    """Hold the lock of kernel ``filename`` (a lock file in the first writable cache directory).
+
+    A process compiling a kernel holds it; another one needing the same
+    kernel waits, then finds the file written. Where no directory is writable
+    or there is no ``fcntl``, nothing is held (each process compiles; the
+    cache's atomic writes keep that safe). The lock file is named by the
+    kernel and its argument types, not by its source: an edit reuses it.
+    """
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    lock = f".{filename.rsplit('-', 1)[0]}.lock"
+    for d in dirs:
+        try:
+            os.makedirs(d, exist_ok=True)
+            fh = open(os.path.join(d, lock), "a")
+        except OSError:
+            continue
+        with fh:
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX)  # released when the file is closed
+            except OSError:  # a file system without locks
+                pass
+            yield
+        return
+    yield
+
+
 def _read_entry(path: str) -> dict | None:
     import hashlib
     import json
@@ -421,7 +466,6 @@ def _read_entry(path: str) -> dict | None:
 
 
 def _write_entry(dirs: list[str], filename: str, entry: dict) -> None:
-    import contextlib
     import hashlib
     import json
     import tempfile
