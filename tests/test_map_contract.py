@@ -66,8 +66,13 @@ def between(src, dst, impl: Implementation) -> BijectiveMap:
     return built_map(src, dst, impl.options)
 
 
-def inside(poly, count: int = 800, seed: int = 7) -> np.ndarray:
-    """Points strictly inside a polygon, at least 1 px from its boundary (seeded)."""
+def inside(poly, count: int = 400, seed: int = 7) -> np.ndarray:
+    """Points strictly inside a polygon, at least 1 px from its boundary (seeded).
+
+    400 for the exact clauses (an identity that fails, fails on a region, not at a point; the
+    smooth maps' Newton inversions of these points were most of the file's time at 800); the
+    accuracy statistics (mean and max error) ask for 800.
+    """
     from warpcli.boundary import nearest_edge
 
     p = np.asarray(poly, dtype=float)
@@ -83,7 +88,8 @@ def affine(points, a, b):
     return np.asarray(points) @ np.asarray(a).T + b
 
 
-@pytest.mark.parametrize("n", [3, 4, 5, 8, 13])
+# The triangle, an even and an odd many-gon: 5 and 8 vertices repeated the classes of 13 and 4.
+@pytest.mark.parametrize("n", [3, 4, 13])
 def test_affine_images_of_theta_give_that_affine_map(impl, n):
     """Both polygons affine images of Theta: the harmonic maps are affine, and so is f."""
     w = regular_polygon(n)
@@ -122,7 +128,7 @@ def test_similar_polygons_give_the_similarity(impl, name):
     src = CONCAVE[name]
     dst = similarity(src, 0.7, 0.5, (4.0, -3.0))
     f = between(src, dst, impl)
-    p = inside(src)
+    p = inside(src, 800)
     err = np.hypot(*(f.forward(p) - similarity(p, 0.7, 0.5, (4.0, -3.0))).T)
     assert err.mean() < impl.accuracy[0] and err.max() < impl.accuracy[1]
 
@@ -139,13 +145,14 @@ def test_symmetry_between_dst_src_is_the_inverse(impl, name):
     np.testing.assert_allclose(g.inverse(p), f.forward(p), atol=100 * impl.exact)
 
 
-@pytest.mark.parametrize("shift", [1, 3])
+# One odd shift (outer vertices relabelled onto inner ones' labels): shift 1 repeated its class.
+@pytest.mark.parametrize("shift", [3])
 def test_cyclic_relabelling_of_both_polygons_changes_nothing(impl, shift):
     src = CONCAVE["star"]
     dst = star(phase=0.4, r_in=20)
     f = between(src, dst, impl)
     g = between(np.roll(src, shift, axis=0), np.roll(dst, shift, axis=0), impl)
-    p = inside(src)
+    p = inside(src, 800)
     # The exact map is the same (a relabelling rotates the regular Theta onto
     # itself); the discretizations may differ (FEM: the mesher starts at
     # another vertex), within the method's accuracy.
@@ -159,7 +166,7 @@ def test_translation_by_a_million_pixels_moves_the_map_along(impl):
     offset = np.array([1.0e6, -2.0e6])
     f = between(src, dst, impl)
     g = between(src + offset, dst - offset, impl)
-    p = inside(src)
+    p = inside(src, 800)
     err = np.hypot(*(g.forward(p + offset) + offset - f.forward(p)).T)
     # The same exact map; the discretizations may differ (rounding the
     # coordinates at 1e6, 2e-10 px, changes triangle's refinement choices
@@ -203,8 +210,12 @@ def test_edges_go_onto_edges_at_the_same_parameter(impl, name):
     np.testing.assert_allclose(f.inverse_boundary(np.arange(n), np.full(n, 0.5)), 0.5 * (src + np.roll(src, -1, axis=0)))
 
 
-@pytest.mark.parametrize("name", sorted(CONCAVE))
-@pytest.mark.parametrize("mirror", [False, True])
+# Every shape onto the regular polygon; mirrored (an orientation-reversing pair) on two of them:
+# the orientation is handled once per map, whatever the shape (the hard shapes fold, if at all,
+# unmirrored too), and each mirrored pair is two more maps to build.
+@pytest.mark.parametrize(
+    "name, mirror", [(name, False) for name in sorted(CONCAVE)] + [("L", True), ("star", True)]
+)
 def test_no_fold_over_and_round_trips(impl, name, mirror):
     src = CONCAVE[name]
     dst = regular(len(src), r=50.0, phase=0.3)

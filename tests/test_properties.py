@@ -20,8 +20,10 @@ def pairs(draw):
     return Polygon(draw(simple_polygons(n))), Polygon(draw(simple_polygons(n)))
 
 
+# 15 pairs (derandomized): both kinds of polygon (star-shaped, notched bands), both orientations
+# and 3 to 60 vertices are all drawn; the next 15 drew more of the same (0.3 s of CPU each).
 @given(pairs())
-@settings(max_examples=30)
+@settings(max_examples=15)
 def test_random_pairs_are_bijective_and_respect_the_boundary(pair):
     src, dst = pair
     f = BijectiveMap.between(src, dst)

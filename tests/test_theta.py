@@ -211,11 +211,12 @@ def test_mixed_conditions_agree_across_methods(method, clockwise):
     for quad in ([[10, 10], [120, 20], [60, 50], [20, 110]], [[5, 5], [120, 5], [120, 40], [5, 120]]):
         src = np.array(quad, dtype=float)
         dst = np.array([[8.0, 8.0], [120.0, 8.0], [120.0, 120.0], [8.0, 120.0]])
+        # The fine FEM reference, of the counter-clockwise pair, for both methods and both
+        # orientations (the same map of points): built once per test process.
+        ref = built_map(src, dst, MapOptions(conditions="mixed", max_area=0.25))
         if clockwise:
             src, dst = src[::-1], dst[::-1]
         f = BijectiveMap.between(Polygon(src), Polygon(dst), MapOptions(method=method, conditions="mixed"))
-        # The fine FEM reference is the same for both methods: built once per test process.
-        ref = built_map(src, dst, MapOptions(conditions="mixed", max_area=0.25))
         p = np.random.default_rng(4).uniform(src.min(axis=0), src.max(axis=0), (3000, 2))
         p = p[inside_polygon(p, src)]
         # px, on a 112 px square. Measured: the skew quad agrees to 0.012 px
@@ -229,7 +230,9 @@ def test_mixed_conditions_agree_across_methods(method, clockwise):
         assert np.isfinite(d).all() and d.max() < 0.6 and d.mean() < 0.08, (d.max(), d.mean())
         for i in range(4):  # the slide along each edge agrees too
             t = np.linspace(0.05, 0.95, 7)
-            np.testing.assert_allclose(f.phi0.to_theta_parameter(i, t), ref.phi0.to_theta_parameter(i, t), atol=1e-2)
+            # Reversed, edge i is the reference's edge 2 - i run backwards (on Theta too).
+            want = 1.0 - ref.phi0.to_theta_parameter((2 - i) % 4, 1.0 - t) if clockwise else ref.phi0.to_theta_parameter(i, t)
+            np.testing.assert_allclose(f.phi0.to_theta_parameter(i, t), want, atol=1e-2)
 
 
 @pytest.mark.parametrize(

@@ -386,13 +386,27 @@ def _crossing(g: NDArray[np.float64], v: NDArray[np.float64]) -> bool:
 
 
 def _self_crossing(g: NDArray[np.float64]) -> bool:
-    """Whether two edges of the closed polyline g that do not share a vertex meet (exactly; O(n^2), vectorised per edge)."""
+    """Whether two edges of the closed polyline g that do not share a vertex meet (exactly).
+
+    Only pairs whose closed bounding boxes overlap can meet (a common point lies in both boxes,
+    compared as the doubles they are): the exact test runs on those, found in blocks of edges
+    against all later ones (O(n^2) comparisons of coordinates, few exact predicates).
+    """
     n = len(g)
     a, b = g, np.roll(g, -1, axis=0)
-    for i in range(n):  # loop over edges, vectorised over the later ones that share no vertex with it
-        j = np.arange(i + 2, n - 1 if i == 0 else n)
-        if j.size and segments_touch(np.broadcast_to(a[i], (j.size, 2)), np.broadcast_to(b[i], (j.size, 2)), a[j], b[j]).any():
-            return True
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    block = 256
+    for s in range(0, n, block):  # blocks of edges, vectorised over the later edges
+        i = np.arange(s, min(n, s + block))[:, None]
+        j = np.arange(n)[None, :]
+        # j shares no vertex with i: not i - 1, i, i + 1 (and edge n - 1 is edge 0's neighbour)
+        later = (j >= i + 2) & ~((i == 0) & (j == n - 1))
+        meet = later & (lo[i, 0] <= hi[j, 0]) & (lo[j, 0] <= hi[i, 0]) & (lo[i, 1] <= hi[j, 1]) & (lo[j, 1] <= hi[i, 1])
+        ii, jj = np.nonzero(meet)
+        if ii.size:
+            ii += s
+            if segments_touch(a[ii], b[ii], a[jj], b[jj]).any():
+                return True
     return False
 
 

@@ -127,25 +127,60 @@ class Collar:
         t_out = np.zeros(len(y))
         best = np.full(len(y), np.inf)
         df, dg = b.f1 - b.f0, b.g1 - b.g0
-        for c in range(len(b.f0)):  # loop over cells, vectorised over the points (the band holds few)
-            a = y - b.f0[c]
+        # Only a cell whose box holds a point can take it: (s, t) within EDGE_SLACK of [0, 1]^2 is
+        # a point of the bilinear patch F + t (G - F) over [-slack, 1 + slack]^2, whose box is that
+        # of the patch's four corners; widened far beyond rounding, so that the cells left out
+        # miss by more than the slack (they would lose to the cell that holds the point, or leave
+        # it at -1: the answer is the same). Points sorted by x: each cell's candidates by bisection.
+        lo, hi = self._cell_boxes()
+        order = np.argsort(y[:, 0], kind="stable")
+        xs = y[order, 0]
+        first = np.searchsorted(xs, lo[:, 0], side="left")
+        last = np.searchsorted(xs, hi[:, 0], side="right")
+        for c in np.flatnonzero(first < last):  # loop over cells with candidates, vectorised over those
+            k = order[first[c] : last[c]]
+            k = k[(y[k, 1] >= lo[c, 1]) & (y[k, 1] <= hi[c, 1])]
+            if not k.size:
+                continue
+            yk = y[k]
+            a = yk - b.f0[c]
             base = b.g0[c] - b.f0[c]
             slope = _cross(a, (dg[c] - df[c])[None]) - _cross(df[c][None], base[None])
             with np.errstate(divide="ignore", invalid="ignore"):
                 s = -_cross(a, base[None]) / slope
                 f = b.f0[c] + s[:, None] * df[c]
                 gf = b.g0[c] + s[:, None] * dg[c] - f
-                t = ((y - f) * gf).sum(axis=1) / (gf * gf).sum(axis=1)
+                t = ((yk - f) * gf).sum(axis=1) / (gf * gf).sum(axis=1)
             # how far outside [0, 1]^2 (0 inside): the best cell wins, so shared segments are taken once
             miss = np.fmax(np.fmax(-s, s - 1.0), np.fmax(-t, t - 1.0))
             miss = np.where(np.isfinite(miss), np.maximum(miss, 0.0), np.inf)
-            take = miss < best
-            best[take] = miss[take]
-            cell[take] = c
-            s_out[take] = s[take]
-            t_out[take] = t[take]
+            take = miss < best[k]
+            kt = k[take]
+            best[kt] = miss[take]
+            cell[kt] = c
+            s_out[kt] = s[take]
+            t_out[kt] = t[take]
         cell[~(best <= EDGE_SLACK)] = -1
         return cell, np.clip(s_out, 0.0, 1.0), np.clip(t_out, 0.0, 1.0)
+
+    def _cell_boxes(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Boxes (lo, hi: (C, 2) each) holding every point `locate` may give each cell, widened."""
+        cached = self.__dict__.get("_boxes_cache")
+        if cached is None:
+            b = self.band
+            e = EDGE_SLACK
+            corners = []
+            for s in (-e, 1.0 + e):
+                f = b.f0 + s * (b.f1 - b.f0)
+                g = b.g0 + s * (b.g1 - b.g0)
+                corners += [f - e * (g - f), g + e * (g - f)]
+            c = np.stack(corners)
+            lo, hi = c.min(axis=0), c.max(axis=0)
+            # far beyond the rounding of (s, t): a thousandth of the cell, and of the coordinates' size
+            pad = 1e-3 * (hi - lo).max(axis=1, keepdims=True) + 1e-9 * (1.0 + np.abs(c).max(axis=(0, 2)))[:, None]
+            cached = (lo - pad, hi + pad)
+            object.__setattr__(self, "_boxes_cache", cached)
+        return cached
 
     def evaluate(self, points: NDArray[np.float64], jacobian: bool = False):
         """The collar's values (and Jacobians) at points of the band; NaN where no cell holds a point.
