@@ -3,8 +3,15 @@
 from __future__ import annotations
 
 import os
+import sys
 
 import pytest
+
+# Bytecode is written and read, as for an installed warpcli, even where the shell sets
+# PYTHONDONTWRITEBYTECODE (this project's CI does): otherwise every test module is rewritten by
+# pytest anew in each xdist worker, and every process the suite starts compiles warpcli's
+# modules from source (see `pytest_configure`).
+sys.dont_write_bytecode = False
 from hypothesis import settings
 
 import warpcli
@@ -39,6 +46,14 @@ def pytest_configure(config):
     config.addinivalue_line(
         "markers", "forks: the test is about forked children (map builders, batch workers): keep them in-process"
     )
+    if not hasattr(config, "workerinput"):  # once, in the process that starts xdist's workers
+        # The CLI subprocesses, the docs build and the README's commands each import warpcli; with
+        # PYTHONDONTWRITEBYTECODE set none of them writes its bytecode, so each compiled about 70
+        # modules from source (0.26 s of CPU a process, measured in bench/jobs.py), as an editable
+        # install leaves them uncompiled. compileall writes them whatever that variable says.
+        import compileall
+
+        compileall.compile_dir(os.path.join(REPO, "warpcli"), quiet=1)
 
 
 @pytest.fixture(autouse=True)
