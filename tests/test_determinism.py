@@ -54,15 +54,17 @@ def test_smooth_methods_give_the_same_bytes_whatever_the_blas_threads(tmp_path):
         "    if code:\n"
         "        sys.exit(code)\n"
     )
-    for k, threads in enumerate(("1", "2", "4")):
+    # The fits run with BLAS limited to one thread (closed_form.lstsq): any other count than 1
+    # shows a limit that does not hold (1 against 2 is where the issue saw the bytes change).
+    for k, threads in enumerate(("1", "2")):
         env = {k_: v for k_, v in os.environ.items() if not k_.endswith("_NUM_THREADS")}
         env.update({"OPENBLAS_NUM_THREADS": threads, "OMP_NUM_THREADS": threads})
         out = str(tmp_path / f"{{}}{k}.png")
         done = subprocess.run([sys.executable, "-c", script, inp, src, dst, out], env=env, capture_output=True, text=True)
         assert done.returncode == 0, done.stderr
     for method in ("bem", "mfs"):
-        outs = [(tmp_path / f"{method}{k}.png").read_bytes() for k in range(3)]
-        assert outs[0] == outs[1] == outs[2], method
+        outs = [(tmp_path / f"{method}{k}.png").read_bytes() for k in range(2)]
+        assert outs[0] == outs[1], method
 
 
 def test_images_wider_than_32767_pixels_warp(tmp_path):
