@@ -54,42 +54,6 @@ def pytest_configure(config):
         import compileall
 
         compileall.compile_dir(os.path.join(REPO, "warpcli"), quiet=1)
-        _compile_kernels_beside(config)
-
-
-# One small warp per method, each in a process of its own: on a fresh checkout (CI's) the
-# compiled kernels are not cached yet, and compiling them costs seconds of CPU each (BEM's
-# three: 21 s in one process, MFS's 5 s, the resampler's 2 s). Started before the workers
-# collect, they compile side by side while the workers run the tests that need no kernel; a
-# worker that needs a kernel being compiled waits for it (`warpcli._native`'s lock) instead of
-# compiling it again. Where the kernels are cached each costs about half a second.
-_KERNEL_WARM_UP = """
-import sys
-import numpy as np
-import warpcli
-method = sys.argv[1]
-t = np.linspace(0, 2 * np.pi, 6, endpoint=False)
-src = np.stack([24 + 14 * np.cos(t), 20 + 12 * np.sin(t)], axis=1)
-dst = np.stack([24 + 12 * np.cos(t + 0.2), 20 + 13 * np.sin(t + 0.2)], axis=1)
-pixels = np.zeros((40, 48, 3), dtype=np.uint8)
-warpcli.warp_image(pixels, src, dst, method=method)
-"""
-
-
-def _compile_kernels_beside(config):
-    import subprocess
-
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [REPO, os.environ.get("PYTHONPATH")])))
-    config._warpcli_warm_up = [
-        subprocess.Popen([sys.executable, "-c", _KERNEL_WARM_UP, method], cwd=REPO, env=env,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
-        for method in ("bem", "mfs", "fem")
-    ]
-
-
-def pytest_unconfigure(config):
-    for proc in getattr(config, "_warpcli_warm_up", ()):
-        proc.wait()
 
 
 @pytest.fixture(autouse=True)
