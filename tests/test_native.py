@@ -324,12 +324,29 @@ def test_bem_kernels_match_numba_bitwise():
         )  # fmt: skip
 
     _same(BEM, "bem_bounds", bounds, ("_smooth_kernels.py",))
+
+
+def _compiles_of_two_at_once(script: str, tmp_path, printed: str, **env) -> str:
+    """Two processes of ``script`` started together, with a cache of their own in ``tmp_path``
+    (``NUMBA_CACHE_DIR``) and a log file as argument, in which each compile writes a line: each
+    must succeed and print ``printed``. Returns the log."""
+    import subprocess
+    import sys
+
+    log = tmp_path / "compiles.txt"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), **env}
+    runs = [subprocess.Popen([sys.executable, "-c", script, str(log)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]  # fmt: skip
+    for run in runs:
+        out, err = run.communicate(timeout=300)
+        assert run.returncode == 0, err
+        assert out.strip() == printed
+    return log.read_text()
+
+
 def test_processes_needing_a_kernel_at_once_compile_it_once(tmp_path):
     """Two processes starting together on an empty cache (a farm, ``pytest -n``) need the same kernel:
     one compiles it (slowed down here, so that the other arrives meanwhile), the other waits for
     its file and loads it; both compute the right thing."""
-    import subprocess
-    import sys
     import textwrap
 
     script = textwrap.dedent(
@@ -353,22 +370,13 @@ def test_processes_needing_a_kernel_at_once_compile_it_once(tmp_path):
         print(out.tolist())
         """
     )
-    log = tmp_path / "compiles.txt"
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "WARPCLI_NATIVE": "1"}
-    runs = [subprocess.Popen([sys.executable, "-c", script, str(log)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]  # fmt: skip
-    for run in runs:
-        out, err = run.communicate(timeout=300)
-        assert run.returncode == 0, err
-        assert out.strip() == "[[[2.0, 0.0], [0.0, 2.0]]]"
-    assert log.read_text() == "compiled\n"
+    assert _compiles_of_two_at_once(script, tmp_path, "[[[2.0, 0.0], [0.0, 2.0]]]", WARPCLI_NATIVE="1") == "compiled\n"
     assert len(list((tmp_path / "cache" / "warpcli").glob("*.native"))) == 1
 
 
 def test_processes_needing_a_numba_function_at_once_compile_it_once(tmp_path):
     """The same for the kernels numba calls itself (``@njit(cache=True)`` from `warpcli._jit`): one
     process compiles (slowed down here), the other waits and loads it from numba's cache."""
-    import subprocess
-    import sys
     import textwrap
 
     script = textwrap.dedent(
@@ -391,11 +399,4 @@ def test_processes_needing_a_numba_function_at_once_compile_it_once(tmp_path):
         print(out.tolist())
         """
     )
-    log = tmp_path / "compiles.txt"
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    runs = [subprocess.Popen([sys.executable, "-c", script, str(log)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]  # fmt: skip
-    for run in runs:
-        out, err = run.communicate(timeout=300)
-        assert run.returncode == 0, err
-        assert out.strip() == "[0, 1]"
-    assert log.read_text() == "compiled\n"
+    assert _compiles_of_two_at_once(script, tmp_path, "[0, 1]") == "compiled\n"

@@ -59,12 +59,11 @@ _COMPILING: set[str] = set()
 
 def _one_compile_across_processes() -> None:
     try:
-        import fcntl
-
         from numba.core.compiler_lock import global_compiler_lock
         from numba.core.dispatcher import Dispatcher
-    except ImportError:  # pragma: no cover - not on POSIX, or another numba
+    except ImportError:  # pragma: no cover - another numba
         return
+    from ._native import locked_file
     compile_ = Dispatcher.compile
     if getattr(compile_, "serialized", False):
         return
@@ -78,14 +77,10 @@ def _one_compile_across_processes() -> None:
                 return compile_(self, sig)
             try:
                 os.makedirs(os.path.dirname(path), exist_ok=True)
-                lock = open(path + ".compiling", "a")  # noqa: SIM115  (closed below)
+                lock = locked_file(path + ".compiling")
             except OSError:  # a cache directory numba cannot write either
                 return compile_(self, sig)
             with lock:
-                try:
-                    fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
-                except OSError:  # a file system without locks
-                    pass
                 _COMPILING.add(path)
                 try:
                     # Finds in the cache what another process compiled while this one waited.

@@ -47,14 +47,14 @@ import os
 import sys
 import threading
 from collections.abc import Callable, Iterator, Sequence
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
 # ctypes, hashlib, json and tempfile are imported where kernels are loaded
 # (usually on the thread that loads them while the maps are solved), not here.
 
-__all__ = ["Kernels", "cores", "native_enabled", "parallel"]
+__all__ = ["Kernels", "cores", "locked_file", "native_enabled", "parallel"]
 
 _log = logging.getLogger("warpcli")
 
@@ -419,26 +419,35 @@ def _compiling(dirs: list[str], filename: str) -> Iterator[None]:
     cache's atomic writes keep that safe). The lock file is named by the
     kernel and its argument types, not by its source: an edit reuses it.
     """
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX
-        yield
-        return
     lock = f".{filename.rsplit('-', 1)[0]}.lock"
     for d in dirs:
         try:
             os.makedirs(d, exist_ok=True)
-            fh = open(os.path.join(d, lock), "a")
+            fh = locked_file(os.path.join(d, lock))
         except OSError:
             continue
         with fh:
-            try:
-                fcntl.flock(fh, fcntl.LOCK_EX)  # released when the file is closed
-            except OSError:  # a file system without locks
-                pass
             yield
         return
     yield
+
+
+def locked_file(path: str) -> IO[str]:
+    """``path`` opened for appending, with an exclusive ``flock`` on it: the lock is released
+    when the file is closed (use it in a ``with``).
+
+    Raises OSError when the file cannot be opened. Where there is no ``fcntl``
+    (not POSIX) or the file system has no locks, the file is returned unlocked.
+    Used by both compile locks: this module's kernels and numba's (`warpcli._jit`).
+    """
+    fh = open(path, "a")  # noqa: SIM115  (the caller closes it)
+    try:
+        import fcntl
+
+        fcntl.flock(fh, fcntl.LOCK_EX)
+    except (ImportError, OSError):  # not POSIX, or a file system without locks
+        pass
+    return fh
 
 
 def _read_entry(path: str) -> dict | None:
