@@ -117,7 +117,8 @@ class SmoothMap(ThetaMap):
         finite = np.flatnonzero(np.isfinite(p).all(axis=1))
         on = ON_BOUNDARY * self._size
         cand, edge, t, dist = _nearest_within(p[finite], self.polygon.points, self._polygon_xy, max(on, self._band_width))
-        near = cand[dist <= on]
+        on_edge = dist <= on
+        near = cand[on_edge]
         inside = self._inside_polygon(p[finite])
         inside[near] = False
         k = finite[inside]
@@ -128,7 +129,7 @@ class SmoothMap(ThetaMap):
             band = finite[close[in_band]]
             inside[close[in_band]] = False
             k = finite[inside]
-        return k, finite[near], edge[dist <= on], t[dist <= on], band
+        return k, finite[near], edge[on_edge], t[on_edge], band
 
     @cached_property
     def _band_width(self) -> float:
@@ -710,9 +711,12 @@ class _Method:
         arrays imports it, in the first guess's triangle locator: 10-20 ms the pull-back
         would otherwise pay).
         """
-        if self.name == "bem" or not _forks():
-            # MFS's locator comes from its forked child (`SmoothMap.precompute`): this process
-            # never calls np.median then (numpy.ma: 50-100 ms of CPU under load, beside the children)
+        from .._fork import available
+
+        if not available():
+            # Built in forked children, BEM's and MFS's maps come with their locators
+            # (`SmoothMap.precompute`): this process never calls np.median then (numpy.ma:
+            # 50-100 ms of CPU under load, beside the children)
             import numpy.ma  # noqa: F401
 
         from . import newton  # noqa: F401
@@ -722,13 +726,6 @@ class _Method:
             from . import bem_eval  # noqa: F401
         self._load_fit()
         _load_runtime()
-
-
-def _forks() -> bool:
-    """Whether MFS's maps are built in forked children here (`_Method.build_forked`)."""
-    from .._fork import available
-
-    return available()
 
 
 def _load_runtime() -> None:
