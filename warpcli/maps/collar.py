@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._arrays import first_of_each
+from .._cached import cached_property
 from .._native import Kernels
 from ..boundary import BoundaryData
 from .boundary_certificate import OffsetBand
@@ -96,15 +97,11 @@ class Collar:
             _compiled.inside_points(np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]), g[0], g[1], out)
         return out
 
-    @property
+    @cached_property
     def _gamma_xy(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Gamma's x and y, contiguous (for `inside_points`)."""
-        cached = self.__dict__.get("_gamma_cache")
-        if cached is None:
-            gamma = np.asarray(self.band.gamma, dtype=np.float64)
-            cached = (np.ascontiguousarray(gamma[:, 0]), np.ascontiguousarray(gamma[:, 1]))
-            object.__setattr__(self, "_gamma_cache", cached)
-        return cached
+        gamma = np.asarray(self.band.gamma, dtype=np.float64)
+        return np.ascontiguousarray(gamma[:, 0]), np.ascontiguousarray(gamma[:, 1])
 
     def _data(self, c: NDArray[np.intp], s: NDArray[np.float64]):
         """g(F(s)) on cells c, and its derivative in s: (K, 2) each."""
@@ -132,7 +129,7 @@ class Collar:
         # of the patch's four corners; widened far beyond rounding, so that the cells left out
         # miss by more than the slack (they would lose to the cell that holds the point, or leave
         # it at -1: the answer is the same). Points sorted by x: each cell's candidates by bisection.
-        lo, hi = self._cell_boxes()
+        lo, hi = self._cell_boxes
         order = np.argsort(y[:, 0], kind="stable")
         xs = y[order, 0]
         first = np.searchsorted(xs, lo[:, 0], side="left")
@@ -163,24 +160,21 @@ class Collar:
         cell[~(best <= EDGE_SLACK)] = -1
         return cell, np.clip(s_out, 0.0, 1.0), np.clip(t_out, 0.0, 1.0)
 
+    @cached_property
     def _cell_boxes(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Boxes (lo, hi: (C, 2) each) holding every point `locate` may give each cell, widened."""
-        cached = self.__dict__.get("_boxes_cache")
-        if cached is None:
-            b = self.band
-            e = EDGE_SLACK
-            corners = []
-            for s in (-e, 1.0 + e):
-                f = b.f0 + s * (b.f1 - b.f0)
-                g = b.g0 + s * (b.g1 - b.g0)
-                corners += [f - e * (g - f), g + e * (g - f)]
-            c = np.stack(corners)
-            lo, hi = c.min(axis=0), c.max(axis=0)
-            # far beyond the rounding of (s, t): a thousandth of the cell, and of the coordinates' size
-            pad = 1e-3 * (hi - lo).max(axis=1, keepdims=True) + 1e-9 * (1.0 + np.abs(c).max(axis=(0, 2)))[:, None]
-            cached = (lo - pad, hi + pad)
-            object.__setattr__(self, "_boxes_cache", cached)
-        return cached
+        b = self.band
+        e = EDGE_SLACK
+        corners = []
+        for s in (-e, 1.0 + e):
+            f = b.f0 + s * (b.f1 - b.f0)
+            g = b.g0 + s * (b.g1 - b.g0)
+            corners += [f - e * (g - f), g + e * (g - f)]
+        c = np.stack(corners)
+        lo, hi = c.min(axis=0), c.max(axis=0)
+        # far beyond the rounding of (s, t): a thousandth of the cell, and of the coordinates' size
+        pad = 1e-3 * (hi - lo).max(axis=1, keepdims=True) + 1e-9 * (1.0 + np.abs(c).max(axis=(0, 2)))[:, None]
+        return lo - pad, hi + pad
 
     def evaluate(self, points: NDArray[np.float64], jacobian: bool = False):
         """The collar's values (and Jacobians) at points of the band; NaN where no cell holds a point.
@@ -325,7 +319,7 @@ class Collar:
         t[~on] = np.nan
         return s, t
 
-    @property
+    @cached_property
     def _knots(self):
         """Per cell: the parameters s where phi(G(s)) is known (the pieces' centres, and the ends), its
         values there, g(F(s)) there, and per interval between two of them a box (lower and upper
@@ -336,9 +330,6 @@ class Collar:
         cover it (the two whose centres end it); the collar's segments between them, and the
         values `_roots` accepts (within `MISS` of a segment), lie in the box of those.
         """
-        cached = self.__dict__.get("_knots_cache")
-        if cached is not None:
-            return cached
         b = self.band
         ends = np.concatenate([b.g0, b.g1])
         vals = self.solution.value_and_jacobian(ends)[0]
@@ -374,7 +365,6 @@ class Collar:
             stray = self.data.stray(e, t_a, t_b, half)[:, None]
             lo, hi = np.minimum(lo, gm - span - stray), np.maximum(hi, gm + span + stray)
             out.append((s_k, v_k, g_k, lo - pad, hi + pad))
-        object.__setattr__(self, "_knots_cache", out)
         return out
 
     @property
