@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warpcli._arrays import first_of_each, sorted_unique
+from warpcli._arrays import first_and_inverse, first_of_each, sorted_unique
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -27,3 +27,12 @@ def test_first_of_each_is_numpys_return_index(seed):
     rng = np.random.default_rng(seed)
     keys = rng.integers(0, 12, size=int(rng.integers(0, 60)))
     assert np.array_equal(first_of_each(keys), np.unique(keys, return_index=True)[1])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_first_and_inverse_are_numpys_return_index_and_inverse(seed):
+    rng = np.random.default_rng(seed)
+    keys = rng.integers(0, 12, size=int(rng.integers(0, 60)))
+    _, index, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    first, which = first_and_inverse(keys)
+    assert np.array_equal(first, index) and np.array_equal(which, inverse.ravel())

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["sorted_unique", "first_of_each"]
+__all__ = ["sorted_unique", "first_of_each", "first_and_inverse"]
 
 
 def sorted_unique(values: ArrayLike) -> NDArray:
@@ -31,7 +31,26 @@ def first_of_each(values: ArrayLike) -> NDArray[np.intp]:
     >>> first_of_each([3, 1, 3, 2]).tolist()
     [1, 3, 0]
     """
+    order, new = _runs(values)
+    return order[new]
+
+
+def first_and_inverse(values: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """``np.unique(values, return_index=True, return_inverse=True)[1:]``: `first_of_each`, and
+    for each value the rank of its distinct value among them.
+
+    >>> [a.tolist() for a in first_and_inverse([3, 1, 3, 2])]
+    [[1, 3, 0], [2, 0, 2, 1]]
+    """
+    order, new = _runs(values)
+    inverse = np.empty(len(order), dtype=np.intp)
+    inverse[order] = np.cumsum(new) - 1
+    return order[new], inverse
+
+
+def _runs(values: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+    """The stable sorting order of the values, and where each run of equal ones starts in it."""
     v = np.ravel(values)
     order = np.argsort(v, kind="stable")
     ranked = v[order]
-    return order[np.r_[True, ranked[1:] != ranked[:-1]]] if v.size else order
+    return order, np.r_[True, ranked[1:] != ranked[:-1]] if v.size else np.zeros(0, dtype=bool)

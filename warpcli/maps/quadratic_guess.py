@@ -31,6 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .._arrays import first_and_inverse
+
 __all__ = ["QuadraticGuess"]
 
 #: Newton steps on the quadratic patch (the first already leaves the patch's own error, O(h^3), behind).
@@ -84,14 +86,9 @@ class QuadraticGuess:
         tri = np.asarray(triangles, dtype=np.int64)
         ends = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
         ends.sort(axis=1)
-        # each edge once (np.unique's index and inverse, without its import of numpy.ma)
-        key = ends[:, 0] * len(vertices) + ends[:, 1]
-        order = np.argsort(key, kind="stable")
-        ranked = key[order]
-        new = np.r_[True, ranked[1:] != ranked[:-1]]
-        which = np.empty(len(key), dtype=np.intp)
-        which[order] = np.cumsum(new) - 1
-        pairs = ends[order[new]]
+        # each edge once
+        first, which = first_and_inverse(ends[:, 0] * len(vertices) + ends[:, 1])
+        pairs = ends[first]
         mid = evaluate(0.5 * (vertices[pairs[:, 0]] + vertices[pairs[:, 1]]))
         which = which.reshape(3, -1)
         p0, p1, p2 = image[tri[:, 0]], image[tri[:, 1]], image[tri[:, 2]]
