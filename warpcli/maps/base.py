@@ -239,8 +239,6 @@ def sliding_tables(theta: NDArray[np.float64], edge: ArrayLike, t: ArrayLike, im
     return tables
 
 
-
-
 class ForkedBuild:
     """A map being built in a forked child (`warpcli._fork.Forked`); `result` gives it.
 
