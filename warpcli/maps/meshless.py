@@ -668,10 +668,15 @@ def taylor_step(
                 axis=1,
             )
 
+    def quadratic(h):  # H[h, h] / 2 per component (numpy's einsum of three operands: 5x slower)
+        xx, xy, yy = 0.5 * h[:, 0] * h[:, 0], h[:, 0] * h[:, 1], 0.5 * h[:, 1] * h[:, 1]
+        return np.stack([H[:, a, 0, 0] * xx + 0.5 * (H[:, a, 0, 1] + H[:, a, 1, 0]) * xy + H[:, a, 1, 1] * yy for a in (0, 1)], axis=1)
+
     d0 = solve(r)
-    s = 0.5 * np.einsum("kabc,kb,kc->ka", H, d0, d0)
+    s = quadratic(d0)
     d = d0 - solve(s)
-    e = r - np.einsum("kab,kb->ka", J, d) - 0.5 * np.einsum("kabc,kb,kc->ka", H, d, d)
+    jd = np.stack([J[:, a, 0] * d[:, 0] + J[:, a, 1] * d[:, 1] for a in (0, 1)], axis=1)
+    e = r - jd - quadratic(d)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t = np.hypot(d[:, 0], d[:, 1]) / rho
         rem = 2.0 * np.hypot(*spread) * t**3 / (1.0 - t)
@@ -682,7 +687,8 @@ def taylor_step(
     y = y0.copy()
     y[step] = y0[step] + d[step]
     jac = J.copy()
-    jac[step] += np.einsum("kabc,kc->kab", H[step], d[step])
+    hs, ds = H[step], d[step]
+    jac[step] += hs[:, :, :, 0] * ds[:, None, None, 0] + hs[:, :, :, 1] * ds[:, None, None, 1]
     return y, done, jac
 
 
