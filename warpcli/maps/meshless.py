@@ -429,11 +429,18 @@ class SmoothMap(ThetaMap):
     @cached_property
     def _guess_mesh(self):
         """A triangulation of the polygon and its image in Theta: the first guess of §3.2."""
+        mesh, mapped = self._guess_evaluated
+        return mesh, mapped.points
+
+    @cached_property
+    def _guess_evaluated(self):
+        """`_guess_mesh`'s triangulation and the map at its vertices, with its Jacobian for BEM (the
+        quadratic guess's midpoints, `_quadratic_guess`)."""
         from .fem.mesh import mesh_polygon
 
         area = abs(self.polygon.signed_area)
         mesh = mesh_polygon(self.polygon, max(area / GUESS_TRIANGLES, 1e-12 * area))
-        return mesh, self.evaluate(mesh.vertices).points
+        return mesh, self.evaluate(mesh.vertices, jacobian=self.name == "bem")
 
     @cached_property
     def _guess_locator(self):
@@ -449,8 +456,10 @@ class SmoothMap(ThetaMap):
         """`_guess_mesh`'s triangles as quadratic patches in Theta (BEM's first guess)."""
         from .quadratic_guess import QuadraticGuess
 
-        mesh, image = self._guess_mesh
-        return QuadraticGuess.of(mesh.vertices, mesh.triangles, image, lambda p: self.evaluate(p).points)
+        mesh, mapped = self._guess_evaluated
+        return QuadraticGuess.of(
+            mesh.vertices, mesh.triangles, mapped.points, lambda p: self.evaluate(p).points, jacobian=mapped.jacobian
+        )
 
     def precompute(self, side: str) -> None:
         """Make now what a pull-back asks first: the certificate with the collar's band (`collar`), and
