@@ -67,3 +67,53 @@ def test_taylor_step_proves_only_residuals_within_the_tolerance(seed):
     assert np.abs(jac[done] - ref).max() <= 1e-8 * np.abs(ref).max()
     assert done[scale < 1e-5].mean() > 0.9
     assert not done[scale > 0.1].any()
+
+
+def test_runs_are_evenly_spaced_pixels_of_one_row():
+    """`_runs` on generated rows of pixel centres mapped by a smooth map, with pixels left out: in
+    every run the row is one and the columns evenly spaced (the interpolation's index is the
+    pixel's position), and a stretch of 3 or more consecutive pixels is one run but for its first
+    (which may end the run before it, where the spacing changes)."""
+    from warpcli.maps.meshless import _runs
+
+    rng = np.random.default_rng(5)
+    rows, cols = [], []
+    for r in range(30):
+        c = np.arange(int(rng.integers(1, 40)))
+        c = c[rng.random(len(c)) > rng.choice([0.05, 0.3, 0.5])]  # pixels left out
+        rows.append(np.full(len(c), r))
+        cols.append(c)
+    row, col = np.concatenate(rows), np.concatenate(cols)
+    x, y = col + 0.5, row + 0.5
+    q = np.stack([x + 0.01 * y**2 + 0.002 * x**2, y + 0.003 * x * y], axis=1)
+    run, pos, last = _runs(q)
+    for r in np.unique(run):
+        k = np.flatnonzero(run == r)
+        assert np.array_equal(k, np.arange(k[0], k[0] + len(k)))
+        assert (pos[k] == np.arange(len(k))).all() and (last[k] == len(k) - 1).all()
+        assert (row[k] == row[k[0]]).all() and len(set(np.diff(col[k]))) <= 1
+    new = np.r_[True, (row[1:] != row[:-1]) | (col[1:] != col[:-1] + 1)]
+    stretch = np.cumsum(new) - 1
+    for s in np.flatnonzero(np.bincount(stretch) >= 3):
+        k = np.flatnonzero(stretch == s)
+        assert (run[k[1:]] == run[k[1]]).all()
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_coherent_starts_find_the_same_pre_images(seed):
+    """BEM's inverse of a pixel grid's values with ``coherent=True`` (first guesses located for a
+    quarter of each row, interpolated between) finds the same points as without, to Newton's
+    tolerance, with the same NaNs and Jacobians to the proved step's accuracy."""
+    phi = _bem_map(seed)
+    V = phi.polygon.points
+    lo, hi = np.floor(V.min(axis=0)), np.ceil(V.max(axis=0))
+    X, Y = np.meshgrid(np.arange(lo[0], hi[0]) + 0.5, np.arange(lo[1], hi[1]) + 0.5)
+    p = np.stack([X.ravel(), Y.ravel()], axis=1)
+    p = p[phi._inside_polygon(p)]
+    q = phi.evaluate(p).points
+    a = phi.inverse(q, jacobian=True, coherent=True)
+    b = phi.inverse(q, jacobian=True)
+    fa, fb = np.isfinite(a.points).all(axis=1), np.isfinite(b.points).all(axis=1)
+    assert np.array_equal(fa, fb) and fa.sum() > 0.9 * len(q)
+    assert np.abs(a.points[fa] - b.points[fa]).max() < 1e-6
+    assert np.abs(a.jacobian[fa] - b.jacobian[fa]).max() <= 1e-7 * np.abs(b.jacobian[fa]).max()
