@@ -208,8 +208,9 @@ class SmoothMap(ThetaMap):
                 # evenly spaced targets starts from the extrapolation of the pre-images before
                 # it (`MFSSolution.invert_newton`'s ``chain``), the others from the first guess
                 chain = _steady(q[k]) if compiled is not None and coherent else None
+                located = None  # BEM, coherent: which starts are first guesses (the others interpolated)
                 if chain is None and coherent and self.name == "bem":
-                    guess = self._coherent_guess(q[k])
+                    guess, located = self._coherent_guess(q[k])
                 elif chain is None:
                     guess = self._first_guess(q[k])
                 else:
@@ -246,7 +247,17 @@ class SmoothMap(ThetaMap):
                             j_mfs[again] = j2
                     jy = [j_mfs]
                 elif self.name == "bem":
-                    y, ok, *jy = self._bem_newton(q[k], guess, tol, jacobian)
+                    thresh, noise = thresholds(q[k], tol, NEWTON_FLOOR)
+                    y, ok, *jy = self._bem_newton(q[k], guess, thresh, noise, jacobian)
+                    again = np.zeros(0, dtype=np.intp) if located is None else np.flatnonzero(~ok & ~located)
+                    if again.size:
+                        # interpolated starts Newton did not converge from: again from the first guess
+                        guess[again] = self._first_guess(q[k[again]])
+                        located[again] = True
+                        y2, ok2, *j2 = self._bem_newton(q[k[again]], guess[again], thresh, noise, jacobian)
+                        y[again], ok[again] = y2, ok2
+                        if jacobian:
+                            jy[0][again] = j2[0]
                 else:
                     y, ok, *jy = invert(
                         self.solution.value, self.solution.jacobian, q[k], guess, tol=tol,
@@ -256,8 +267,8 @@ class SmoothMap(ThetaMap):
                 jac_k = jy[0] if jacobian else None
                 redo = self._in_band(y)
                 if redo.size:
-                    unset = redo[np.isnan(guess[redo, 0])]
-                    if unset.size:  # chained points: the band's Newton starts from the first guess
+                    unset = redo[np.isnan(guess[redo, 0]) if located is None else ~located[redo]]
+                    if unset.size:  # chained or interpolated starts: the band's Newton starts from the first guess
                         guess[unset] = self._first_guess(q[k[unset]])
                     self._band_inverse(q[k[redo]], guess[redo], y, jac_k, redo, tol, mesh)
                 ok = np.isfinite(y).all(axis=1)
@@ -276,8 +287,10 @@ class SmoothMap(ThetaMap):
                 jac[k] = inv2(jac_k)
         return Mapped(out, jac)
 
-    def _coherent_guess(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
-        """`_first_guess` for coherent targets (a pull-back's pixels), located for a quarter of them.
+    def _coherent_guess(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """`_first_guess` for coherent targets (a pull-back's pixels), located for a quarter of them;
+        and which were located (the caller starts again from `_first_guess` where an interpolated
+        start did not converge).
 
         In each run of evenly spaced targets (`_runs`: consecutive pixels of a row), the points at
         multiples of `GUESS_STRIDE` and the run's last take `_first_guess`; those between take the
@@ -318,21 +331,21 @@ class SmoothMap(ThetaMap):
             lost = rest[~both]
             if lost.size:
                 guess[lost] = self._first_guess(q[lost])
-        return guess
+                node[lost] = True
+        return guess, node
 
-    def _bem_newton(self, q, guess, tol, jacobian):
+    def _bem_newton(self, q, guess, thresh, noise, jacobian):
         """`newton.invert` for BEM (its points, tolerance and results), its first step proved.
 
         Every start inside the polygon gets one evaluation with the Hessian and a second-order step
         (`taylor_step`); where the step's residual is proved within half the tolerance, that is the
         pre-image, with its Jacobian from the same expansion. The others go on with ``invert`` from
-        the step (or from their start), with the same absolute tolerance and noise floor as all the
-        points together would have had.
+        the step (or from their start). ``thresh`` and ``noise`` are `newton.thresholds` of all the
+        points of the call to `inverse` (absolute: the same for any subset).
         """
-        from .newton import invert, thresholds
+        from .newton import invert
 
         K = len(q)
-        thresh, noise = thresholds(q, tol, NEWTON_FLOOR)
         y = np.array(guess, dtype=np.float64)
         ok = np.zeros(K, dtype=bool)
         jac = np.full((K, 2, 2), np.nan) if jacobian else None
