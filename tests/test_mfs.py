@@ -307,7 +307,10 @@ def test_refits_of_a_folding_map_stay_within_the_cap(monkeypatch, caplog, cap):
 def test_the_inverse_jacobian_is_the_maps_at_the_pre_images_found(method, seed):
     """`SmoothMap.inverse` takes phi's Jacobian from Newton's own evaluations (issue 24); the former
     route, a pass of `evaluate` at the pre-images, is the reference: same points, same NaNs, and
-    the Jacobians of the inverse agree to rounding. Generated star-shaped polygons."""
+    the Jacobians of the inverse agree to rounding (MFS), or for BEM, whose Newton takes most points
+    after one proved second-order step (`warpcli.maps.meshless.taylor_step`) with the Jacobian J + H d
+    of that step's expansion, to its third-order term (|d| / rho)^2: 1e-8 here. Generated star-shaped
+    polygons."""
     from warpcli import MapOptions, Polygon
     from warpcli.maps.base import inv2
     from warpcli.maps.registry import METHODS
@@ -333,7 +336,8 @@ def test_the_inverse_jacobian_is_the_maps_at_the_pre_images_found(method, seed):
     assert np.array_equal(np.isnan(got.jacobian), np.isnan(ref))
     fin = np.isfinite(ref)
     assert fin.sum() > 100
-    assert np.abs(got.jacobian[fin] - ref[fin]).max() <= 1e-10 * np.abs(ref[fin]).max()
+    close = 1e-10 if method == "mfs" else 1e-8
+    assert np.abs(got.jacobian[fin] - ref[fin]).max() <= close * np.abs(ref[fin]).max()
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -105,3 +105,49 @@ def test_guesses_outside_the_domain_keep_the_linear_one():
     kept = (left == linear).all(axis=1)
     assert ((left[:, 0] < 0.5) | kept).all()  # each is in the domain, or the linear one
     assert (left[~kept] == everywhere[~kept]).all()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_hermite_midpoints_are_the_maps_for_a_cubic_and_only_edges_without_jacobians_are_evaluated(seed):
+    """With the map's Jacobian at the vertices, the midpoints are cubic Hermite values: exact for a
+    generated cubic map (the patches equal those of evaluated midpoints to rounding); ``evaluate`` is
+    called only at the midpoints of edges with an end whose Jacobian is NaN, and its values used there."""
+    rng = np.random.default_rng(seed)
+    c = rng.normal(0.0, 0.1, (2, 10))
+
+    def fun(p):
+        x, y = p[:, 0], p[:, 1]
+        mono = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y, x**3, x * x * y, x * y * y, y**3])
+        return p + (c @ mono).T
+
+    def jac(p):
+        x, y = p[:, 0], p[:, 1]
+        one, zero = np.ones_like(x), np.zeros_like(x)
+        dx = np.stack([zero, one, zero, 2 * x, y, zero, 3 * x * x, 2 * x * y, y * y, zero])
+        dy = np.stack([zero, zero, one, zero, x, 2 * y, zero, x * x, 2 * x * y, 3 * y * y])
+        return np.eye(2)[None] + np.stack([(c @ dx).T, (c @ dy).T], axis=2)
+
+    v, tri = square_mesh(5)
+    j = jac(v)
+    blank = rng.random(len(v)) < 0.2
+    j[blank] = np.nan
+    asked = []
+
+    def counted(p):
+        asked.append(p.copy())
+        return fun(p) + 1.0  # marked: these values must be the ones used at those edges
+
+    ref = QuadraticGuess.of(v, tri, fun(v), fun)
+    got = QuadraticGuess.of(v, tri, fun(v), counted, jacobian=j)
+    asked = np.concatenate(asked)
+    ends = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    ends = np.unique(ends, axis=0)
+    lacking = ends[blank[ends[:, 0]] | blank[ends[:, 1]]]
+    expect = 0.5 * (v[lacking[:, 0]] + v[lacking[:, 1]])
+    assert len(asked) == len(expect)
+    assert np.array_equal(np.unique(asked, axis=0), np.unique(expect, axis=0))
+    # patches whose three edges have Jacobians at both ends are the evaluated midpoints' patches
+    full = ~blank[tri].any(axis=1)
+    assert full.any()
+    assert np.allclose(got.coef_rows[:, full], ref.coef_rows[:, full], rtol=0, atol=1e-13)
+    assert (np.abs(got.coef_rows[:, ~full] - ref.coef_rows[:, ~full]).max(axis=0) > 0.5).all()  # the marked values
