@@ -25,7 +25,7 @@ def test_median_is_numpys(n):
     assert _median(a) == float(np.median(a))
 
 
-def _bem_map(seed):
+def _bem_map(seed, check=False):
     from warpcli import MapOptions, Polygon
     from warpcli.maps.registry import METHODS
     from warpcli.maps.theta import regular
@@ -35,7 +35,7 @@ def _bem_map(seed):
     th = np.sort(rng.uniform(0, 2 * np.pi, n))
     r = rng.uniform(20.0, 45.0, n)
     poly = Polygon(np.stack([60 + r * np.cos(th), 60 + r * np.sin(th)], axis=1))
-    opts = MapOptions(method="bem", nodes=96, check=False)
+    opts = MapOptions(method="bem", nodes=96, check=check)
     return METHODS["bem"].load().build(poly, regular(poly, poly, opts), opts, "source")
 
 
@@ -117,3 +117,30 @@ def test_coherent_starts_find_the_same_pre_images(seed):
     assert np.array_equal(fa, fb) and fa.sum() > 0.9 * len(q)
     assert np.abs(a.points[fa] - b.points[fa]).max() < 1e-6
     assert np.abs(a.jacobian[fa] - b.jacobian[fa]).max() <= 1e-7 * np.abs(b.jacobian[fa]).max()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_value_spread_holds_inside_gamma(seed):
+    """`taylor_step`'s bound D rests on the maximum principle inside Gamma: for a map the certificate
+    accepts, the closed form's values at generated points farther from the boundary than the
+    collar's band lie in Theta's bounding box (the spread's centre +- D, D with its margin removed),
+    and `_distance_below` keeps every start's disc that far from the boundary."""
+    from warpcli.maps.meshless import _nearest_within
+
+    phi = _bem_map(seed, check=True)
+    rng = np.random.default_rng(seed + 20)
+    V = phi.polygon.points
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    p = lo + rng.random((20000, 2)) * (hi - lo)
+    p = p[phi._inside_polygon(p)]
+    cand, _, _, dist = _nearest_within(p, V, phi._polygon_xy, np.inf)
+    d = np.full(len(p), np.inf)
+    d[cand] = dist
+    inside_gamma = p[d > phi._band_width]
+    u = phi.solution.value(inside_gamma)
+    T = phi.theta.points
+    centre, half = 0.5 * (T.min(axis=0) + T.max(axis=0)), 0.5 * np.ptp(T, axis=0)
+    assert (np.abs(u - centre) <= half * (1 + 1e-9)).all()
+    assert np.allclose(phi._value_spread, 1.1 * half)
+    rho = phi._distance_below(p)
+    assert (rho <= np.maximum(d - phi._band_width, 0.0)).all()

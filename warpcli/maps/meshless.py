@@ -373,21 +373,26 @@ class SmoothMap(ThetaMap):
         return (y, ok, jac) if jacobian else (y, ok)
 
     def _distance_below(self, p: NDArray[np.float64]) -> NDArray[np.float64]:
-        """A lower bound of each point's distance to the polygon's boundary (points inside it): the
-        distance itself within `TAYLOR_REACH` of the polygon's size, that reach beyond."""
+        """A lower bound of each point's distance to the curve Gamma the map is proved on (points inside it):
+        the distance to the polygon's boundary less the collar's band width, within `TAYLOR_REACH` of the
+        polygon's size; that reach beyond. A disc of this radius lies inside Gamma, where `_value_spread`
+        holds."""
         reach = TAYLOR_REACH * self._size
         cand, _, _, dist = _nearest_within(p, self.polygon.points, self._polygon_xy, reach)
         out = np.full(len(p), reach)
         out[cand] = np.minimum(dist, reach)
-        return out * (1.0 - 1e-9)  # rounding of the distances
+        out -= self._band_width
+        return np.maximum(out, 0.0) * (1.0 - 1e-9)  # rounding of the distances
 
     @cached_property
     def _value_spread(self) -> NDArray[np.float64]:
-        """Bounds of |u - c| over the polygon for each component u of phi and a constant c (`taylor_step`'s
-        D): half Theta's extent in that component (c its middle) and a tenth more. phi maps onto Theta, and
-        by the maximum principle the closed form's values stay within those on its boundary, which leave
-        Theta's box by its boundary deviation (measured on the bench pairs: at most 1e-5 of the extent
-        0.1 px inside the polygon, 1e-4 at 1e-4 px; the margin here is 5e-2)."""
+        """Bounds of |u - c| inside Gamma for each component u of phi and a constant c (`taylor_step`'s D):
+        half Theta's extent in that component (c its middle), and a tenth more for rounding.
+
+        The boundary certificate proves phi(Gamma) strictly inside Theta (its condition 4, which every
+        accepted map meets); phi is harmonic inside Gamma, so by the maximum principle its values there
+        stay within Theta's bounding box. (Beyond Gamma, in the band, BEM's closed form is singular at its
+        nodes and is not bounded this way: `_distance_below` keeps the discs inside Gamma.)"""
         return 0.55 * np.ptp(self.theta.points, axis=0)
 
     def _first_guess(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -722,8 +727,9 @@ def taylor_step(
         q - phi(y1) = e - R,  e = r - J d - H[d, d] / 2 (computed),
 
     R the Taylor remainder of order 3. Each component u of phi is harmonic in
-    the disc of radius rho around y0 (inside the polygon: ``rho`` is at most
-    the distance to its boundary), so u = Re f with f holomorphic there, and
+    the disc of radius rho around y0 (``rho`` keeps it inside the polygon, and
+    the caller's keeps it inside Gamma, where ``spread`` is proved: see
+    `SmoothMap._value_spread`), so u = Re f with f holomorphic there, and
     f's Taylor coefficients obey |a_k| <= 2 D / rho^k (k >= 1) whenever
     |u - c| <= D on the disc for some constant c (a_k rho^k = (1/pi) int
     (u - c) e^(-ik theta) d theta over the circle; ``spread``, per
@@ -752,9 +758,9 @@ def taylor_step(
     y0 : (K, 2) ndarray of float
         Starts, strictly inside the polygon.
     rho : (K,) ndarray of float
-        Radii of discs around the starts inside the polygon (lower bounds of their distance to its boundary).
+        Radii of discs around the starts on which ``spread`` holds (inside the polygon).
     spread : (2,) ndarray of float
-        Per component u, a bound D of |u - c| over the polygon for some constant c.
+        Per component u, a bound D of |u - c| on those discs for some constant c.
     thresh : float
         The absolute residual tolerance (`warpcli.maps.newton.thresholds`).
 
