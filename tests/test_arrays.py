@@ -36,3 +36,15 @@ def test_first_and_inverse_are_numpys_return_index_and_inverse(seed):
     _, index, inverse = np.unique(keys, return_index=True, return_inverse=True)
     first, which = first_and_inverse(keys)
     assert np.array_equal(first, index) and np.array_equal(which, inverse.ravel())
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_median_is_numpys(seed):
+    """`median` against np.median, bit for bit: odd and even counts, whole arrays and along axis 0 and 1."""
+    from warpcli._arrays import median
+
+    rng = np.random.default_rng(seed)
+    a = rng.random(([1, 2, 3, 16, 255, 256][seed % 6], 3)) * 10.0 ** rng.integers(-3, 4)
+    assert median(a) == float(np.median(a)) and isinstance(median(a), float)
+    for axis in (0, 1):
+        assert median(a, axis=axis).tobytes() == np.median(a, axis=axis).tobytes()

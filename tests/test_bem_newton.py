@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warpcli.maps.bem_eval import _GAUSS01, _median, gauss01
+from warpcli.maps.bem_eval import _GAUSS01, gauss01
 from warpcli.maps.meshless import taylor_step
 from warpcli.maps.newton import thresholds
 
@@ -17,12 +17,6 @@ def test_gauss_tables_are_numpys_leggauss_bit_for_bit():
         assert np.array_equal(t, 0.5 * (x + 1.0)) and np.array_equal(wt, 0.5 * w)
     x, w = np.polynomial.legendre.leggauss(7)  # not tabled: numpy's
     assert np.array_equal(gauss01(7)[0], 0.5 * (x + 1.0))
-
-
-@pytest.mark.parametrize("n", [1, 2, 3, 16, 255, 256])
-def test_median_is_numpys(n):
-    a = np.random.default_rng(n).random(n) * 10.0 ** np.random.default_rng(n + 1).integers(-3, 3, n)
-    assert _median(a) == float(np.median(a))
 
 
 def _bem_map(seed, check=False):

@@ -1,9 +1,9 @@
-"""``np.unique`` as it computes it, without its test for masked arrays.
+"""``np.unique`` and ``np.median`` as they compute them, without their test for masked arrays.
 
-``np.unique`` checks whether its input is a masked array, and that check
-imports numpy.ma: 10-20 ms (quiet) in every process that calls it, on a
-warp's critical path and in each forked builder. These give the same
-values (and first indices) by the same stable sort.
+``np.unique`` and ``np.median`` check whether their input is a masked array,
+and that check imports numpy.ma: 10-20 ms (quiet) in every process that
+calls them, on a warp's critical path and in each forked builder. These give
+the same values (and first indices) by the same stable sort.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["sorted_unique", "first_of_each", "first_and_inverse"]
+__all__ = ["sorted_unique", "first_of_each", "first_and_inverse", "median"]
 
 
 def sorted_unique(values: ArrayLike) -> NDArray:
@@ -46,6 +46,22 @@ def first_and_inverse(values: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.i
     inverse = np.empty(len(order), dtype=np.intp)
     inverse[order] = np.cumsum(new) - 1
     return order[new], inverse
+
+
+def median(values: ArrayLike, axis: int | None = None) -> NDArray[np.float64] | float:
+    """``np.median(values, axis)`` of finite floats, the same bits: the middle of the sorted values, or
+    the mean of the two middle ones (at least one value along ``axis``).
+
+    >>> median([3.0, 1.0, 2.0, 10.0])
+    2.5
+    """
+    ax = 0 if axis is None else axis
+    s = np.sort(np.ravel(values) if axis is None else np.asarray(values), axis=ax)
+    h = s.shape[ax] // 2
+    mid = np.take(s, h, axis=ax)
+    if s.shape[ax] % 2 == 0:
+        mid = (np.take(s, h - 1, axis=ax) + mid) / 2.0
+    return float(mid) if axis is None else mid
 
 
 def _runs(values: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:

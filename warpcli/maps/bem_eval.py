@@ -27,6 +27,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from .._arrays import median
 from .._native import Kernels
 from .closed_form import TWO_PI
 
@@ -170,14 +171,6 @@ def gauss01(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         return np.array(t), np.array(w)
     x, w = np.polynomial.legendre.leggauss(n)
     return 0.5 * (x + 1.0), 0.5 * w
-
-
-def _median(x: NDArray[np.float64]) -> float:
-    """``np.median`` of a non-empty 1-d array, the same bits, without its test for masked arrays (which
-    imports numpy.ma: 10 ms quiet, 50-100 ms loaded, in each process that evaluates a BEM map)."""
-    s = np.sort(x)
-    h = len(s) // 2
-    return float(s[h]) if len(s) % 2 else float((s[h - 1] + s[h]) / 2.0)
 
 
 # --------------------------------------------------------------------------
@@ -334,7 +327,7 @@ def evaluate(
     order = _morton_order(p)
     px = p[:, 0][order]
     py = p[:, 1][order]
-    bstart, bcx, bcy, brad = _blocks(px, py, _SPLIT_RADIUS * _median(sources.length))
+    bstart, bcx, bcy, brad = _blocks(px, py, _SPLIT_RADIUS * median(sources.length))
     ax, ay, bx, by, ecx, ecy, elen, orders, offsets, sx, sy, alpha, bre, bim = sources
     # the kernel's work arrays (it allocates nothing): G far Gauss nodes at most, blocks of B points
     G = len(ax) * int(orders[-1])

@@ -8,6 +8,7 @@ from collections.abc import Iterator
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._arrays import median
 from ..errors import PolygonError
 from .messages import format_number, format_point
 from .predicates import intersection_point, orient, orient_sign, point_segment_distance, segments_touch, signed_area
@@ -423,7 +424,7 @@ def _grid_scan(q: NDArray[np.float64], reach: float, scan: _PairScan, name: str,
     taxicab = float(np.abs(xb - xa).sum() + np.abs(yb - ya).sum())
     # Cells about as long as a typical edge, but long enough that all edges
     # together pass through at most about 7 n cells.
-    h = max(float(np.median(length)), taxicab / (4.0 * n), 4.0 * d)
+    h = max(median(length), taxicab / (4.0 * n), 4.0 * d)
     del r, length
     budget = _ENTRIES_PER_EDGE * n + _ENTRIES_EXTRA
     scan.budget = scan.tested + _PAIRS_PER_EDGE * n + _PAIRS_EXTRA

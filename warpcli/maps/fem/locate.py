@@ -7,6 +7,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..._arrays import median
 from ...simplicial import barycentric_combine
 
 #: A point counts as inside a triangle when all its barycentric coordinates
@@ -50,7 +51,7 @@ class TriangleLocator:
         # Cells shaped like a typical triangle's bounding box, about one cell
         # per triangle: a mesh of slivers (the harmonic image of a long thin
         # polygon) would otherwise put thousands of triangles in every cell.
-        extent = np.maximum(np.median(tmax - tmin, axis=0), span * 1e-9)
+        extent = np.maximum(median(tmax - tmin, axis=0), span * 1e-9)
         scale = math.sqrt(float(span[0] * span[1]) / (max(len(t), 1) * float(extent[0] * extent[1])))
         self._cell = np.maximum(scale * extent, span / 4096.0)
         self._lo = lo
