@@ -203,8 +203,9 @@ def test_a_kernel_compiles_the_kernels_it_calls_once_for_plain_types():
     numba is still typing the loop: the callee was compiled for that literal and again for int64
     (BEM's evaluation: 2.2 s of its 11 s). warpcli's functions get the plain types only, and the
     caller's results are those of the same code compiled by numba's own rules."""
-    import warpcli._jit  # noqa: F401  (installs the typing of calls)
     from numba import njit, types
+
+    import warpcli._jit  # noqa: F401  (installs the typing of calls)
 
     source = (
         "def step(n, x, out):\n"
