@@ -119,7 +119,8 @@ def _compile_callees_once() -> None:
     def plain_call_template(self, args, kws):
         # Only warpcli's functions (numba's own and other packages' keep numba's typing); a
         # function that needs a literal argument (none of warpcli's does) is typed as numba would.
-        if any(isinstance(a, types.Literal) for a in args) and self.py_func.__module__.startswith("warpcli."):
+        module = getattr(self.py_func, "__module__", None) or ""  # None for a function made by exec
+        if any(isinstance(a, types.Literal) for a in args) and module.startswith("warpcli."):
             try:
                 return get_call_template(self, tuple(types.unliteral(a) for a in args), kws)
             except TypingError:
