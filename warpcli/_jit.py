@@ -15,6 +15,16 @@ Processes starting together on a fresh install also compiled the same kernel
 each (BEM's kernels: about 15 s of CPU per process): here a process about to
 compile a kernel another one is compiling waits for it (a second lock file
 beside the index), then loads its machine code from the cache.
+
+And a kernel calling another one compiles it once, for its arguments' plain
+types. numba types a call while it is still inferring the caller's types,
+so a counter started at ``0`` and carried through a loop (``ng = 0`` ...
+``ng = _gather_far(..., ng)``) is first the literal ``0``: numba compiled the
+callee for that literal, then again for int64 once the loop was typed, and
+linked only the second (BEM's ``_far_to_local`` and ``_gather_far``: 2.2 s of
+the 11 s that `bem_evaluate` took to compile; FEM's ``_bary``). Here calls
+from one of warpcli's functions to another are typed with the arguments'
+plain types (`numba.types.unliteral`), the types the linked code has anyway.
 """
 
 from __future__ import annotations
@@ -93,3 +103,32 @@ def _one_compile_across_processes() -> None:
 
 
 _one_compile_across_processes()
+
+
+def _compile_callees_once() -> None:
+    try:
+        from numba.core import types
+        from numba.core.dispatcher import Dispatcher
+        from numba.core.errors import TypingError
+    except ImportError:  # pragma: no cover - another numba
+        return
+    get_call_template = Dispatcher.get_call_template
+    if getattr(get_call_template, "plain", False):
+        return
+
+    def plain_call_template(self, args, kws):
+        # Only warpcli's functions (numba's own and other packages' keep numba's typing); a
+        # function that needs a literal argument (none of warpcli's does) is typed as numba would.
+        module = getattr(self.py_func, "__module__", None) or ""  # None for a function made by exec
+        if any(isinstance(a, types.Literal) for a in args) and module.startswith("warpcli."):
+            try:
+                return get_call_template(self, tuple(types.unliteral(a) for a in args), kws)
+            except TypingError:
+                pass
+        return get_call_template(self, args, kws)
+
+    plain_call_template.plain = True
+    Dispatcher.get_call_template = plain_call_template
+
+
+_compile_callees_once()

@@ -237,7 +237,9 @@ def refine_surface(vertices: NDArray[np.float64], triangles: NDArray[np.int64], 
     from ._kernels import split_triangles
 
     v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
+    # A writable copy, as split_triangles' own output is: numba compiles read-only arrays as
+    # another type, and a cage's frozen triangles cost a second compile (1.8 s) of the kernel.
+    t = np.array(triangles, dtype=np.int64)
     owner = np.arange(len(t), dtype=np.int64)
     for _ in range(max_passes):
         sides = np.stack([t, np.roll(t, -1, axis=1)], axis=2).reshape(-1, 2)
