@@ -375,3 +375,28 @@ def test_prefer_strips_takes_strips_only_where_they_write_the_same_bytes(tmp_pat
     whole = warp_file(inp, tmp_path / f"w_{name}", a, b, **extra)
     assert isinstance(got, tiled.TiledResult) == strips and not isinstance(whole, tiled.TiledResult)
     assert (tmp_path / f"s_{name}").read_bytes() == (tmp_path / f"w_{name}").read_bytes()
+
+
+def test_strips_made_ahead_come_in_order_and_an_error_making_one_is_raised_by_the_writer():
+    """`warpcli.tiled._Ahead`: strips made on a thread, one ahead of the writer."""
+    import itertools
+
+    from warpcli.errors import ImageInputError
+    from warpcli.tiled import _Ahead
+
+    made = [int(s[0]) for s in _Ahead(np.full(2, k) for k in range(40))]
+    assert made == list(range(40))
+
+    def failing():
+        yield np.zeros(1)
+        raise ImageInputError("in.png: cannot read image: cut short")
+
+    got = []
+    with pytest.raises(ImageInputError, match="cut short"):
+        for strip in _Ahead(failing()):
+            got.append(strip)
+    assert len(got) == 1
+    endless = _Ahead(np.full(1, k) for k in itertools.count())
+    next(iter(endless))
+    endless.stop()  # the writer failed: the thread ends after the strip it is making
+    endless._task.result()

@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .budget import MAX_COMPRESSION
+from .cores import budget
 from .errors import InputError
 from .maps.cage import map_between
 from .maps.compose import BijectiveMap
@@ -127,17 +128,73 @@ def warp_file_tiled(
     # the images strips exist for: the input is read and the output checked in parts.
     with size_limit_lifted(), atomic_path(output_path) as tmp, PartReader(input_path, header) as reader:
         writer = StripWriter(tmp, output_path, width, height, out_header)
+        strips = (sampler.strip(reader, width, height, y, min(height, y + TILE), timings) for y in range(0, height, TILE))
+        made = _Ahead(strips) if budget() > 1 else None
         try:
-            for y in range(0, height, TILE):
-                strip = sampler.strip(reader, width, height, y, min(height, y + TILE), timings)
+            for strip in made if made is not None else strips:
                 t0 = clock()
                 writer.write(strip if not opts.dtype else convert_pixels(strip, opts.dtype))
                 timings["write"] += clock() - t0
             writer.close()
         except BaseException:
+            if made is not None:
+                made.stop()
             writer.abandon()
             raise
     return TiledResult(fmap, (width, height), timings)
+
+
+class _Ahead:
+    """Strips made on a thread of their own, one ahead of the strip being written.
+
+    The encoder (zlib, one core, holding the GIL in OpenImageIO) writes strip k
+    while the next is pulled back and resampled, in compiled kernels that
+    release the GIL, instead of after it: 12 MP in strips, about a third less
+    time for the strips. The strips come in order, so the file is the same.
+    Iterating gives each strip, then raises what making them raised; `stop`
+    makes the thread end after the strip it is making (the writer failed).
+    """
+
+    def __init__(self, strips) -> None:
+        import queue
+        import threading
+
+        from .maps.compose import Task
+
+        self._made: queue.Queue = queue.Queue(maxsize=1)
+        self._stopped = threading.Event()
+        self._task = Task(self._make, strips, name="warp-strips")
+
+    def _make(self, strips) -> None:
+        try:
+            for strip in strips:
+                if self._stopped.is_set():
+                    return
+                self._made.put((strip, None))
+        except BaseException as err:  # handed to the writer, which raises it
+            self._made.put((None, err))
+            return
+        self._made.put((None, None))
+
+    def __iter__(self):
+        while True:
+            strip, err = self._made.get()
+            if err is not None:
+                raise err
+            if strip is None:
+                return
+            yield strip
+
+    def stop(self) -> None:
+        """End the thread: no more strips are wanted (it finishes the one it is making)."""
+        import queue
+
+        self._stopped.set()
+        try:
+            while True:
+                self._made.get_nowait()  # one that waits to be put finds room, then stops
+        except queue.Empty:
+            pass
 
 
 class _Sampler:
