@@ -272,3 +272,40 @@ def test_a_png_whose_size_is_turned_by_its_orientation_gets_the_map_of_the_turne
     assert image.pixels.shape[:2] == (60, 70)
     again = warp_image(image.pixels, result.map.src, result.map.dst)
     assert again.pixels.tobytes() == result.pixels.tobytes() == read_image(tmp_path / "out.png").pixels.tobytes()
+
+
+_COMMANDS_PROBE = """
+import importlib, json, sys
+import click
+from warpcli.cli import main
+code = main(sys.argv[1:])
+loaded = sorted(m for m in sys.modules if m.startswith("warpcli.cli."))
+import warpcli.cli as package
+module = importlib.import_module("warpcli.cli.points")  # a command's module imported first, by name
+from warpcli.cli import points, warp
+from warpcli.cli.run import cli
+print(json.dumps({
+    "code": code, "loaded": loaded,
+    "names_are_commands": isinstance(points, click.Command) and isinstance(warp, click.Command)
+                          and points is module.points and package.points is points,
+    "commands": {name: cli.commands[name].name for name in cli.commands},
+    "early": [m for m in ("secrets", "hmac", "tempfile") if m in sys.modules],
+}))
+"""
+
+
+def test_a_warp_imports_its_own_command_module_only_and_every_command_is_still_there(tmp_path):
+    """The group's commands are imported when run (`warpcli.cli.group.LazyCommands`); the package's
+    names stay the commands whichever module is imported first."""
+    _, _, dst = _inputs(tmp_path)
+    args = [str(tmp_path / "in.png"), str(tmp_path / "out.png"), "--src", str(tmp_path / "none.json"), "--dst", dst]
+    done = subprocess.run([sys.executable, "-c", _COMMANDS_PROBE, *args], capture_output=True, text=True)
+    doc = json.loads(done.stdout.strip().splitlines()[-1])
+    assert doc["code"] == 2
+    commands = {"warpcli.cli.apply_map", "warpcli.cli.edit", "warpcli.cli.points", "warpcli.cli.texture", "warpcli.cli.volume"}
+    assert "warpcli.cli.warp" in doc["loaded"] and not commands & set(doc["loaded"])
+    assert doc["early"] == []  # nor what outputs and capture no longer import before the work
+    assert doc["names_are_commands"]
+    assert doc["commands"] == {
+        "warp": "warp", "apply-map": "apply-map", "edit": "edit", "points": "points", "texture": "texture", "volume": "volume"
+    }
