@@ -653,15 +653,16 @@ def warp_file(
         if early is not None and not early.fits(header, opts):
             early.cancel()
             early = None
+        preferred = False  # strips chosen for their memory, not because a whole warp would not fit
         if tiled is None and prefer_strips and _strips_pay(header, opts, output_path, extra, report_path):
             check_plausible(input_path, header)  # decoded strip by strip: no header declaring a bomb
-            tiled = True
+            tiled = preferred = True
         if in_parts(input_path, header, opts.size, tiled):
             return _warp_file_tiled(
                 input_path, output_path, src, dst, opts, progress,
                 {"--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path, "--save-map": save_map,
                  "--save-forward-map": save_forward_map, "--labels": labels or None},
-                save_theta, header, early,
+                save_theta, header, early, preferred,
             )  # fmt: skip
         early = early or _EarlyMap.start(header, src, dst, opts)
         t0 = clock()
@@ -814,26 +815,40 @@ def _strips_pay(header: ImageHeader | None, opts: WarpOptions, output_path, extr
     return bool(fmt) and fmt not in NOT_IN_PARTS
 
 
-def _warp_file_tiled(input_path, output_path, src, dst, opts, progress, refused: dict, save_theta, header, early=None):
+def _warp_file_tiled(
+    input_path, output_path, src, dst, opts, progress, refused: dict, save_theta, header, early=None, preferred=False
+):
     used = [name for name, value in refused.items() if value is not None]
     if used:
         raise InputError(
             f"{os.fspath(input_path)}: {', '.join(used)} needs the whole image in memory, and it is warped in parts "
             "(it does not fit, or --tiled was given)"
         )
-    fmap, timings = None, {}
+    fmap, timings, pixels = None, {}, None
     if early is not None and not header.oriented:  # (strips refuse an oriented image before any map)
         from .raster.parts import check_writable_in_parts, output_format
+        from .tiled import tiled_needed
 
         check_writable_in_parts(output_format(os.fspath(output_path)), os.fspath(output_path))
+        width, height = opts.size if opts.size is not None else (header.width, header.height)
+        if preferred and not tiled_needed(header, width, height):
+            # Strips for their memory, of an image that fits: its pixels are decoded now, while
+            # the map's children mesh and solve, rather than strip by strip after them (each
+            # strip's read then waiting for the encoder's hold of the captured stderr).
+            if progress is not None:
+                progress("reading")
+            t0 = time.perf_counter()
+            pixels = read_image(input_path).pixels
+            timings["read"] = time.perf_counter() - t0
         if progress is not None:
             progress("building the map")
         t0 = time.perf_counter()
         fmap = early.take()  # the map of the same regions as warp_file_tiled's
-        timings = {**fmap.timings, "map": time.perf_counter() - t0}
+        timings.update(fmap.timings, map=time.perf_counter() - t0)
     with PendingOutputs() as pending:
         result = warp_file_tiled(
-            input_path, pending.path(output_path), src, dst, opts, fmap=fmap, progress=progress, header=header
+            input_path, pending.path(output_path), src, dst, opts, fmap=fmap, progress=progress, header=header,
+            pixels=pixels,
         )
         result.timings.update(timings)
         if save_theta is not None:

@@ -82,11 +82,14 @@ def warp_file_tiled(
     fmap: BijectiveMap | None = None,
     progress: Callable[[str], None] | None = None,
     header: ImageHeader | None = None,
+    pixels: NDArray | None = None,
 ) -> TiledResult:
     """Warp the image at ``input_path`` into ``output_path`` strip by strip.
 
     The caller has checked the paths and the polygons (`warpcli.pipeline.warp_file`);
-    ``header`` is the input's `read_header` when the caller has read it.
+    ``header`` is the input's `read_header` when the caller has read it, ``pixels``
+    the input's pixels (`warpcli.raster.imageio.read_image`) when it has decoded them
+    (then parts of them are resampled instead of parts of the file).
 
     Raises
     ------
@@ -126,7 +129,8 @@ def warp_file_tiled(
     log.info("%s: warping in strips of %d rows, %d x %d -> %d x %d", name, TILE, header.width, header.height, width, height)
     # OpenImageIO's size limit (a guard for whole-image decoders) must not refuse
     # the images strips exist for: the input is read and the output checked in parts.
-    with size_limit_lifted(), atomic_path(output_path) as tmp, PartReader(input_path, header) as reader:
+    parts = PartReader(input_path, header) if pixels is None else _Decoded(pixels)
+    with size_limit_lifted(), atomic_path(output_path) as tmp, parts as reader:
         writer = StripWriter(tmp, output_path, width, height, out_header)
         strips = (sampler.strip(reader, width, height, y, min(height, y + TILE), timings) for y in range(0, height, TILE))
         made = _Ahead(strips) if budget() > 1 else None
@@ -142,6 +146,22 @@ def warp_file_tiled(
             writer.abandon()
             raise
     return TiledResult(fmap, (width, height), timings)
+
+
+class _Decoded:
+    """`PartReader`'s rectangles, of an image already decoded (each a contiguous copy, as read)."""
+
+    def __init__(self, pixels: NDArray) -> None:
+        self.pixels = pixels
+
+    def read(self, x0: int, y0: int, x1: int, y1: int) -> NDArray:
+        return np.ascontiguousarray(self.pixels[y0:y1, x0:x1])
+
+    def __enter__(self) -> _Decoded:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.pixels = None
 
 
 class _Ahead:
