@@ -16,7 +16,7 @@ import os
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -46,9 +46,11 @@ from .raster.imageio import (
 )
 from .raster.peek import png_size
 from .report import build_report
-from .report.metrics import Distortion, distortion
 from .tiled import TiledResult, check_plausible, in_parts, warp_file_tiled
-from .within import WithinPair, read_within_pair, within_pair, within_seams
+
+if TYPE_CHECKING:  # imported where used: a default warp needs neither (5-10 ms of every run's start)
+    from .report.metrics import Distortion
+    from .within import WithinPair
 
 __all__ = [
     "WarpResult", "apply_map_file", "build_report", "check_output", "read_header_or_none", "warp_file", "warp_image",
@@ -133,6 +135,8 @@ class WarpResult:
         ValueError
             If the result kept no Jacobians.
         """
+        from .report.metrics import Distortion, distortion
+
         if self.pull.jacobian is None:
             raise ValueError("this result kept no Jacobians")
         d = distortion(self.pull.jacobian)
@@ -232,6 +236,8 @@ def _warp(
     if img.dtype.kind not in "uif":
         raise InputError(f"image must hold numbers, got dtype {img.dtype}")
     if opts.within is not None and pair is None:
+        from .within import within_pair
+
         pair = within_pair(_cages_of(src, "src"), _cages_of(dst, "dst"), opts.within, (img.shape[1], img.shape[0]))
         src, dst = pair.src, pair.dst
     src = src if isinstance(src, (Polygon, Partition)) else Polygon(src, name="src")
@@ -616,6 +622,8 @@ def warp_file(
     if opts.within is not None:
         if save_theta is not None:
             raise InputError(f"{os.fspath(save_theta)}: --save-theta writes one Theta, but --within maps several faces")
+        from .within import read_within_pair
+
         header = read_header(input_path)  # the outline needs the image's size before the map
         pair = read_within_pair(
             src_path, dst_path, opts.within, header.displayed_size, src_label=src_label, dst_label=dst_label, frame=frame
@@ -751,6 +759,8 @@ def _within_summary(result: WarpResult) -> dict:
     output values, and of the inverse map's Jacobian, across the cages'
     edges, the ring's cuts and the outline, against those elsewhere.
     """
+    from .within import within_seams
+
     pair = result.within
     if pair is None:
         raise InputError("the warp was not made within an outline")
