@@ -466,8 +466,11 @@ class _EarlyMap:
         regions = cls.regions_for(found[:2], found[2], opts)
         if regions is None:
             return None
+        from ._fork import available
+
         early = cls(src, dst, opts, regions)
-        if opts.map.method == "fem" and opts.map.theta in ("regular", "cyclic") and opts.map.conditions != "mixed":
+        forks = available() and opts.map.method == "fem" and opts.map.conditions != "mixed"
+        if forks and opts.map.theta in ("regular", "cyclic"):
             # Its two children (`warpcli.maps.fem.build_forked`) are forked first, about 15 ms
             # from now: the import of OpenImageIO that follows would hold the GIL against that.
             early._brood.wait(2, timeout=0.05)
