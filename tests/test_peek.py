@@ -100,3 +100,26 @@ def test_limits_and_doctest_values():
     assert parse_png_header(PNG_SIGNATURE + _ihdr(5, 5, 16, 3)) is None  # no 16-bit palette
     assert parse_png_header(PNG_SIGNATURE + _ihdr(5, 5, crc=1)) is None
     assert parse_png_header((PNG_SIGNATURE + _ihdr(5, 5))[:32]) is None
+
+
+@settings(max_examples=10, deadline=None)
+@given(
+    side=st.sampled_from([(70, 60), (3000, 3000), (4000, 2500), (70000, 70000), (1_000_001, 2)]),
+    rest=st.sampled_from(["none", "junk", "idat-cut"]), crc=st.sampled_from([None, 0]),
+)
+def test_a_hostile_png_header_is_one_line_exit_2_and_leaves_nothing(tmp_path_factory, side, rest, crc):
+    """A PNG stating a size its data does not hold (the map may be started from it before OpenImageIO
+    reads the header): the run still ends in one line naming the file, exit 2, and no output."""
+    from .helpers import run_cli, star, write_polygon
+
+    tmp = tmp_path_factory.mktemp("hostile")
+    path = tmp / "in.png"
+    write_png(path, np.zeros((60, 70, 3), dtype=np.uint8))
+    good = path.read_bytes()
+    tail = {"none": b"", "junk": bytes(range(256)) * 4, "idat-cut": good[33 : len(good) // 2]}[rest]
+    path.write_bytes(PNG_SIGNATURE + _ihdr(*side, crc=crc) + tail)
+    a = write_polygon(tmp / "a.json", star(6, 35, 30, 12, 27))
+    b = write_polygon(tmp / "b.json", star(6, 35, 30, 9, 28, 0.3))
+    code, err = run_cli([path, tmp / "out.png", "--src", a, "--dst", b, "-q"])
+    assert code == 2 and err.startswith(f"warp: error: {path}") and len(err.strip().splitlines()) == 1, err
+    assert sorted(p.name for p in tmp.iterdir()) == ["a.json", "b.json", "in.png"]
