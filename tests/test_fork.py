@@ -460,3 +460,27 @@ def test_an_array_larger_than_a_region_comes_through_the_pipe():
         assert _is(worker.result(), 4_000, 1.5)
     finally:
         worker.close()
+
+
+def test_a_brood_kills_its_children_and_those_forked_after_it_is_cancelled():
+    """`_fork.Brood`: the children forked in its context (on threads started there too) are killed by
+    `cancel`, and a child forked after that is killed at once (the map of a run whose image is refused)."""
+    from warpcli.maps.compose import Task
+
+    brood = _fork.Brood()
+    context = _fork.watching(brood)
+    first = context.run(_fork.Forked, time.sleep, 60)
+    on_thread = [context.run(Task, _fork.Forked, time.sleep, 60).result()]  # a Task runs in a copy of the context
+    assert brood.wait(2, timeout=10)
+    outside = _fork.Forked(_say_and_return, 3)  # not in the context: not the brood's
+    t0 = time.perf_counter()
+    brood.cancel()
+    for child in (first, on_thread[0]):
+        with pytest.raises(_fork.ChildDied, match="SIGKILL"):
+            child.result()
+    late = context.run(_fork.Forked, time.sleep, 60)
+    with pytest.raises(_fork.ChildDied, match="SIGKILL"):
+        late.result()
+    assert time.perf_counter() - t0 < 10
+    assert outside.result()["twice"] == 6
+    assert not brood.wait(4, timeout=0.01)  # three forked in it, no more

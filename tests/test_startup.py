@@ -158,6 +158,16 @@ def _logging_build(monkeypatch):
         return started[-1]
 
     monkeypatch.setattr(pipeline._EarlyMap, "start", classmethod(start))
+    # A PNG's map is started from the size its first bytes state (warpcli.raster.peek).
+    real_guess = pipeline._EarlyMap.guess.__func__
+
+    def guess(cls, *args):
+        found = real_guess(cls, *args)
+        if found is not None:
+            started.append(found)
+        return found
+
+    monkeypatch.setattr(pipeline._EarlyMap, "guess", classmethod(guess))
     return started
 
 
@@ -206,3 +216,96 @@ def test_an_image_that_cannot_be_read_drops_the_maps_records(tmp_path, monkeypat
     assert started and started[0] is not None
     assert records == []
     assert not (tmp_path / "out.png").exists()
+
+
+def _cancels(monkeypatch):
+    """The early maps cancelled (`warpcli.pipeline._EarlyMap.cancel`), by their regions."""
+    from warpcli import pipeline
+
+    cancelled = []
+    real = pipeline._EarlyMap.cancel
+
+    def cancel(self):
+        cancelled.append(self.regions)
+        real(self)
+
+    monkeypatch.setattr(pipeline._EarlyMap, "cancel", cancel)
+    return cancelled
+
+
+def test_the_map_of_an_image_that_cannot_be_read_is_cancelled(tmp_path, monkeypatch):
+    import pytest
+
+    from warpcli.errors import ImageInputError
+    from warpcli.pipeline import warp_file
+
+    inp, src, dst = _inputs(tmp_path)
+    data = open(inp, "rb").read()
+    cut = tmp_path / "cut.png"
+    cut.write_bytes(data[:60])  # the first chunk (the size) whole, nothing after it
+    cancelled = _cancels(monkeypatch)
+    with pytest.raises(ImageInputError, match="cut.png"):
+        warp_file(cut, tmp_path / "out.png", src, dst)
+    assert cancelled == [((0.0, 0.0, 70.0, 60.0), (0.0, 0.0, 70.0, 60.0))]  # the size the header states
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_a_png_whose_size_is_turned_by_its_orientation_gets_the_map_of_the_turned_size(tmp_path, monkeypatch):
+    """The first bytes' size is a guess: OpenImageIO's header says the image is read turned a quarter
+    (EXIF orientation 6), so the map started from the guess is dropped and the right one built."""
+    import OpenImageIO as oiio
+
+    from warpcli.pipeline import warp_file, warp_image
+    from warpcli.raster.imageio import read_image
+
+    px = np.random.default_rng(5).integers(0, 256, (70, 60, 3), dtype=np.uint8)  # 60 wide, 70 high as stored
+    path = str(tmp_path / "turned.png")
+    spec = oiio.ImageSpec(60, 70, 3, "uint8")
+    spec.attribute("Orientation", 6)
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, spec) and out.write_image(px) and out.close()
+    _, src, dst = _inputs(tmp_path)  # within 70 x 60: the image as displayed
+    cancelled = _cancels(monkeypatch)
+    result = warp_file(path, tmp_path / "out.png", src, dst)
+    assert cancelled == [((0.0, 0.0, 60.0, 70.0), (0.0, 0.0, 60.0, 70.0))]
+    image = read_image(path)
+    assert image.pixels.shape[:2] == (60, 70)
+    again = warp_image(image.pixels, result.map.src, result.map.dst)
+    assert again.pixels.tobytes() == result.pixels.tobytes() == read_image(tmp_path / "out.png").pixels.tobytes()
+
+
+_COMMANDS_PROBE = """
+import importlib, json, sys
+import click
+from warpcli.cli import main
+code = main(sys.argv[1:])
+loaded = sorted(m for m in sys.modules if m.startswith("warpcli.cli."))
+import warpcli.cli as package
+module = importlib.import_module("warpcli.cli.points")  # a command's module imported first, by name
+from warpcli.cli import points, warp
+from warpcli.cli.run import cli
+print(json.dumps({
+    "code": code, "loaded": loaded,
+    "names_are_commands": isinstance(points, click.Command) and isinstance(warp, click.Command)
+                          and points is module.points and package.points is points,
+    "commands": {name: cli.commands[name].name for name in cli.commands},
+    "early": [m for m in ("secrets", "hmac", "tempfile") if m in sys.modules],
+}))
+"""
+
+
+def test_a_warp_imports_its_own_command_module_only_and_every_command_is_still_there(tmp_path):
+    """The group's commands are imported when run (`warpcli.cli.group.LazyCommands`); the package's
+    names stay the commands whichever module is imported first."""
+    _, _, dst = _inputs(tmp_path)
+    args = [str(tmp_path / "in.png"), str(tmp_path / "out.png"), "--src", str(tmp_path / "none.json"), "--dst", dst]
+    done = subprocess.run([sys.executable, "-c", _COMMANDS_PROBE, *args], capture_output=True, text=True)
+    doc = json.loads(done.stdout.strip().splitlines()[-1])
+    assert doc["code"] == 2
+    commands = {"warpcli.cli.apply_map", "warpcli.cli.edit", "warpcli.cli.points", "warpcli.cli.texture", "warpcli.cli.volume"}
+    assert "warpcli.cli.warp" in doc["loaded"] and not commands & set(doc["loaded"])
+    assert doc["early"] == []  # nor what outputs and capture no longer import before the work
+    assert doc["names_are_commands"]
+    assert doc["commands"] == {
+        "warp": "warp", "apply-map": "apply-map", "edit": "edit", "points": "points", "texture": "texture", "volume": "volume"
+    }

@@ -375,3 +375,59 @@ def test_prefer_strips_takes_strips_only_where_they_write_the_same_bytes(tmp_pat
     whole = warp_file(inp, tmp_path / f"w_{name}", a, b, **extra)
     assert isinstance(got, tiled.TiledResult) == strips and not isinstance(whole, tiled.TiledResult)
     assert (tmp_path / f"s_{name}").read_bytes() == (tmp_path / f"w_{name}").read_bytes()
+
+
+def test_strips_made_ahead_come_in_order_and_an_error_making_one_is_raised_by_the_writer():
+    """`warpcli.tiled._Ahead`: strips made on a thread, one ahead of the writer."""
+    import itertools
+
+    from warpcli.errors import ImageInputError
+    from warpcli.tiled import _Ahead
+
+    made = [int(s[0]) for s in _Ahead(np.full(2, k) for k in range(40))]
+    assert made == list(range(40))
+
+    def failing():
+        yield np.zeros(1)
+        raise ImageInputError("in.png: cannot read image: cut short")
+
+    got = []
+    with pytest.raises(ImageInputError, match="cut short"):
+        for strip in _Ahead(failing()):
+            got.append(strip)
+    assert len(got) == 1
+    endless = _Ahead(np.full(1, k) for k in itertools.count())
+    next(iter(endless))
+    endless.stop()  # the writer failed: the thread ends after the strip it is making
+    endless._task.result()
+
+
+@pytest.mark.parametrize("channels, dtype", [(4, np.uint8), (1, np.uint16)])
+def test_strips_of_an_image_decoded_while_the_map_is_built_write_the_bytes_of_strips_read_in_parts(
+    tmp_path, monkeypatch, small_strips, channels, dtype
+):
+    """Strips preferred for their memory (``prefer_strips``) of a PNG that fits: its pixels are decoded
+    while the map is built and cut into parts in memory (`warpcli.tiled._Decoded`), with the bytes of
+    strips read from the file in parts (``--tiled``) and of the whole warp, for any PNG's channels and depth."""
+    import warpcli.pipeline as pipeline
+
+    monkeypatch.setattr(pipeline, "STRIP_PIXELS", 100)
+    decoded = []
+    real = tiled._Decoded.__init__
+
+    def keep(self, pixels):
+        decoded.append(pixels.shape)
+        real(self, pixels)
+
+    monkeypatch.setattr(tiled._Decoded, "__init__", keep)
+    rng = np.random.default_rng(channels)
+    px = rng.integers(0, np.iinfo(dtype).max, (70, 90, channels), endpoint=True).astype(dtype)
+    inp = write_png(tmp_path / "in.png", px)
+    a = write_polygon(tmp_path / "a.json", star(6, 45, 35, 12, 33))
+    b = write_polygon(tmp_path / "b.json", star(6, 45, 35, 10, 33, phase=0.25))
+    got = warp_file(inp, tmp_path / "s.png", a, b, prefer_strips=True)
+    assert isinstance(got, tiled.TiledResult) and decoded == [(70, 90, channels)]
+    warp_file(inp, tmp_path / "t.png", a, b, tiled=True)
+    warp_file(inp, tmp_path / "w.png", a, b)
+    assert len(decoded) == 1  # --tiled reads parts of the file
+    assert (tmp_path / "s.png").read_bytes() == (tmp_path / "t.png").read_bytes() == (tmp_path / "w.png").read_bytes()

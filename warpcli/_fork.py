@@ -23,6 +23,7 @@ turns it off (the work then runs on a thread, with the same result).
 from __future__ import annotations
 
 import collections
+import contextvars
 import logging
 import mmap
 import os
@@ -30,6 +31,7 @@ import pickle
 import signal
 import struct
 import sys
+import threading
 import warnings
 import weakref
 from collections.abc import Callable
@@ -78,6 +80,9 @@ class Forked:
         self._pid: int | None = pid
         self._fd = read_end
         self._outcome: tuple | None = None
+        brood = _BROOD.get()
+        if brood is not None:
+            brood.add(self)
 
     def result(self) -> Any:
         """Wait for the child; its return value, or the exception it raised (`ChildDied` if it died)."""
@@ -111,6 +116,58 @@ class Forked:
                 continue
             except ChildProcessError:
                 return 0
+
+
+class Brood:
+    """The children `Forked` in a context (`watching`), to stop them all when their work is not wanted.
+
+    A caller that starts work which may fork (a map built on a thread while
+    the image is read: `warpcli.pipeline`) and may then find it unwanted (the
+    image cannot be read, or its size is not the one guessed) kills the
+    children with `cancel`, so that none computes on after the run has ended;
+    a child forked after that is killed at once. Whoever waits for a child's
+    result gets `ChildDied` (and reaps it), as for any killed child.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Condition()
+        self._children: list[Forked] = []
+        self._forked = 0
+        self.cancelled = False
+
+    def add(self, child: Forked) -> None:
+        with self._lock:
+            self._forked += 1
+            self._lock.notify_all()
+            if not self.cancelled:
+                self._children.append(child)
+                return
+        child.cancel()
+
+    def wait(self, count: int, timeout: float) -> bool:
+        """Wait until ``count`` children were forked, at most ``timeout`` seconds; whether they were."""
+        with self._lock:
+            return self._lock.wait_for(lambda: self._forked >= count, timeout)
+
+    def cancel(self) -> None:
+        """Kill every child forked so far; later ones are killed as they are forked."""
+        with self._lock:
+            self.cancelled = True
+            children, self._children = self._children, []
+        for child in children:
+            child.cancel()
+
+
+#: The `Brood` that children forked in this context join (None: none).
+_BROOD: contextvars.ContextVar[Brood | None] = contextvars.ContextVar("warpcli_brood", default=None)
+
+
+def watching(brood: Brood) -> contextvars.Context:
+    """A copy of the current context in which every `Forked` child joins ``brood``
+    (run work in it with ``context.run``; threads it starts with `warpcli.maps.compose.Task` inherit it)."""
+    context = contextvars.copy_context()
+    context.run(_BROOD.set, brood)
+    return context
 
 
 def _receive(fd: int, shared: SharedMemory | None = None, region: int | None = None) -> tuple | None:

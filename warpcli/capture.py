@@ -6,7 +6,6 @@ import contextlib
 import os
 import re
 import sys
-import tempfile
 import threading
 from collections.abc import Iterator
 
@@ -110,6 +109,8 @@ def _anonymous_file(name: str):
             return os.fdopen(os.memfd_create(name, os.MFD_CLOEXEC), "w+b")
         except OSError:
             pass
+    import tempfile  # (shutil, random, bz2, lzma: 5 ms, for systems without memfd only)
+
     return tempfile.TemporaryFile()
 
 

@@ -16,9 +16,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
-import secrets
 import stat
-import tempfile
 from collections.abc import Iterator
 from types import TracebackType
 
@@ -70,6 +68,10 @@ def final_path(path: str | os.PathLike[str]) -> str:
     return _finals.get(name, name)
 
 
+#: Names tried before giving up (tempfile.TMP_MAX).
+_TMP_MAX = 10000
+
+
 def _new_temporary(prefix: str, suffix: str, directory: str) -> tuple[int, str]:
     """``tempfile.mkstemp``, with the name in ``_live`` before the file exists (open, 0600).
 
@@ -78,8 +80,10 @@ def _new_temporary(prefix: str, suffix: str, directory: str) -> tuple[int, str]:
     signal either finds the name registered (its file then removed, or not
     created yet: the unlink fails harmlessly) or comes before it is chosen.
     """
-    for _ in range(tempfile.TMP_MAX):
-        name = os.path.join(directory, f"{prefix}{secrets.token_hex(4)}{suffix}")
+    for _ in range(_TMP_MAX):
+        # secrets.token_hex's bytes (os.urandom), without importing secrets: it imports hmac and
+        # OpenSSL's hashlib (3-5 ms), before a warp's map could start.
+        name = os.path.join(directory, f"{prefix}{os.urandom(4).hex()}{suffix}")
         _live.add(name)
         try:
             return os.open(name, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o600), name

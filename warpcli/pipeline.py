@@ -16,7 +16,7 @@ import os
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -44,10 +44,13 @@ from .raster.imageio import (
     with_compression,
     write_image,
 )
+from .raster.peek import png_size
 from .report import build_report
-from .report.metrics import Distortion, distortion
 from .tiled import TiledResult, check_plausible, in_parts, warp_file_tiled
-from .within import WithinPair, read_within_pair, within_pair, within_seams
+
+if TYPE_CHECKING:  # imported where used: a default warp needs neither (5-10 ms of every run's start)
+    from .report.metrics import Distortion
+    from .within import WithinPair
 
 __all__ = [
     "WarpResult", "apply_map_file", "build_report", "check_output", "read_header_or_none", "warp_file", "warp_image",
@@ -132,6 +135,8 @@ class WarpResult:
         ValueError
             If the result kept no Jacobians.
         """
+        from .report.metrics import Distortion, distortion
+
         if self.pull.jacobian is None:
             raise ValueError("this result kept no Jacobians")
         d = distortion(self.pull.jacobian)
@@ -231,6 +236,8 @@ def _warp(
     if img.dtype.kind not in "uif":
         raise InputError(f"image must hold numbers, got dtype {img.dtype}")
     if opts.within is not None and pair is None:
+        from .within import within_pair
+
         pair = within_pair(_cages_of(src, "src"), _cages_of(dst, "dst"), opts.within, (img.shape[1], img.shape[0]))
         src, dst = pair.src, pair.dst
     src = src if isinstance(src, (Polygon, Partition)) else Polygon(src, name="src")
@@ -400,16 +407,19 @@ class _EarlyMap:
     refuses what it always did, before any map. Its log records (a repair's
     warning, an optimization's progress) are held back and given out when
     the map is taken, where building it logged them before; if the map is
-    never taken (the image cannot be read), they are dropped with it.
+    never taken (the image cannot be read), they are dropped with it, and
+    `cancel` kills the children forked to build it (`warpcli._fork.Brood`).
     """
 
     def __init__(self, src: Polygon, dst: Polygon, opts: WarpOptions, regions: tuple) -> None:
+        from ._fork import Brood, watching
         from .maps.compose import Task
 
         self.regions = regions
         self._records: list[logging.LogRecord] = []
+        self._brood = Brood()
         log.addFilter(_hold_back)  # once: the same function
-        context = contextvars.copy_context()
+        context = watching(self._brood)
         context.run(_HELD_RECORDS.set, self._records)
         build = functools.partial(map_between, src, dst, opts.map, regions=regions)
         self._task = context.run(Task, build, name="warp-map")
@@ -422,19 +432,53 @@ class _EarlyMap:
             for record in self._records:
                 log.handle(record)
 
+    def cancel(self) -> None:
+        """The map is not wanted: stop its children (a map already taken is not touched)."""
+        self._brood.cancel()
+
+    @staticmethod
+    def regions_for(size: tuple[int, int], channels: int, opts: WarpOptions) -> tuple | None:
+        """The regions of the map of an image of ``size`` (displayed) and ``channels``, or None
+        where `warp_image` will refuse that image (it then does so in its own order)."""
+        w, h = size
+        width, height = opts.size if opts.size is not None else (w, h)
+        try:
+            check_output(opts, (width, height), (w, h), np.zeros((1, 1, channels)))
+        except WarpError:
+            return None
+        return ((0.0, 0.0, float(w), float(h)), (0.0, 0.0, float(width), float(height)))
+
     @classmethod
     def start(cls, header: ImageHeader | None, src: Polygon, dst: Polygon, opts: WarpOptions) -> _EarlyMap | None:
         """Start building the map for an image with this header (None: unread, then no map is started)."""
         if header is None:
             return None
-        (w, h), channels = header.displayed_size, header.channels
-        width, height = opts.size if opts.size is not None else (w, h)
-        try:
-            check_output(opts, (width, height), (w, h), np.zeros((1, 1, channels)))
-        except WarpError:
-            return None  # warp_image refuses it later, in its own order
-        regions = ((0.0, 0.0, float(w), float(h)), (0.0, 0.0, float(width), float(height)))
-        return cls(src, dst, opts, regions)
+        regions = cls.regions_for(header.displayed_size, header.channels, opts)
+        return None if regions is None else cls(src, dst, opts, regions)
+
+    @classmethod
+    def guess(cls, input_path, src: Polygon, dst: Polygon, opts: WarpOptions) -> _EarlyMap | None:
+        """Start building the map for the size a PNG's first bytes state (`warpcli.raster.peek`),
+        before OpenImageIO is imported and its header read; None if there is no guess."""
+        found = png_size(input_path)
+        if found is None:
+            return None
+        regions = cls.regions_for(found[:2], found[2], opts)
+        if regions is None:
+            return None
+        from ._fork import available
+
+        early = cls(src, dst, opts, regions)
+        forks = available() and opts.map.method == "fem" and opts.map.conditions != "mixed"
+        if forks and opts.map.theta in ("regular", "cyclic"):
+            # Its two children (`warpcli.maps.fem.build_forked`) are forked first, about 15 ms
+            # from now: the import of OpenImageIO that follows would hold the GIL against that.
+            early._brood.wait(2, timeout=0.05)
+        return early
+
+    def fits(self, header: ImageHeader | None, opts: WarpOptions) -> bool:
+        """Whether this map is the one `start` would build for ``header`` (the guess was right)."""
+        return header is not None and self.regions_for(header.displayed_size, header.channels, opts) == self.regions
 
 
 def _warn_if_relabelled(src: Polygon, dst: Polygon) -> None:
@@ -556,8 +600,13 @@ def warp_file(
     inputs = (*inputs, *(label_in for label_in, _ in labels))
     extra = [p for p in (grid_path, heatmap_path, save_map, save_forward_map) if p is not None]
     extra += [label_out for _, label_out in labels]
+    later = []  # PNG outputs: OpenImageIO's check of the format can wait until the map is started
     for path in (output_path, *extra):
-        check_image_output(path, inputs=inputs)
+        if _known_format(path):
+            check_output_path(path, inputs)
+            later.append(path)
+        else:
+            check_image_output(path, inputs=inputs)
     if report_path is not None and os.fspath(report_path) != "-":
         check_output_path(report_path, inputs=inputs)
     if save_theta is not None:
@@ -576,6 +625,8 @@ def warp_file(
     if opts.within is not None:
         if save_theta is not None:
             raise InputError(f"{os.fspath(save_theta)}: --save-theta writes one Theta, but --within maps several faces")
+        from .within import read_within_pair
+
         header = read_header(input_path)  # the outline needs the image's size before the map
         pair = read_within_pair(
             src_path, dst_path, opts.within, header.displayed_size, src_label=src_label, dst_label=dst_label, frame=frame
@@ -600,36 +651,52 @@ def warp_file(
         )
     elif isinstance(src, Polygon):
         _warn_if_relabelled(src, dst)
-    header = header or read_header_or_none(input_path)
-    if tiled is None and prefer_strips and _strips_pay(header, opts, output_path, extra, report_path):
-        check_plausible(input_path, header)  # decoded strip by strip: no header declaring a bomb
-        tiled = True
-    if in_parts(input_path, header, opts.size, tiled):
-        return _warp_file_tiled(
-            input_path, output_path, src, dst, opts, progress,
-            {"--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path, "--save-map": save_map,
-             "--save-forward-map": save_forward_map, "--labels": labels or None},
-            save_theta, header,
+    # The map needs the image's size, not its pixels: it is built in other
+    # processes and threads while the pixels are decoded (the decoder releases
+    # the GIL). A PNG states its size in its first bytes: the map is started
+    # from that before OpenImageIO is imported (25-40 ms), and kept only if
+    # OpenImageIO's header agrees (else stopped, and started again if need be).
+    early = _EarlyMap.guess(input_path, src, dst, opts) if header is None else None
+    try:
+        for path in later:
+            check_image_output(path, inputs=inputs)
+        header = header or read_header_or_none(input_path)
+        if early is not None and not early.fits(header, opts):
+            early.cancel()
+            early = None
+        preferred = False  # strips chosen for their memory, not because a whole warp would not fit
+        if tiled is None and prefer_strips and _strips_pay(header, opts, output_path, extra, report_path):
+            check_plausible(input_path, header)  # decoded strip by strip: no header declaring a bomb
+            tiled = preferred = True
+        if in_parts(input_path, header, opts.size, tiled):
+            return _warp_file_tiled(
+                input_path, output_path, src, dst, opts, progress,
+                {"--report": report_path, "--grid": grid_path, "--heatmap": heatmap_path, "--save-map": save_map,
+                 "--save-forward-map": save_forward_map, "--labels": labels or None},
+                save_theta, header, early, preferred,
+            )  # fmt: skip
+        early = early or _EarlyMap.start(header, src, dst, opts)
+        t0 = clock()
+        stage("reading")
+        image = read_image(input_path)
+        label_images = [_read_labels(label_in, image) for label_in, _ in labels]
+        t_read = clock() - t0
+        warn_if_outside(src, (image.width, image.height), os.fspath(input_path), "all background")
+        out_size = opts.size if opts.size is not None else (image.width, image.height)
+        warn_if_outside(dst, out_size, os.fspath(output_path), "all background")
+        try:  # an image with other channels than the background's: name the image
+            background_values(opts.background, image.pixels)
+        except InputError as err:
+            raise naming(err, os.fspath(input_path)) from err
+        streamed: list[_RowsMade] = []
+        result = _warp(
+            image.pixels, src, dst, opts, image.alpha_channel, image.associated_alpha, None, progress, early, pair,
+            streamed,
         )  # fmt: skip
-    # The map needs the image's size, not its pixels: it is built on other
-    # threads while the pixels are decoded (the decoder releases the GIL).
-    early = _EarlyMap.start(header, src, dst, opts)
-    t0 = clock()
-    stage("reading")
-    image = read_image(input_path)
-    label_images = [_read_labels(label_in, image) for label_in, _ in labels]
-    t_read = clock() - t0
-    warn_if_outside(src, (image.width, image.height), os.fspath(input_path), "all background")
-    out_size = opts.size if opts.size is not None else (image.width, image.height)
-    warn_if_outside(dst, out_size, os.fspath(output_path), "all background")
-    try:  # an image with other channels than the background's: name the image
-        background_values(opts.background, image.pixels)
-    except InputError as err:
-        raise naming(err, os.fspath(input_path)) from err
-    streamed: list[_RowsMade] = []
-    result = _warp(
-        image.pixels, src, dst, opts, image.alpha_channel, image.associated_alpha, None, progress, early, pair, streamed
-    )  # fmt: skip
+    except BaseException:
+        if early is not None:  # its children stop now rather than compute for nobody
+            early.cancel()
+        raise
     rows = streamed[0] if streamed else None
     # Every output is written under a pending name and renamed into place
     # only when all are written: a run's outputs succeed or fail together.
@@ -695,6 +762,8 @@ def _within_summary(result: WarpResult) -> dict:
     output values, and of the inverse map's Jacobian, across the cages'
     edges, the ring's cuts and the outline, against those elsewhere.
     """
+    from .within import within_seams
+
     pair = result.within
     if pair is None:
         raise InputError("the warp was not made within an outline")
@@ -717,6 +786,16 @@ def _read_labels(path: str | os.PathLike[str], image: RasterImage) -> RasterImag
             f"{image.width}x{image.height}"
         )
     return labels
+
+
+#: Output extensions whose format OpenImageIO is known to write (PNG is in every build): their
+#: check by OpenImageIO (`check_image_output`) waits until the map is started, so that it is not
+#: what imports OpenImageIO before the map's children are forked.
+_KNOWN_EXTENSIONS = (".png",)
+
+
+def _known_format(path: str | os.PathLike[str]) -> bool:
+    return os.path.splitext(os.fspath(path))[1].lower() in _KNOWN_EXTENSIONS
 
 
 def read_header_or_none(input_path: str | os.PathLike[str]) -> ImageHeader | None:
@@ -749,15 +828,42 @@ def _strips_pay(header: ImageHeader | None, opts: WarpOptions, output_path, extr
     return bool(fmt) and fmt not in NOT_IN_PARTS
 
 
-def _warp_file_tiled(input_path, output_path, src, dst, opts, progress, refused: dict, save_theta, header):
+def _warp_file_tiled(
+    input_path, output_path, src, dst, opts, progress, refused: dict, save_theta, header, early=None, preferred=False
+):
     used = [name for name, value in refused.items() if value is not None]
     if used:
         raise InputError(
             f"{os.fspath(input_path)}: {', '.join(used)} needs the whole image in memory, and it is warped in parts "
             "(it does not fit, or --tiled was given)"
         )
+    fmap, timings, pixels = None, {}, None
+    if early is not None and not header.oriented:  # (strips refuse an oriented image before any map)
+        from .raster.parts import check_writable_in_parts, output_format
+        from .tiled import tiled_needed
+
+        check_writable_in_parts(output_format(os.fspath(output_path)), os.fspath(output_path))
+        width, height = opts.size if opts.size is not None else (header.width, header.height)
+        if preferred and not tiled_needed(header, width, height):
+            # Strips for their memory, of an image that fits: its pixels are decoded now, while
+            # the map's children mesh and solve, rather than strip by strip after them (each
+            # strip's read then waiting for the encoder's hold of the captured stderr).
+            if progress is not None:
+                progress("reading")
+            t0 = time.perf_counter()
+            pixels = read_image(input_path).pixels
+            timings["read"] = time.perf_counter() - t0
+        if progress is not None:
+            progress("building the map")
+        t0 = time.perf_counter()
+        fmap = early.take()  # the map of the same regions as warp_file_tiled's
+        timings.update(fmap.timings, map=time.perf_counter() - t0)
     with PendingOutputs() as pending:
-        result = warp_file_tiled(input_path, pending.path(output_path), src, dst, opts, progress=progress, header=header)
+        result = warp_file_tiled(
+            input_path, pending.path(output_path), src, dst, opts, fmap=fmap, progress=progress, header=header,
+            pixels=pixels,
+        )
+        result.timings.update(timings)
         if save_theta is not None:
             _write_theta(pending.path(save_theta), result.map.theta)
     return result

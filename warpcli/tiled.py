@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .budget import MAX_COMPRESSION
+from .cores import budget
 from .errors import InputError
 from .maps.cage import map_between
 from .maps.compose import BijectiveMap
@@ -81,11 +82,14 @@ def warp_file_tiled(
     fmap: BijectiveMap | None = None,
     progress: Callable[[str], None] | None = None,
     header: ImageHeader | None = None,
+    pixels: NDArray | None = None,
 ) -> TiledResult:
     """Warp the image at ``input_path`` into ``output_path`` strip by strip.
 
     The caller has checked the paths and the polygons (`warpcli.pipeline.warp_file`);
-    ``header`` is the input's `read_header` when the caller has read it.
+    ``header`` is the input's `read_header` when the caller has read it, ``pixels``
+    the input's pixels (`warpcli.raster.imageio.read_image`) when it has decoded them
+    (then parts of them are resampled instead of parts of the file).
 
     Raises
     ------
@@ -125,19 +129,92 @@ def warp_file_tiled(
     log.info("%s: warping in strips of %d rows, %d x %d -> %d x %d", name, TILE, header.width, header.height, width, height)
     # OpenImageIO's size limit (a guard for whole-image decoders) must not refuse
     # the images strips exist for: the input is read and the output checked in parts.
-    with size_limit_lifted(), atomic_path(output_path) as tmp, PartReader(input_path, header) as reader:
+    parts = PartReader(input_path, header) if pixels is None else _Decoded(pixels)
+    with size_limit_lifted(), atomic_path(output_path) as tmp, parts as reader:
         writer = StripWriter(tmp, output_path, width, height, out_header)
+        strips = (sampler.strip(reader, width, height, y, min(height, y + TILE), timings) for y in range(0, height, TILE))
+        made = _Ahead(strips) if budget() > 1 else None
         try:
-            for y in range(0, height, TILE):
-                strip = sampler.strip(reader, width, height, y, min(height, y + TILE), timings)
+            for strip in made if made is not None else strips:
                 t0 = clock()
                 writer.write(strip if not opts.dtype else convert_pixels(strip, opts.dtype))
                 timings["write"] += clock() - t0
             writer.close()
         except BaseException:
+            if made is not None:
+                made.stop()
             writer.abandon()
             raise
     return TiledResult(fmap, (width, height), timings)
+
+
+class _Decoded:
+    """`PartReader`'s rectangles, of an image already decoded (each a contiguous copy, as read)."""
+
+    def __init__(self, pixels: NDArray) -> None:
+        self.pixels = pixels
+
+    def read(self, x0: int, y0: int, x1: int, y1: int) -> NDArray:
+        return np.ascontiguousarray(self.pixels[y0:y1, x0:x1])
+
+    def __enter__(self) -> _Decoded:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.pixels = None
+
+
+class _Ahead:
+    """Strips made on a thread of their own, one ahead of the strip being written.
+
+    The encoder (zlib, one core, holding the GIL in OpenImageIO) writes strip k
+    while the next is pulled back and resampled, in compiled kernels that
+    release the GIL, instead of after it: 12 MP in strips, about a third less
+    time for the strips. The strips come in order, so the file is the same.
+    Iterating gives each strip, then raises what making them raised; `stop`
+    makes the thread end after the strip it is making (the writer failed).
+    """
+
+    def __init__(self, strips) -> None:
+        import queue
+        import threading
+
+        from .maps.compose import Task
+
+        self._made: queue.Queue = queue.Queue(maxsize=1)
+        self._stopped = threading.Event()
+        self._task = Task(self._make, strips, name="warp-strips")
+
+    def _make(self, strips) -> None:
+        try:
+            for strip in strips:
+                if self._stopped.is_set():
+                    return
+                self._made.put((strip, None))
+        except BaseException as err:  # handed to the writer, which raises it
+            self._made.put((None, err))
+            return
+        self._made.put((None, None))
+
+    def __iter__(self):
+        while True:
+            strip, err = self._made.get()
+            if err is not None:
+                raise err
+            if strip is None:
+                return
+            yield strip
+
+    def stop(self) -> None:
+        """End the thread: no more strips are wanted (it finishes the one it is making)."""
+        import queue
+
+        self._stopped.set()
+        try:
+            while True:
+                self._made.get_nowait()  # one that waits to be put finds room, then stops
+        except queue.Empty:
+            pass
 
 
 class _Sampler:

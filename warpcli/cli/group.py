@@ -28,3 +28,58 @@ class DefaultGroup(click.Group):
         name, cmd, rest = super().resolve_command(ctx, args)
         # The default command's usage and messages read "warp ...", not "warp warp ...".
         return ("" if name == self.default else name), cmd, rest
+
+
+class LazyCommands(dict):
+    """A group's commands by name, each imported from its module when first asked for.
+
+    ``warp`` runs one command: its start-up then imports that command's
+    module only, not every subcommand's (click's lazy-group pattern, kept as
+    the ``commands`` mapping click and sphinx-click read). Iterating gives
+    every name; ``[name]``, ``get``, ``values`` and ``items`` import what they
+    return.
+
+    Parameters
+    ----------
+    where : dict of str to str
+        Command name -> ``"module:attribute"`` of the click command.
+    """
+
+    def __init__(self, where: dict[str, str]) -> None:
+        super().__init__()
+        self._where = dict(where)
+
+    def __missing__(self, name: str):
+        import importlib
+
+        if name not in self._where:
+            raise KeyError(name)
+        module, attribute = self._where[name].split(":")
+        command = getattr(importlib.import_module(module), attribute)
+        super().__setitem__(name, command)
+        return command
+
+    def __setitem__(self, name: str, command) -> None:  # click's add_command
+        self._where.setdefault(name, "")
+        super().__setitem__(name, command)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._where
+
+    def __iter__(self):
+        return iter(self._where)
+
+    def __len__(self) -> int:
+        return len(self._where)
+
+    def get(self, name: str, default=None):
+        return self[name] if name in self._where else default
+
+    def keys(self):
+        return self._where.keys()
+
+    def values(self):
+        return [self[name] for name in self._where]
+
+    def items(self):
+        return [(name, self[name]) for name in self._where]

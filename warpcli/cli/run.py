@@ -11,20 +11,19 @@ import click
 from ..capture import stderr_fd
 from ..errors import WarpError
 from ..outputs import end_when_consistent, remove_temporaries
-from .apply_map import apply_map
-from .edit import edit
 from .exits import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, exit_code
-from .group import DefaultGroup
+from .group import DefaultGroup, LazyCommands
 from .options import CONTEXT
-from .points import points
-from .texture import texture
-from .volume import volume
-from .warp import warp
+
+#: Each command's name and where it is defined: a run imports the module of its own command only.
+COMMANDS = {
+    "warp": "warpcli.cli.warp:warp", "apply-map": "warpcli.cli.apply_map:apply_map", "edit": "warpcli.cli.edit:edit",
+    "points": "warpcli.cli.points:points", "texture": "warpcli.cli.texture:texture",
+    "volume": "warpcli.cli.volume:volume",
+}  # fmt: skip
 
 #: The ``warp`` command line: ``warp ...`` warps, ``warp apply-map|edit|points|texture|volume ...`` the others.
-cli = DefaultGroup(
-    "warp", commands={"warp": warp, "apply-map": apply_map, "edit": edit, "points": points, "texture": texture, "volume": volume}, default="warp", context_settings=CONTEXT
-)
+cli = DefaultGroup("warp", commands=LazyCommands(COMMANDS), default="warp", context_settings=CONTEXT)
 
 
 class Terminated(BaseException):
@@ -70,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     warnings.simplefilter("ignore")
     args = list(sys.argv[1:] if argv is None else argv)
     if not args:
+        warp = cli.commands["warp"]
         ctx = warp.make_context("warp", ["--help"], resilient_parsing=True)
         click.echo(warp.get_usage(ctx), err=True)
         click.echo("Try 'warp --help' for help; 'warp apply-map --help' for saved maps.", err=True)
