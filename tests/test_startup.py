@@ -276,7 +276,11 @@ def test_a_png_whose_size_is_turned_by_its_orientation_gets_the_map_of_the_turne
 
 _COMMANDS_PROBE = """
 import importlib, json, sys
+already = set(sys.modules)  # what the interpreter's site (a sitecustomize, say) loaded is not warp's doing
 import click
+import warpcli.capture, warpcli.outputs, warpcli.pipeline, warpcli.cli.warp
+# before any work starts (a kernel-loading thread may import tempfile once the map is under way)
+early = [m for m in ("secrets", "hmac", "tempfile") if m in sys.modules and m not in already]
 from warpcli.cli import main
 code = main(sys.argv[1:])
 loaded = sorted(m for m in sys.modules if m.startswith("warpcli.cli."))
@@ -289,7 +293,7 @@ print(json.dumps({
     "names_are_commands": isinstance(points, click.Command) and isinstance(warp, click.Command)
                           and points is module.points and package.points is points,
     "commands": {name: cli.commands[name].name for name in cli.commands},
-    "early": [m for m in ("secrets", "hmac", "tempfile") if m in sys.modules],
+    "early": early,
 }))
 """
 
