@@ -315,7 +315,7 @@ def test_a_stack_written_page_by_page_reads_as_the_same_volume(tmp_path, shape, 
     import tifffile
 
     data = np.random.default_rng(len(shape)).integers(0, 200, shape).astype(dtype)
-    tifffile.imwrite(tmp_path / "one.tif", data, photometric="rgb" if len(shape) == 4 else None)
+    tifffile.imwrite(tmp_path / "one.tif", data, photometric="rgb" if len(shape) == 4 else "minisblack")
     for name, metadata in (("shaped.tif", {}), ("plain.tif", None)):
         with tifffile.TiffWriter(tmp_path / name) as tw:
             for page in data:
