@@ -438,3 +438,55 @@ def test_a_temporary_is_registered_for_removal_before_it_exists(tmp_path, monkey
             fh.write(b"y")
     assert len(seen) == 2 and all(registered and not existed for _, registered, existed in seen), seen
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "b.png"] and not outputs._live
+
+
+_SIGTERM_WITH_A_CHILD = """
+import os, signal, sys, time
+from warpcli import _fork
+from warpcli.cli.run import _terminate
+signal.signal(signal.SIGTERM, _terminate)
+child = _fork.Forked(time.sleep, 60)  # a map still being built, say
+print(child._pid, flush=True)
+time.sleep(0.3)  # the child sets itself up
+if sys.argv[1] == "group":
+    os.killpg(0, signal.SIGTERM)  # a scheduler ending the job: every process of it
+else:
+    os.kill(os.getpid(), signal.SIGTERM)  # kill PID: this process alone
+time.sleep(60)
+"""
+
+
+def _gone(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] in "ZX"  # a zombie computes nothing
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.forks
+@pytest.mark.parametrize("to", ["process", "group"])
+def test_sigterm_ends_the_children_too_and_says_so_once(tmp_path, to):
+    """SIGTERM to warp alone kills the children it forked (they would build a map on after the run
+    ended); SIGTERM to its whole process group ends each child quietly, not with the parent's
+    handler (which would say "terminated" once per process and remove the parent's files)."""
+    import time
+
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _SIGTERM_WITH_A_CHILD, to], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        out, err = proc.communicate(timeout=10)  # a child left alive holds the pipes open
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, 9)
+    child = int(out.split()[0])
+    deadline = time.monotonic() + 5
+    while not _gone(child) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    alive = not _gone(child)
+    if alive:
+        os.kill(child, 9)
+    assert proc.returncode == 143 and err == "warp: terminated\n", (proc.returncode, err)
+    assert not alive

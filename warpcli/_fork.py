@@ -78,6 +78,7 @@ class Forked:
             _child(fn, args, write_end)
         os.close(write_end)
         self._pid: int | None = pid
+        _CHILDREN.add(pid)
         self._fd = read_end
         self._outcome: tuple | None = None
         brood = _BROOD.get()
@@ -109,6 +110,7 @@ class Forked:
         pid, self._pid = self._pid, None
         if pid is None:
             return 0
+        _CHILDREN.discard(pid)
         while True:
             try:
                 return os.waitpid(pid, 0)[1]
@@ -203,6 +205,25 @@ def _unpack(kind: str, value: Any, records: list[dict]) -> Any:
 _WORKER_FDS: set[int] = set()
 
 
+#: The pids of this process's children not yet reaped (`Forked`, `Worker`): `kill_children`'s.
+_CHILDREN: set[int] = set()
+
+
+def kill_children() -> None:
+    """Kill every child this process forked and has not reaped: for a run that ends at once.
+
+    `warpcli.cli.run`'s SIGTERM handler ends the process without unwinding;
+    a SIGTERM sent to the process alone (``kill PID``) does not reach its
+    children, which would otherwise compute on, a map or a frame, after the
+    run has ended. Safe in a signal handler: no lock.
+    """
+    for pid in list(_CHILDREN):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+
+
 def _close_inherited() -> None:
     for fd in list(_WORKER_FDS):
         try:
@@ -210,6 +231,7 @@ def _close_inherited() -> None:
         except OSError:
             pass
     _WORKER_FDS.clear()
+    _CHILDREN.clear()  # the parent's children are not this child's
 
 
 class SharedMemory:
@@ -311,6 +333,7 @@ class Worker:
         os.close(requests[0])
         os.close(answers[1])
         self._pid: int | None = pid
+        _CHILDREN.add(pid)
         self._to, self._from = requests[1], answers[0]
         _WORKER_FDS.update((self._to, self._from))
         self._shared = shared
@@ -465,6 +488,13 @@ def _child(fn: Callable[..., Any], args: tuple, fd: int) -> None:
 
 def _child_setup() -> KeptRecords:
     _close_inherited()
+    # The parent's SIGTERM handler (`warpcli.cli.run`) removes the parent's temporary files and
+    # says "terminated": not a child's to do when a job's whole process group is sent SIGTERM
+    # (a scheduler, systemd). A child just ends; its parent, sent the same signal, does the rest.
+    try:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    except ValueError:  # not the main thread: cannot be after a fork (it makes the forking thread the main one)
+        pass
     if "faulthandler" in sys.modules:
         # A crash here is the parent's to report (`ChildDied`), in one line.
         sys.modules["faulthandler"].disable()

@@ -38,13 +38,18 @@ def _terminate(signum, frame):
     aborts the process with "Critical nanobind error" when its import is
     interrupted), while the import or logging lock is held (the unwinding
     then waits on it for ever), or inside code that catches the exception
-    and goes on to exit 0. So nothing is unwound: the files this process
-    created are removed (`warpcli.outputs.remove_temporaries`), and the line
+    and goes on to exit 0. So nothing is unwound: the children it forked are
+    killed (`warpcli._fork.kill_children`: a ``kill PID`` reaches this process
+    alone), the files it created are removed
+    (`warpcli.outputs.remove_temporaries`), and the line
     goes straight to file descriptor 2, without Python's stream locks. Pending
     outputs being renamed into place finish first, so that a run leaves all
     of them or none.
     """
     def end():
+        forks = sys.modules.get("warpcli._fork")  # not imported: no child (and no import in a handler)
+        if forks is not None:
+            forks.kill_children()  # a map or a frame computed in a child is not wanted any more
         remove_temporaries()
         try:
             # Not plain 2: a C library's output may be being captured right now (warpcli.capture).
