@@ -450,9 +450,26 @@ print(child._pid, flush=True)
 time.sleep(0.3)  # the child sets itself up
 if sys.argv[1] == "group":
     os.killpg(0, signal.SIGTERM)  # a scheduler ending the job: every process of it
-else:
+elif sys.argv[1] == "process":
     os.kill(os.getpid(), signal.SIGTERM)  # kill PID: this process alone
 time.sleep(60)
+"""
+
+_INTERRUPT_WITH_A_CHILD = """
+import os, signal, sys, time
+from warpcli import _fork
+from warpcli.cli.run import main
+run = sys.modules["warpcli.cli.run"]
+
+def warp_that_builds(*args, **kwargs):  # the command, its map being built in a child
+    child = _fork.Forked(time.sleep, 60)
+    print(child._pid, flush=True)
+    time.sleep(0.3)
+    os.kill(os.getpid(), signal.SIGINT)  # kill -INT PID: this process alone
+    time.sleep(60)
+
+run.cli.main = warp_that_builds
+sys.exit(main(["x.png", "y.png"]))
 """
 
 
@@ -465,15 +482,16 @@ def _gone(pid: int) -> bool:
 
 
 @pytest.mark.forks
-@pytest.mark.parametrize("to", ["process", "group"])
+@pytest.mark.parametrize("to", ["process", "group", "interrupt"])
 def test_sigterm_ends_the_children_too_and_says_so_once(tmp_path, to):
-    """SIGTERM to warp alone kills the children it forked (they would build a map on after the run
-    ended); SIGTERM to its whole process group ends each child quietly, not with the parent's
-    handler (which would say "terminated" once per process and remove the parent's files)."""
+    """SIGTERM (or SIGINT) to warp alone kills the children it forked (they would build a map on
+    after the run ended); SIGTERM to its whole process group ends each child quietly, not with the
+    parent's handler (which would say "terminated" once per process and remove the parent's files)."""
     import time
 
+    script = _INTERRUPT_WITH_A_CHILD if to == "interrupt" else _SIGTERM_WITH_A_CHILD
     proc = subprocess.Popen(
-        [sys.executable, "-c", _SIGTERM_WITH_A_CHILD, to], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        [sys.executable, "-c", script, to], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True, start_new_session=True,
     )  # fmt: skip
     try:
@@ -488,5 +506,6 @@ def test_sigterm_ends_the_children_too_and_says_so_once(tmp_path, to):
     alive = not _gone(child)
     if alive:
         os.kill(child, 9)
-    assert proc.returncode == 143 and err == "warp: terminated\n", (proc.returncode, err)
+    want = (130, "warp: interrupted\n") if to == "interrupt" else (143, "warp: terminated\n")
+    assert (proc.returncode, err) == want
     assert not alive

@@ -30,6 +30,13 @@ class Terminated(BaseException):
     """SIGTERM arrived (kept for callers that catch it; `main` now ends the process at once)."""
 
 
+def _kill_children() -> None:
+    """Kill the children this run forked: a map or a frame computed in one is not wanted any more."""
+    forks = sys.modules.get("warpcli._fork")  # not imported: no child (and no import in a signal handler)
+    if forks is not None:
+        forks.kill_children()
+
+
 def _terminate(signum, frame):
     """End the run now: temporary and pending files removed, one line, exit 143.
 
@@ -47,9 +54,7 @@ def _terminate(signum, frame):
     of them or none.
     """
     def end():
-        forks = sys.modules.get("warpcli._fork")  # not imported: no child (and no import in a handler)
-        if forks is not None:
-            forks.kill_children()  # a map or a frame computed in a child is not wanted any more
+        _kill_children()
         remove_temporaries()
         try:
             # Not plain 2: a C library's output may be being captured right now (warpcli.capture).
@@ -92,6 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         click.echo(f"warp: error: {err.format_message()} (see '{prog} --help')", err=True)
         return EXIT_BAD_INPUT if err.exit_code == 2 else err.exit_code
     except (click.exceptions.Abort, KeyboardInterrupt):
+        _kill_children()  # Ctrl-C reaches them too; ``kill -INT PID`` this process alone
         click.echo("warp: interrupted", err=True)
         return EXIT_INTERRUPTED
     except Terminated:
