@@ -94,6 +94,15 @@ def read_pixels(path):
     return px if px.ndim == 3 else px[:, :, None]
 
 
+def random_star(rng, cx: float = 60.0, cy: float = 60.0):
+    """A generated star-shaped polygon's vertices, drawn from ``rng`` (a numpy Generator): 5 to 8 at
+    sorted random angles, radii 20-45 px around (cx, cy)."""
+    n = int(rng.integers(5, 9))
+    th = np.sort(rng.uniform(0, 2 * np.pi, n))
+    r = rng.uniform(20.0, 45.0, n)
+    return np.stack([cx + r * np.cos(th), cy + r * np.sin(th)], axis=1)
+
+
 def star_shaped(angles_gaps, radii, cx: float = 64.0, cy: float = 64.0, scale: float = 56.0):
     """A star-shaped polygon: vertex k at angle (cumulative gaps) and radius radii[k].
 

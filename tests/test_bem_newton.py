@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers import random_star
+
 from warpcli.maps.bem_eval import _GAUSS01, gauss01
 from warpcli.maps.meshless import taylor_step
 from warpcli.maps.newton import thresholds
@@ -25,10 +27,7 @@ def _bem_map(seed, check=False):
     from warpcli.maps.theta import regular
 
     rng = np.random.default_rng(seed)
-    n = int(rng.integers(5, 9))
-    th = np.sort(rng.uniform(0, 2 * np.pi, n))
-    r = rng.uniform(20.0, 45.0, n)
-    poly = Polygon(np.stack([60 + r * np.cos(th), 60 + r * np.sin(th)], axis=1))
+    poly = Polygon(random_star(rng))
     opts = MapOptions(method="bem", nodes=96, check=check)
     return METHODS["bem"].load().build(poly, regular(poly, poly, opts), opts, "source")
 

@@ -12,7 +12,7 @@ from warpcli.maps.bem import fit_bem
 from warpcli.maps.closed_form import distance_to_boundary
 from warpcli.maps.mfs import fit_mfs
 
-from helpers import simple_polygons
+from helpers import random_star, simple_polygons
 
 # -- shapes -----------------------------------------------------------------
 
@@ -317,10 +317,7 @@ def test_the_inverse_jacobian_is_the_maps_at_the_pre_images_found(method, seed):
     from warpcli.maps.theta import regular
 
     rng = np.random.default_rng(seed)
-    n = int(rng.integers(5, 9))
-    th = np.sort(rng.uniform(0, 2 * np.pi, n))
-    r = rng.uniform(20.0, 45.0, n)
-    poly = Polygon(np.stack([60 + r * np.cos(th), 60 + r * np.sin(th)], axis=1))
+    poly = Polygon(random_star(rng))
     opts = MapOptions(method=method, nodes=96, check=False)
     phi = METHODS[method].load().build(poly, regular(poly, poly, opts), opts, "source")
     g = (np.arange(24) + 0.5) / 24
@@ -443,10 +440,7 @@ def test_a_coherent_inverse_finds_the_plain_ones_pre_images(seed):
     from warpcli.maps.theta import regular
 
     rng = np.random.default_rng(seed)
-    n = int(rng.integers(5, 9))
-    th = np.sort(rng.uniform(0, 2 * np.pi, n))
-    r = rng.uniform(20.0, 45.0, n)
-    poly = Polygon(np.stack([60 + r * np.cos(th), 60 + r * np.sin(th)], axis=1))
+    poly = Polygon(random_star(rng))
     opts = MapOptions(method="mfs", nodes=96, check=False)
     phi = MFS.build(poly, regular(poly, poly, opts), opts, "source")
     lo, span = phi.theta.points.min(axis=0), np.ptp(phi.theta.points, axis=0)
