@@ -460,6 +460,9 @@ import os, signal, sys, time
 from warpcli import _fork
 from warpcli.cli.run import main
 run = sys.modules["warpcli.cli.run"]
+# Python leaves SIGINT ignored when it starts so (a job started with & or nohup, as a CI runner
+# may start the suite); warp at a terminal has the default handler that raises KeyboardInterrupt.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 
 def warp_that_builds(*args, **kwargs):  # the command, its map being built in a child
     child = _fork.Forked(time.sleep, 60)
