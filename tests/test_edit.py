@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import http.client
+import importlib
 import json
 import os
 import socket
@@ -406,7 +407,9 @@ def test_command_line_parses_back_to_the_options(monkeypatch):
     """Every option of the printed command reaches ``warp`` as the session's options."""
     from warpcli.cli import main
 
-    warp_command = sys.modules["warpcli.cli.warp"]  # the package's name ``warp`` is the command
+    # The module (the package's name ``warp`` is the command); imported here, since the group
+    # imports a command's module only when the command runs.
+    warp_command = importlib.import_module("warpcli.cli.warp")
 
     opts = WarpOptions(map=MapOptions(method="bem", theta="cyclic", dst_boundary="quadratic", max_area=4.0), interp="cubic",
                        outside="input", antialias=False, background=(1.0, 0.5, 0.25))  # fmt: skip
@@ -417,6 +420,30 @@ def test_command_line_parses_back_to_the_options(monkeypatch):
     assert seen[0][:2] == ("in.png", "out.png") and seen[0][3] == opts
     assert command_args(WarpOptions(), "in.png", "a.json", "b.json", "out.png") == [
         "warp", "in.png", "--src", "a.json", "--dst", "b.json", "out.png"]  # fmt: skip
+
+
+@pytest.mark.parametrize("when", ["serving", "before the loop starts", "twice"])
+def test_shutdown_ends_the_serving_thread_and_frees_the_port(tmp_path, when):
+    """`EditServer.shutdown` wakes the serving loop (it sleeps in select, it does not poll), waits
+    for it to end and closes the port; called before the loop runs, the loop never serves."""
+    from warpcli.edit.server import EditServer
+
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 16, 12)
+    server = EditServer(EditSession(EditPaths.defaults(image)))
+    if when == "before the loop starts":
+        server.shutdown()
+        thread = server.start()
+    else:
+        thread = server.start()
+        assert request(server, "GET", f"/?token={server.token}")[0] == 200  # it serves
+        server.shutdown()
+        if when == "twice":
+            server.shutdown()
+    thread.join(timeout=30)
+    assert not thread.is_alive()
+    with pytest.raises(OSError):
+        socket.create_connection(("127.0.0.1", server.port), timeout=5).close()
 
 
 # --- the command ------------------------------------------------------------------------------------------
@@ -697,7 +724,7 @@ def test_within_file_of_the_command_line_and_the_cli_checks(tmp_path, capsys):
 def test_within_command_line_parses_back(monkeypatch):
     from warpcli.cli import main
 
-    warp_command = sys.modules["warpcli.cli.warp"]
+    warp_command = importlib.import_module("warpcli.cli.warp")  # the module, imported on demand
     seen = []
     monkeypatch.setattr(warp_command, "_single", lambda *args: seen.append(args))
     for within in ("image", "7.5"):

@@ -28,6 +28,8 @@ import hmac
 import json
 import logging
 import secrets
+import selectors
+import socket
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
@@ -88,6 +90,13 @@ class EditServer:
         # One call of the session at a time: the page sends one, and a save
         # must not interleave with an export.
         self.calls = threading.Lock()
+        # `shutdown` wakes the serving loop through this pair of sockets: the loop sleeps in
+        # select() until a connection or the wake-up, instead of waking to poll a flag.
+        self._wake_read, self._wake_write = socket.socketpair()
+        self._state = threading.Lock()
+        self._stopping = False
+        self._idle = threading.Event()  # set while no loop serves
+        self._idle.set()
 
     @property
     def url(self) -> str:
@@ -95,8 +104,23 @@ class EditServer:
         return f"http://127.0.0.1:{self.port}/?token={self.token}"
 
     def serve_forever(self) -> None:
-        """Serve until `shutdown`."""
-        self.httpd.serve_forever(poll_interval=0.2)
+        """Serve until `shutdown` (at once if it was already called)."""
+        with self._state:
+            if self._stopping:
+                return
+            self._idle.clear()
+        try:
+            with selectors.DefaultSelector() as selector:
+                selector.register(self.httpd, selectors.EVENT_READ)
+                selector.register(self._wake_read, selectors.EVENT_READ)
+                self.httpd.timeout = 0  # handle_request() then never blocks on a connection gone meanwhile
+                while True:
+                    ready = [key.fileobj for key, _ in selector.select()]
+                    if self._wake_read in ready:
+                        return
+                    self.httpd.handle_request()
+        finally:
+            self._idle.set()
 
     def start(self) -> threading.Thread:
         """Serve on a daemon thread; return it."""
@@ -105,9 +129,16 @@ class EditServer:
         return thread
 
     def shutdown(self) -> None:
-        """Stop serving and close the socket."""
-        self.httpd.shutdown()
+        """Stop serving, wait for the serving loop to end and close the sockets; a second call does nothing."""
+        with self._state:
+            if self._stopping:
+                return
+            self._stopping = True
+        self._wake_write.send(b"\0")
+        self._idle.wait()
         self.httpd.server_close()
+        self._wake_read.close()
+        self._wake_write.close()
 
     def asset(self, path: str) -> bytes:
         """The asset at URL ``path``; the page with its token filled in."""
