@@ -163,6 +163,48 @@ def test_parallel_runs_every_part_once_and_raises_the_first_error(monkeypatch):
         parallel(fail, range(10))
 
 
+def test_parallel_hands_the_next_part_to_whichever_thread_is_free(monkeypatch):
+    # part 0 holds its thread until every other part is done: the other thread must take them all
+    # (parts fixed to threads in turn would leave parts 2 and 4 behind part 0, and the wait would fail)
+    monkeypatch.setattr(_native, "cores", lambda: 2)
+    done, lock, others = [], threading.Lock(), threading.Event()
+    waited = []
+
+    def work(k):
+        if k == 0:
+            waited.append(others.wait(timeout=20))
+            return
+        with lock:
+            done.append(k)
+            if len(done) == 5:
+                others.set()
+
+    parallel(work, range(6))
+    assert waited == [True] and sorted(done) == [1, 2, 3, 4, 5]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_bands_are_handed_out_most_work_first(seed):
+    from warpcli.grid import inside_polygon, pixel_centres
+    from warpcli.maps.compose import _most_work_first
+
+    # a generated triangle, widest at its bottom or top, over several bands of rows
+    rng = np.random.default_rng(seed)
+    width, height, band = 200, 160, int(rng.integers(12, 40))
+    top, bottom = rng.uniform(2, 20), rng.uniform(140, 158)
+    apex = rng.uniform(20, 180)
+    tri = np.array([[apex, top], [2.0, bottom], [198.0, bottom]])
+    if rng.random() < 0.5:
+        tri[:, 1] = height - tri[:, 1]
+    firsts = range(0, height, band)
+    order = _most_work_first(firsts, band, height, 0, width, tri)
+    assert sorted(order) == list(firsts)
+    # the pixel centres in the polygon per band, counted in full: the order is theirs where they differ by much
+    count = {f: int(inside_polygon(pixel_centres(width, height, (f, min(f + band, height))), tri).sum()) for f in firsts}
+    for a, b in zip(order, order[1:]):
+        assert count[a] >= 0.8 * count[b] - 200
+
+
 def test_warps_do_not_depend_on_the_number_of_threads(monkeypatch):
     """Compose bands and resample runs are shared out over the cores: same bytes on one."""
     from warpcli.pipeline import warp_image

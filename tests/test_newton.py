@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from warpcli.grid import inside_polygon as points_in_polygon
 from warpcli.maps.closed_form import distance_to_boundary
@@ -86,6 +87,31 @@ def test_unreachable_targets_are_reported_not_converged():
     assert not ok[0] and ok[1]
     assert in_disc(y).all()
     np.testing.assert_allclose(bulge(y[1:]), x[1:], atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_hopeless_points_stop_and_the_others_iterate_bit_for_bit(seed):
+    # generated targets in and out of the bulge's image (the unit disc), some hopeless by the
+    # caller's word: those stop after `hopeless_after` iterations, not converged; every other
+    # point's iterates, flag and Jacobian are those of the run without `hopeless`
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-1.6, 1.6, size=(40, 2))
+    guess = rng.uniform(-0.5, 0.5, size=(40, 2))
+    far = np.hypot(*x.T) > 1.05  # no pre-image: these would run all their iterations
+    asked = []
+
+    def hopeless(t):
+        asked.append(len(t))
+        return np.hypot(*t.T) > 1.05
+
+    fj = lambda y: (bulge(y), bulge_jac(y))  # noqa: E731
+    y0, ok0, j0 = invert(bulge, bulge_jac, x, guess, inside=in_disc, fun_jac=fj, jacobian=True)
+    y1, ok1, j1 = invert(bulge, bulge_jac, x, guess, inside=in_disc, fun_jac=fj, jacobian=True, hopeless=hopeless)
+    assert len(asked) == 1 and asked[0] >= far.sum()  # asked once, about the points still iterating
+    assert not ok0[far].any() and not ok1[far].any()
+    np.testing.assert_array_equal(ok1, ok0)
+    np.testing.assert_array_equal(y1[~far], y0[~far])
+    np.testing.assert_array_equal(j1[~far], j0[~far])
 
 
 def test_starting_outside_fails_and_exact_guesses_return_at_once():

@@ -16,7 +16,7 @@ from .._fork import empty
 from .._native import Kernels, parallel
 from ..cores import budget
 from ..errors import InputError
-from ..grid import window
+from ..grid import inside_polygon, window
 from ..options import MapOptions
 from ..polygon import Polygon, check_pair
 from ..mapping import Certificate, ComposedMap
@@ -34,6 +34,8 @@ Region = tuple[float, float, float, float]
 #: The composition works through the output grid in bands of about this many
 #: pixels, so its temporary arrays stay small whatever the image size.
 BAND_PIXELS = 1 << 18
+#: The rows and columns `_most_work_first` samples a band's work on.
+WORK_STRIDE = 8
 
 
 @dataclass(frozen=True)
@@ -333,13 +335,34 @@ def _through_theta(
             _compiled.scatter_products(np.ascontiguousarray(jac_found), np.ascontiguousarray(jac_grid), idx, jac)
 
     if r1 > r0:
-        parallel(one_band, range(w0 + (r0 - w0) // band * band, r1, band))
+        firsts = range(w0 + (r0 - w0) // band * band, r1, band)
+        parallel(one_band, _most_work_first(firsts, band, w1, c0, c1, phi_grid.polygon.points))
     if made is not None:
         _STRIP_BANDS[phi_grid] = (phi_other, made)
     shape = (r1 - r0, ww)
     return PullBack(
         points.reshape(*shape, 2), None if jac is None else jac.reshape(*shape, 2, 2), (r0, c0), (width, height)
     )
+
+
+def _most_work_first(firsts: range, band: int, last: int, c0: int, c1: int, vertices) -> list[int]:
+    """The bands' first rows, those with the most pixel centres in the polygon first (counted on
+    every `WORK_STRIDE`-th row and column).
+
+    `parallel` hands each thread the next band when it is free: with the largest first, the small
+    ones fill in at the end. In their own order, a 1 MP star's four bands of 28k, 105k, 66k and 3k
+    pixels left one core idle for a quarter of a BEM pull-back (measured). Bands are independent,
+    so their order does not change a value."""
+    if len(firsts) <= 1:
+        return list(firsts)
+    rows = np.arange(firsts[0], last, WORK_STRIDE) + 0.5
+    cols = np.arange(c0, c1, WORK_STRIDE) + 0.5
+    xx, yy = np.meshgrid(cols, rows)
+    inside = inside_polygon(np.stack([xx.ravel(), yy.ravel()], axis=1), vertices).reshape(len(rows), len(cols))
+    per_row = inside.sum(axis=1)
+    which = (rows.astype(np.int64) - firsts[0]) // band
+    work = np.bincount(which, weights=per_row, minlength=len(firsts))[: len(firsts)]
+    return [firsts[i] for i in np.argsort(-work, kind="stable")]
 
 
 class Task:

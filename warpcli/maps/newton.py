@@ -56,6 +56,8 @@ def invert(
     floor: float | None = None,
     fun_jac: Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None,
     jacobian: bool = False,
+    hopeless: Callable[[NDArray[np.float64]], NDArray[np.bool_]] | None = None,
+    hopeless_after: int = 2,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]] | tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
     """Solve fun(y) = x for y, for every row x of ``targets_xy``, by damped Newton.
 
@@ -96,6 +98,16 @@ def invert(
         (NaN elsewhere): from the last evaluation with ``fun_jac``, else
         from one pass of ``jac`` over the converged points.
 
+    hopeless : callable, optional
+        ``hopeless(targets)`` with targets (k, 2) returns a (k,) bool mask,
+        True for targets the caller knows need no pre-image from this
+        iteration (BEM: values in its collar's image, whose pre-images lie in
+        the collar's band). Asked once, after ``hopeless_after`` iterations,
+        for the points still iterating; those it marks stop there, not
+        converged. Without it the iteration is as before, bit for bit.
+    hopeless_after : int, optional
+        The iterations before ``hopeless`` is asked.
+
     Returns
     -------
     points : (K, 2) ndarray of float
@@ -132,7 +144,9 @@ def invert(
     converged[active[ok]] = True
     active = active[~ok]
 
-    for _ in range(max_iter):
+    for it in range(max_iter):
+        if hopeless is not None and it == hopeless_after and len(active):
+            active = active[~np.asarray(hopeless(x[active]), dtype=bool)]
         if len(active) == 0:
             break
         J = J_at[active] if J_at is not None else jac(y[active])
