@@ -203,6 +203,12 @@ def test_bands_are_handed_out_most_work_first(seed):
     count = {f: int(inside_polygon(pixel_centres(width, height, (f, min(f + band, height))), tri).sum()) for f in firsts}
     for a, b in zip(order, order[1:]):
         assert count[a] >= 0.8 * count[b] - 200
+    # a strip's few bands (of the window's): ordered among themselves
+    few = range(band, min(4 * band, height), band)
+    order = _most_work_first(few, band, height, 0, width, tri)
+    assert sorted(order) == list(few)
+    for a, b in zip(order, order[1:]):
+        assert count[a] >= 0.8 * count[b] - 200
 
 
 def test_warps_do_not_depend_on_the_number_of_threads(monkeypatch):

@@ -355,7 +355,9 @@ def _most_work_first(firsts: range, band: int, last: int, c0: int, c1: int, vert
     so their order does not change a value."""
     if len(firsts) <= 1:
         return list(firsts)
-    rows = np.arange(firsts[0], last, WORK_STRIDE) + 0.5
+    # the bands' rows only: a strip's bands are a few of the window's, and counting the rest of
+    # the window for each strip would cost a gigapixel run time quadratic in its strips
+    rows = np.arange(firsts[0], min(firsts[-1] + band, last), WORK_STRIDE) + 0.5
     cols = np.arange(c0, c1, WORK_STRIDE) + 0.5
     xx, yy = np.meshgrid(cols, rows)
     inside = inside_polygon(np.stack([xx.ravel(), yy.ravel()], axis=1), vertices).reshape(len(rows), len(cols))

@@ -377,8 +377,9 @@ class SmoothMap(ThetaMap):
 
         Newton's hopeless points (`_bem_newton`): the collar maps its band onto Theta less phi(Gamma), so such
         a value has its pre-image in the band, where `inverse` takes the collar's (`_band_inverse`) whatever
-        Newton finds. Near Theta's corners the closed form folds next to its nodes, and Newton on it ran all
-        its iterations of 40 halvings for one point at a time (0.03-0.05 s of CPU per point, 1 MP)."""
+        Newton finds. Within ~1e-5 of Theta's edges the closed form's image can stop short of Theta (its
+        least residual there is ~1e-6, at the polygon), and Newton on it ran all its iterations of 40
+        halvings for one point at a time (0.03-0.05 s of CPU per point, 1 MP; bench/results/2026-11-26-bem-speed.md)."""
         if self.collar is None:
             return np.zeros(len(q), dtype=bool)
         return np.isfinite(self.collar.inverse(q)).all(axis=1)
