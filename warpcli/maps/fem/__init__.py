@@ -408,6 +408,10 @@ def _built_to_send(
         phi.__dict__["_flipped"] = built.__dict__["_flipped"]
     if side is not None:
         phi.precompute(side)
+    # The mesh's edge tables (four arrays of its edges: a fifth of what would cross the pipe,
+    # 1.6-1.8 MB at 1 MP) served the Laplacian and `_neighbours`, made here: the parent's
+    # warp asks for neither, and a later retarget makes them again.
+    phi.mesh.__dict__.pop("edges", None)
     return phi
 
 
