@@ -196,10 +196,12 @@ class FEMMap(ThetaMap):
 
     def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
         q = as_points(points)
-        finite = np.isfinite(q).all(axis=1)
         out = np.full(q.shape, np.nan)
         tri = np.full(len(q), -1, dtype=np.int64)
-        if coherent and finite.all():
+        # The whole array's test first: the per-point one (``.all(axis=1)``, 2.5 ms per 130k
+        # points, a reduction along an axis of 2) only where some point is not finite.
+        all_finite = bool(np.isfinite(q).all())
+        if coherent and all_finite:
             # One compiled walk through the image mesh from each point's
             # predecessor; the few walks that give up go to the bucket search.
             where = np.empty(len(q), dtype=np.int32)
@@ -211,7 +213,7 @@ class FEMMap(ThetaMap):
             tri[:] = where
             lost = np.flatnonzero(where < 0)
         else:
-            lost = np.flatnonzero(finite)
+            lost = np.arange(len(q)) if all_finite else np.flatnonzero(np.isfinite(q).all(axis=1))
         if lost.size:
             out[lost], tri[lost] = self._inverse_located(q[lost])
         return Mapped(out, _gather(self._inverse_jacobians, tri) if jacobian else None)
