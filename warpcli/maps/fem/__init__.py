@@ -292,7 +292,12 @@ class FEMMap(ThetaMap):
     def _coherent_order(self) -> NDArray[np.int64]:
         """Triangles in serpentine bands of 8 pixels: consecutive triangles are
         neighbours, so each pixel's walk in Theta starts next to its goal."""
-        c = self.mesh.vertices[self._triangles].mean(axis=1)
+        # The centroids as mean(axis=1) makes them ((a + b) + c) / 3, without its reduction over
+        # an axis of 3 (7 ms for 37k triangles against 1 ms, in the child before the map is sent).
+        corners = np.take(self.mesh.vertices, self._triangles, axis=0)
+        c = corners[:, 0] + corners[:, 1]
+        c += corners[:, 2]
+        c /= 3.0
         row = np.floor(c[:, 1] / 8.0)
         x = np.where(row % 2 == 0, c[:, 0], -c[:, 0])
         return np.lexsort((x, row)).astype(np.int64)
@@ -323,8 +328,12 @@ def triangle_jacobians(
     triangle. Swap the arguments for the inverse map's Jacobians.
     """
     t = triangles
-    e = np.stack([domain[t[:, 1]] - domain[t[:, 0]], domain[t[:, 2]] - domain[t[:, 0]]], axis=2)  # columns
-    g = np.stack([image[t[:, 1]] - image[t[:, 0]], image[t[:, 2]] - image[t[:, 0]]], axis=2)
+    e = np.empty((len(t), 2, 2))  # the edges as columns, written in place (np.stack copied them)
+    g = np.empty((len(t), 2, 2))
+    for side, points in ((e, domain), (g, image)):
+        first = points[t[:, 0]]
+        np.subtract(points[t[:, 1]], first, out=side[:, :, 0])
+        np.subtract(points[t[:, 2]], first, out=side[:, :, 1])
     return g @ inv2(e)
 
 
