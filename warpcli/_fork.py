@@ -209,13 +209,11 @@ def _receive(fd: int, shared: SharedMemory | None = None, region: int | None = N
     try:
         sizes, places = _read_header(fd)
         parts: list[Any] = []
+        block = _Block(sizes[1:], places[1:])
         for k, (n, place) in enumerate(zip(sizes, places)):
             if place == _IN_PIPE:
-                # The arrays' memory: each part is read once, in place. A large one in numpy's
-                # memory, which asks the kernel for huge pages (madvise): a bytearray took
-                # one page fault per 4 KiB, 10-14 ms for the 7-8 MB of a 1 MP map against
-                # 1.5 ms, between the children's end and the pull-back.
-                parts.append(bytearray(n) if k == 0 or n < 1 << 20 else _pages(n))
+                # The arrays' memory: each part is read once, in place.
+                parts.append(bytearray(n) if k == 0 else block.take(n))
                 _read_into(fd, parts[-1])
             elif shared is None or region is None:
                 raise ValueError("a part in shared memory that was not lent")
@@ -226,11 +224,27 @@ def _receive(fd: int, shared: SharedMemory | None = None, region: int | None = N
         return None
 
 
-def _pages(n: int) -> Any:
-    """``n`` bytes of numpy's memory (uninitialised), to read a large part into."""
-    import numpy as np
+class _Block:
+    """One allocation for the arrays of a result that come through the pipe, cut in parts.
 
-    return np.empty(n, dtype=np.uint8)
+    Each in a bytearray of its own, the 7-8 MB of a 1 MP map took one page fault
+    per 4 KiB as they were read (10-14 ms in a fresh process, 2.5 ms warm); in
+    one numpy array of 4 MiB or more, which numpy asks the kernel to back with
+    huge pages (``madvise``), 1.5 ms: between the last child's end and the pull-back.
+    """
+
+    def __init__(self, sizes: list[int], places: list[int]) -> None:
+        import numpy as np
+
+        total = sum(-(-n // _ALIGN) * _ALIGN for n, place in zip(sizes, places) if place == _IN_PIPE)
+        self._memory = np.empty(total, dtype=np.uint8)
+        self._used = 0
+
+    def take(self, n: int) -> Any:
+        """The next ``n`` bytes (at a multiple of `_ALIGN`)."""
+        part = self._memory[self._used : self._used + n]
+        self._used += -(-n // _ALIGN) * _ALIGN
+        return part
 
 
 def _unpack(kind: str, value: Any, records: list[dict]) -> Any:
