@@ -328,13 +328,18 @@ def triangle_jacobians(
     triangle. Swap the arguments for the inverse map's Jacobians.
     """
     t = triangles
-    e = np.empty((len(t), 2, 2))  # the edges as columns, written in place (np.stack copied them)
-    g = np.empty((len(t), 2, 2))
-    for side, points in ((e, domain), (g, image)):
-        first = points[t[:, 0]]
-        np.subtract(points[t[:, 1]], first, out=side[:, :, 0])
-        np.subtract(points[t[:, 2]], first, out=side[:, :, 1])
+    e, g = (_edge_columns(points, t) for points in (domain, image))
     return g @ inv2(e)
+
+
+def _edge_columns(points: NDArray, t: NDArray[np.integer]) -> NDArray:
+    """(M, 2, 2): per triangle, its edges from corner 0 to corners 1 and 2 as columns, in the
+    type their difference has; written in place (``np.stack`` of the two copied them)."""
+    first = points[t[:, 0]]
+    out = np.empty((len(t), 2, 2), dtype=np.subtract(first[:0], first[:0]).dtype)
+    np.subtract(points[t[:, 1]], first, out=out[:, :, 0])
+    np.subtract(points[t[:, 2]], first, out=out[:, :, 1])
+    return out
 
 
 def build(
