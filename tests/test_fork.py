@@ -44,6 +44,22 @@ def test_a_result_and_an_error_come_back_as_they_were():
         _fork.Forked(_fail).result()
 
 
+def test_a_child_whose_result_is_taken_is_reaped_in_the_background():
+    """`result` returns once the result is read, without waiting for the child's exit; the child
+    is reaped all the same (no zombie stays), and a later cancel touches no process."""
+    pending = _fork.Forked(_say_and_return, 4)
+    pid = pending._pid
+    assert pending.result()["twice"] == 8
+    pending.cancel()
+    deadline = time.monotonic() + 10
+    while os.path.exists(f"/proc/{pid}") and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert not os.path.exists(f"/proc/{pid}")  # reaped: not even a zombie
+    with pytest.raises(ChildProcessError):
+        os.waitpid(pid, os.WNOHANG)
+    assert pid not in _fork._CHILDREN
+
+
 def test_a_child_that_crashes_is_an_error_not_a_crash():
     with pytest.raises(_fork.ChildDied, match="killed by SIGSEGV"):
         _fork.Forked(_die).result()

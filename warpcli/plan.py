@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import InputError
 from .maps.compose import PullBack
 from .polygon import Polygon
-from .raster.pixels import unit
+from .raster.pixels import fill, unit
 from .raster.resample import EdgeCoverage, edge_coverage, resample
 
 if TYPE_CHECKING:
@@ -373,8 +373,8 @@ class SamplingPlan:
         r, c = self.pull.origin
         wh, ww = self.pull.points.shape[:2]
         if (wh, ww) != (height, width):
-            out[:] = resample(pixels, np.full((1, 1, 2), np.nan), interp=self.interp, background=bg,
-                              alpha_channel=alpha_channel, associated_alpha=associated_alpha)[0, 0]  # fmt: skip
+            fill(out, resample(pixels, np.full((1, 1, 2), np.nan), interp=self.interp, background=bg,
+                               alpha_channel=alpha_channel, associated_alpha=associated_alpha)[0, 0])  # fmt: skip
             if r > 0:
                 yield 0, r
         for a in range(0, wh, band):
@@ -396,8 +396,8 @@ class SamplingPlan:
         # Pixels outside the window have no pre-image: the background, exactly as
         # the resampler writes it for such a pixel (rounded, alpha convention).
         out = np.empty((height, width, window.shape[2]), dtype=window.dtype)
-        out[:] = resample(pixels, np.full((1, 1, 2), np.nan), interp=self.interp, background=bg,
-                          alpha_channel=alpha_channel, associated_alpha=associated_alpha)[0, 0]  # fmt: skip
+        fill(out, resample(pixels, np.full((1, 1, 2), np.nan), interp=self.interp, background=bg,
+                           alpha_channel=alpha_channel, associated_alpha=associated_alpha)[0, 0])  # fmt: skip
         r, c = self.pull.origin
         out[r : r + window.shape[0], c : c + window.shape[1]] = window
         return out

@@ -51,6 +51,7 @@ from .plan import SamplingPlan, check_paste, plan_for, warn_if_outside
 from .polygon import Polygon
 from .raster.imageio import ImageHeader, read_header, size_limit_lifted, with_compression
 from .raster.parts import TILE, PartReader, StripWriter, check_writable_in_parts, output_format
+from .raster.pixels import fill
 
 log = logging.getLogger("warpcli")
 
@@ -233,7 +234,7 @@ class _Sampler:
         if plan.outside == "input":
             return self._pasted(reader, plan, width, y0, y1, timings)
         out = np.empty((y1 - y0, width, self.header.channels), dtype=self.header.dtype)
-        out[:] = plan.empty_pixel(self.header.dtype, self.header.channels, **self.alpha)
+        fill(out, plan.empty_pixel(self.header.dtype, self.header.channels, **self.alpha))
         if plan.pull.points.size == 0:
             return out
         t0 = time.perf_counter()
