@@ -274,13 +274,21 @@ class Collar:
         return tuple(np.concatenate(col) for col in zip(*parts))
 
     def _roots(self, w, c, s0, s1, h0, h1):
-        """s in each bracket [s0, s1] of cell c where h changes sign (Illinois, all at once), and t there
-        (NaN unless w lies on the segment there, to the closed form's rounding: `MISS`)."""
+        """s in each bracket [s0, s1] of cell c where h changes sign (all at once), and t there
+        (NaN unless w lies on the segment there, to the closed form's rounding: `MISS`).
+
+        Each step is Newton's from the last trial, h' from the closed form's Jacobian that its
+        evaluation gives anyway, where that falls strictly inside the bracket; else Illinois'
+        (regula falsi, the kept end's value halved when the same end is kept twice). The bracket
+        is kept either way, so the step converges as Illinois alone would at worst; Newton takes
+        it there in a few steps where Illinois took up to 50 (one evaluation each, 0.3-1 ms for a
+        handful of points, 10 % of a 1 MP BEM pull-back, measured)."""
         b = self.band
         a, z = s0.astype(np.float64), s1.astype(np.float64)
         fa, fz = h0.astype(np.float64), h1.astype(np.float64)
         side = np.zeros(len(w), dtype=np.int8)
         s = a.copy()
+        newton = np.full(len(w), np.nan)  # Newton's next trial from the last one (NaN: none yet)
         live = np.arange(len(w))
         for _ in range(ROOT_STEPS):  # each step evaluates the closed form once for the brackets still open
             k = live
@@ -288,12 +296,19 @@ class Collar:
                 trial = np.where(fz[k] != fa[k], z[k] - fz[k] * (z[k] - a[k]) / (fz[k] - fa[k]), 0.5 * (a[k] + z[k]))
             inside = (trial > a[k]) & (trial < z[k]) | (trial < a[k]) & (trial > z[k])
             trial = np.where(inside, trial, 0.5 * (a[k] + z[k]))
+            nk = newton[k]
+            use = (nk > a[k]) & (nk < z[k]) | (nk < a[k]) & (nk > z[k])
+            trial = np.where(use, nk, trial)
             before = s[k]
             s[k] = trial
-            g = b.g0[c[k]] + trial[:, None] * (b.g1 - b.g0)[c[k]]
-            gf = self._data(c[k], trial)[0]
-            val = self.solution.value_and_jacobian(g)[0]
+            dg = (b.g1 - b.g0)[c[k]]
+            g = b.g0[c[k]] + trial[:, None] * dg
+            gf, dgf = self._data(c[k], trial)
+            val, jac = self.solution.value_and_jacobian(g)
             h = _cross(w[k] - gf, val - gf)
+            dh = _cross(-dgf, val - gf) + _cross(w[k] - gf, np.einsum("kab,kb->ka", jac, dg) - dgf)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                newton[k] = trial - h / dh
             left = np.sign(h) == np.sign(fa[k])
             # Illinois: halve the kept end's value when the same end is kept twice
             fz[k] = np.where(~left & (side[k] == -1), 0.5 * fz[k], fz[k])
