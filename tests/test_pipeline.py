@@ -282,11 +282,14 @@ def test_cubic_with_alpha_prints_no_warnings():
 
 
 def test_huge_similar_polygons_warp_accurately_where_the_image_is():
-    """Both polygons 1e7 px: the map is the similarity to FEM accuracy over the image (the
-    meshes are graded from the image, so the cost does not grow with the polygons)."""
+    """Both polygons 1e6 px (15,000 times the image): the map is the similarity to FEM accuracy
+    over the image (the meshes are graded from the image, so the cost does not grow with the
+    polygons)."""
     from warpcli.grid import pixel_centres
 
-    big = np.array([[-5.0e6, -4.0e6], [6.0e6, -5.0e6], [5.0e6, 5.0e6], [-4.0e6, 6.0e6]])
+    # 1e6 px, not 1e7: the same class (graded meshes, every triangle count below the uniform
+    # cap's), 490k triangles against 610k and 60 % of the CPU; the accuracy is held to 0.1 px.
+    big = np.array([[-5.0e5, -4.0e5], [6.0e5, -5.0e5], [5.0e5, 5.0e5], [-4.0e5, 6.0e5]])
     moved = similarity(big, 1.02, 0.01, (3.0, -2.0), center=(32.0, 24.0))
     img = np.zeros((48, 64, 1), dtype=np.float32)
     res = warp_image(img, big, moved)
@@ -296,9 +299,9 @@ def test_huge_similar_polygons_warp_accurately_where_the_image_is():
     rot = np.array([[np.cos(0.01), -np.sin(0.01)], [np.sin(0.01), np.cos(0.01)]])
     exact = ((q - c - t) @ rot) / 1.02 + c  # the inverse of y = 1.02 R (x - c) + c + t
     err = np.hypot(*(res.inverse_map.reshape(-1, 2) - exact).T)
-    # The harmonic map at the image depends on the whole polygon: a relative
-    # accuracy of ~1e-8 of its size (uniform meshing at the cap: 0.05 px in 17 s).
-    assert err.max() < 0.25, err.max()
+    # The harmonic map at the image depends on the whole polygon: a relative accuracy of a few
+    # 1e-8 of its size (measured: 0.025 px at 1e6 px, 0.14 px at 1e7 px).
+    assert err.max() < 0.1, err.max()
 
 
 @pytest.mark.parametrize("interp", ["linear", "cubic"])

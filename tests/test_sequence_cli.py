@@ -159,11 +159,13 @@ def test_the_maps_of_failed_frames_are_not_kept(tmp_path, monkeypatch):
     from warpcli.batch import warp_sequence
     from warpcli.maps.compose import BijectiveMap
 
+    # Three frames, each its own map (keyframed): a map kept by the run, whichever and however
+    # many, is one of them (six frames took twice the CPU and could show nothing more).
     (tmp_path / "in").mkdir()
-    for f in range(1, 7):
+    for f in range(1, 4):
         (tmp_path / "in" / f"shot.{f:04d}.png").write_bytes(b"not a png")
     src = write_polygon(tmp_path / "s.json", SRC)
-    dst = _keyframes(tmp_path, {1: star(cx=64, cy=48, r_in=10, r_out=42), 6: star(cx=64, cy=48, r_in=12, r_out=40, phase=0.2)})
+    dst = _keyframes(tmp_path, {1: star(cx=64, cy=48, r_in=10, r_out=42), 3: star(cx=64, cy=48, r_in=12, r_out=40, phase=0.2)})
     maps = []
     original = BijectiveMap.between.__func__
 
@@ -173,7 +175,7 @@ def test_the_maps_of_failed_frames_are_not_kept(tmp_path, monkeypatch):
         return m
 
     monkeypatch.setattr(BijectiveMap, "between", classmethod(between))
-    items = warp_sequence(str(tmp_path / "in" / "shot.#.png"), str(tmp_path / "out.#.png"), range(1, 7), src, dst)
+    items = warp_sequence(str(tmp_path / "in" / "shot.#.png"), str(tmp_path / "out.#.png"), range(1, 4), src, dst)
     gc.collect()
-    assert len(maps) == 6 and all(i.error is not None for i in items)
-    assert [m() for m in maps] == [None] * 6
+    assert len(maps) == 3 and all(i.error is not None for i in items)
+    assert [m() for m in maps] == [None] * 3
