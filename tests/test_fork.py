@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from warpcli import _fork
-from warpcli.errors import InputError, MeshingError
+from warpcli.errors import InputError, MeshingError, WarpError
 from warpcli.maps import fem
 from warpcli.maps.compose import theta_for
 from warpcli.options import MapOptions
@@ -111,6 +111,39 @@ def test_the_identity_target_of_theta_none_is_not_forked():
     sq = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), name="sq")
     opts = MapOptions(theta="none")
     assert fem.build_forked(sq, theta_for(sq, sq, opts), opts, "target") is None
+
+
+@pytest.mark.parametrize(
+    "method, theta, conditions",
+    [(m, t, c) for m in ("fem", "mfs") for t in ("regular", "cyclic", "none", "optimized") for c in (None, "mixed")
+     if t != "none" or (m == "fem" and c is None)],  # --theta none: FEM's straight map only
+)  # fmt: skip
+def test_children_at_once_are_the_children_the_build_forks(monkeypatch, method, theta, conditions):
+    """`compose.children_at_once` (what `warpcli.pipeline` waits for) is the number of children
+    `build_map` forks, counted here as it forks them, wherever it says any (it says none where
+    the forks come after an optimization or not at all)."""
+    from warpcli.maps import base
+    from warpcli.maps.compose import build_map, children_at_once
+
+    opts = MapOptions(method=method, theta=theta, **({"conditions": conditions} if conditions else {}))
+    forked = []
+    init = base.ForkedBuild.__init__
+
+    def counting(self, *args):
+        forked.append(args[0])
+        init(self, *args)
+
+    monkeypatch.setattr(base.ForkedBuild, "__init__", counting)
+    src = Polygon(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 6.0], [4.0, 6.0], [4.0, 10.0], [0.0, 10.0]]), name="L")
+    dst = Polygon(src.points * [1.2, 0.9] + [1.0, 2.0], name="L2")
+    n = children_at_once(opts)
+    try:
+        build_map(src, dst, opts, regions=((0.0, 0.0, 12.0, 12.0), (0.0, 0.0, 14.0, 12.0)))
+    except WarpError:  # a combination refused later: the forks before it count
+        pass
+    assert n == 0 or len(forked) == n
+    if method == "fem" and theta in ("regular", "cyclic") and conditions is None:
+        assert n == 2
 
 
 def test_an_fem_build_that_dies_in_its_child_names_the_polygon(monkeypatch):

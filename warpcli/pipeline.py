@@ -28,7 +28,7 @@ from .cores import budget
 from .errors import ImageInputError, InputError, WarpError, naming
 from .keyframes import read_shape_at
 from .maps.cage import map_between
-from .maps.compose import BijectiveMap, PullBack
+from .maps.compose import BijectiveMap, PullBack, children_at_once
 from .options import WarpOptions, resolve_options
 from .outputs import PendingOutputs, check_output_path, write_checked
 from .plan import SamplingPlan, background_values, check_paste, plan_for, warn_if_outside
@@ -466,14 +466,12 @@ class _EarlyMap:
         regions = cls.regions_for(found[:2], found[2], opts)
         if regions is None:
             return None
-        from ._fork import available
-
+        children = children_at_once(opts.map)
         early = cls(src, dst, opts, regions)
-        forks = available() and opts.map.method == "fem" and opts.map.conditions != "mixed"
-        if forks and opts.map.theta in ("regular", "cyclic"):
-            # Its two children (`warpcli.maps.fem.build_forked`) are forked first, about 15 ms
-            # from now: the import of OpenImageIO that follows would hold the GIL against that.
-            early._brood.wait(2, timeout=0.05)
+        if children:
+            # The map's children are forked first, about 15 ms from now: the import of
+            # OpenImageIO that follows would hold the GIL against that.
+            early._brood.wait(children, timeout=0.05)
         return early
 
     def fits(self, header: ImageHeader | None, opts: WarpOptions) -> bool:

@@ -513,6 +513,20 @@ def build_map(
     return result
 
 
+def children_at_once(options: MapOptions) -> int:
+    """How many children `map_between` forks as soon as it starts with these options (0, 1 or 2).
+
+    A caller that starts the build on a thread and then holds the GIL for a while (an import)
+    may let them be forked first (`warpcli.pipeline`). The method says whether it forks at
+    once (``forks``); Theta must be one chosen without an optimization, and the straight map
+    onto the target (``--theta none``) forks the source's child alone.
+    """
+    method = METHODS[options.method].load() if options.method in METHODS else None
+    if method is None or not getattr(method, "forks", lambda _: False)(options):
+        return 0
+    return {"regular": 2, "cyclic": 2, "none": 1}.get(options.theta, 0)
+
+
 def _build_onto(src: Polygon, dst: Polygon, theta: Theta, opts: MapOptions, regions) -> BijectiveMap:
     """`build_map` for a chosen Theta, uncertified."""
     method = METHODS[opts.method].load()

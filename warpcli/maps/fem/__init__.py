@@ -441,6 +441,13 @@ def _built_to_send(
     return phi
 
 
+def forks(options: MapOptions) -> bool:
+    """Whether `build_forked` builds maps with these options in a child, as soon as it is called."""
+    from ..._fork import available
+
+    return available() and options.conditions != "mixed"
+
+
 def build_forked(
     polygon: Polygon, theta: Theta, options: MapOptions, role: str = "source", region=None, *,
     precompute: str | None = None,
@@ -451,9 +458,7 @@ def build_forked(
     conditions keep their solver). ``.result()`` is what `build` returns, bit for bit,
     with the lookup tables of `FEMMap.precompute` for side ``precompute`` (if given) made
     in the child."""
-    from ..._fork import available
-
-    if not available() or options.conditions == "mixed":
+    if not forks(options):
         return None
     if role == "target" and isinstance(theta, TargetTheta):
         return None  # the identity (see `build`): nothing to build
