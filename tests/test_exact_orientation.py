@@ -186,8 +186,12 @@ def test_fem_certificate_counts_a_sliver_the_float_area_gets_wrong():
     interior = np.setdiff1d(np.arange(len(phi.values)), phi.mesh.boundary)
     tri = phi.mesh.triangles
     theta_sense = np.sign(triangle_areas(phi.theta.points, np.array([[0, 1, 2]])))[0]
-    seen_wrong = False
-    for _ in range(40):
+    # Each sliver checks the certificate; the float area is fooled by about 1 in 70 of them (which
+    # ones moves with the last bits of the solve, that is with numpy's and scipy's versions): the
+    # walk goes on past 40 until one has, so that the class is shown to need the exact test.
+    seen_wrong, tried = False, 0
+    while tried < 40 or not seen_wrong and tried < 1000:
+        tried += 1
         v = int(rng.choice(interior))
         t = tri[np.flatnonzero((tri == v).any(axis=1))[0]]
         p, q = (phi.values[i] for i in t if i != v)
@@ -197,7 +201,7 @@ def test_fem_certificate_counts_a_sliver_the_float_area_gets_wrong():
         want = sum(sign2(*values[k]) * theta_sense <= 0 for k in tri)
         assert moved.certify().flipped == want
         seen_wrong |= int((triangle_areas(values, tri) * theta_sense <= 0).sum()) != want
-    assert seen_wrong, "some of these slivers should fool the float area"
+    assert seen_wrong, f"none of {tried} slivers fooled the float area"
 
 
 def test_volume_inversion_test_is_exact():
