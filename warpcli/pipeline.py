@@ -41,6 +41,7 @@ from .raster.imageio import (
     convert_pixels,
     read_header,
     read_image,
+    ready_to_write,
     with_compression,
     write_image,
 )
@@ -679,6 +680,8 @@ def warp_file(
         image = read_image(input_path)
         label_images = [_read_labels(label_in, image) for label_in, _ in labels]
         t_read = clock() - t0
+        if early is not None:
+            ready_to_write(image)  # while the map is built elsewhere: not at the encoder's start
         warn_if_outside(src, (image.width, image.height), os.fspath(input_path), "all background")
         out_size = opts.size if opts.size is not None else (image.width, image.height)
         warn_if_outside(dst, out_size, os.fspath(output_path), "all background")
