@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from warpcli.grid import pixel_centres
-from warpcli.raster.resample import resample
+from warpcli.raster.resample import footprint_bounds, resample
 
 
 def identity_map(w: int, h: int) -> np.ndarray:
@@ -100,3 +100,41 @@ def test_border_coverage_of_a_patch_is_that_of_the_patched_points(seed):
     assert (got is None) == (want is None)
     if got is not None:
         assert got[0].tobytes() == want[0].tobytes() and got[1].tobytes() == want[1].tobytes()
+
+
+def _bounds_by_numpy(points, jac, limits):
+    """footprint_bounds' definition, written with numpy's whole-array operations."""
+    xy = points.reshape(-1, 2)
+    ex = ey = 0.0
+    if jac is not None:
+        j = np.abs(jac.reshape(-1, 2, 2))
+        with np.errstate(invalid="ignore"):
+            ex = np.nan_to_num(0.5 * (j[:, 0, 0] + j[:, 0, 1]), nan=0.0, posinf=np.inf)
+            ey = np.nan_to_num(0.5 * (j[:, 1, 0] + j[:, 1, 1]), nan=0.0, posinf=np.inf)
+    finite = np.isfinite(xy).all(axis=1)
+    if not finite.any():
+        return None
+    with np.errstate(invalid="ignore"):
+        xs = [np.clip((xy[:, 0] + s * ex)[finite], limits[0], limits[1]) for s in (-1, 1)]
+        ys = [np.clip((xy[:, 1] + s * ey)[finite], limits[2], limits[3]) for s in (-1, 1)]
+    return xs[0].min(), xs[1].max(), ys[0].min(), ys[1].max()
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_footprint_bounds_are_numpys_bounds_exactly(seed):
+    # Points inside, beyond and far beyond the limits, some NaN or infinite; Jacobians from
+    # magnifying to huge, some NaN or infinite entries; with and without Jacobians.
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 300))
+    scale = 10.0 ** rng.uniform(-2, 12)
+    pts = rng.normal(50, scale, (n, 2))
+    jac = rng.normal(0, 10.0 ** rng.uniform(-3, 8), (n, 2, 2))
+    for arr, specials in ((pts, (np.nan, np.inf, -np.inf)), (jac, (np.nan, np.inf, -np.inf))):
+        flat = arr.reshape(-1)
+        hit = rng.random(flat.size) < rng.choice([0.0, 0.05, 0.5, 1.0])
+        flat[hit] = rng.choice(specials, int(hit.sum()))
+    limits = (-2.0, 100.0 + 2.0, -2.0, 70.0 + 2.0)
+    for j in (jac, None):
+        want = _bounds_by_numpy(pts, j, limits)
+        got = footprint_bounds(pts.reshape(n, 1, 2), None if j is None else j.reshape(n, 1, 2, 2), limits)
+        assert got == want if want is None else np.array_equal(np.array(got), np.array(want))

@@ -52,6 +52,7 @@ from .polygon import Polygon
 from .raster.imageio import ImageHeader, read_header, size_limit_lifted, with_compression
 from .raster.parts import TILE, PartReader, StripWriter, check_writable_in_parts, output_format
 from .raster.pixels import fill
+from .raster.resample import footprint_bounds
 
 log = logging.getLogger("warpcli")
 
@@ -311,39 +312,29 @@ def _reach(points: NDArray, jac: NDArray | None, extra: NDArray | None, header: 
 
     A sample reads the pixels around a point of its footprint, the
     parallelogram ``J [-1/2, 1/2]^2`` about its source point, so each point
-    is widened by half the footprint's extent (``jac`` None: none), then by
-    the two pixels bilinear interpolation reads and ``margin``; clipped to the
-    image (samples beyond it are background or read its edge pixels).
+    is widened by half the footprint's extent (``jac`` None: none;
+    `warpcli.raster.resample.footprint_bounds`), then by the two pixels
+    bilinear interpolation reads and ``margin``; clipped to the image
+    (samples beyond it are background or read its edge pixels).
     """
-    xy = points.reshape(-1, 2)
-    ex = ey = 0.0
-    if jac is not None:
-        j = np.abs(jac.reshape(-1, 2, 2))
-        with np.errstate(invalid="ignore"):
-            ex = np.nan_to_num(0.5 * (j[:, 0, 0] + j[:, 0, 1]), nan=0.0, posinf=np.inf)
-            ey = np.nan_to_num(0.5 * (j[:, 1, 0] + j[:, 1, 1]), nan=0.0, posinf=np.inf)
-    finite = np.isfinite(xy[:, 0]) & np.isfinite(xy[:, 1])
-    with np.errstate(invalid="ignore"):
-        lo_x = (xy[:, 0] - ex)[finite]
-        hi_x = (xy[:, 0] + ex)[finite]
-        lo_y = (xy[:, 1] - ey)[finite]
-        hi_y = (xy[:, 1] + ey)[finite]
+    w, h = header.width, header.height
+    # Beyond the image by more than a pixel (or infinite) reads no more than its edge.
+    limits = (-2.0, w + 2.0, -2.0, h + 2.0)
+    bounds = [b for b in (footprint_bounds(points, jac, limits),) if b is not None]
     if extra is not None and len(extra):
         e = np.asarray(extra, dtype=np.float64).reshape(-1, 2)
         e = e[np.isfinite(e).all(axis=1)]
-        lo_x, hi_x = np.r_[lo_x, e[:, 0]], np.r_[hi_x, e[:, 0]]
-        lo_y, hi_y = np.r_[lo_y, e[:, 1]], np.r_[hi_y, e[:, 1]]
-    w, h = header.width, header.height
-    if lo_x.size == 0:
+        if len(e):
+            bounds.append(footprint_bounds(e, None, limits))
+    if not bounds:
         return 0, 0, 1, 1
-    # Beyond the image by more than a pixel (or infinite) reads no more than its edge.
-    x0 = min(max(math.floor(np.clip(lo_x, -2.0, w + 2.0).min() - 0.5) - margin, 0), w - 1)
-    x1 = min(max(math.floor(np.clip(hi_x, -2.0, w + 2.0).max() - 0.5) + 2 + margin, x0 + 1), w)
-    y0 = min(max(math.floor(np.clip(lo_y, -2.0, h + 2.0).min() - 0.5) - margin, 0), h - 1)
-    y1 = min(max(math.floor(np.clip(hi_y, -2.0, h + 2.0).max() - 0.5) + 2 + margin, y0 + 1), h)
+    lo_x, hi_x = min(b[0] for b in bounds), max(b[1] for b in bounds)
+    lo_y, hi_y = min(b[2] for b in bounds), max(b[3] for b in bounds)
+    x0 = min(max(math.floor(lo_x - 0.5) - margin, 0), w - 1)
+    x1 = min(max(math.floor(hi_x - 0.5) + 2 + margin, x0 + 1), w)
+    y0 = min(max(math.floor(lo_y - 0.5) - margin, 0), h - 1)
+    y1 = min(max(math.floor(hi_y - 0.5) + 2 + margin, y0 + 1), h)
     return x0, y0, x1, y1
-
-
 
 
 def check_plausible(path: str | os.PathLike[str], header: ImageHeader) -> None:

@@ -176,6 +176,61 @@ def near_border(xy, w, h, out):
 
 
 @njit(cache=True, nogil=True)
+def footprint_bounds(xy, jac, with_jac, out):
+    """The least and greatest x and y that the footprints of samples at ``xy`` (N, 2) reach.
+
+    A sample at a finite point (x, y) with Jacobian ``jac[n]`` (N, 2, 2;
+    unread unless ``with_jac``) reaches x -+ ex and y -+ ey, where
+    ex = (|J00| + |J01|) / 2 and ey = (|J10| + |J11|) / 2 (a NaN half-extent
+    counts as 0, an infinite one stays infinite). Points with a NaN or
+    infinite coordinate reach nothing. Writes ``out[:4]`` = (least x,
+    greatest x, least y, greatest y) over the points that reach something,
+    each bound clipped to ``[out[4], out[5]]`` for x and ``[out[6], out[7]]``
+    for y as given on entry.
+
+    Returns
+    -------
+    int
+        How many points reach something (0: ``out[:4]`` unchanged).
+    """
+    xlo, xhi, ylo, yhi = out[4], out[5], out[6], out[7]
+    count = 0
+    min_x = max_x = min_y = max_y = 0.0
+    for n in range(xy.shape[0]):
+        x = xy[n, 0]
+        y = xy[n, 1]
+        if not (math.isfinite(x) and math.isfinite(y)):
+            continue
+        ex = 0.0
+        ey = 0.0
+        if with_jac:
+            ex = 0.5 * (abs(jac[n, 0, 0]) + abs(jac[n, 0, 1]))
+            ey = 0.5 * (abs(jac[n, 1, 0]) + abs(jac[n, 1, 1]))
+            if ex != ex:
+                ex = 0.0
+            if ey != ey:
+                ey = 0.0
+        lo_x = x - ex
+        hi_x = x + ex
+        lo_y = y - ey
+        hi_y = y + ey
+        if count == 0:
+            min_x, max_x, min_y, max_y = lo_x, hi_x, lo_y, hi_y
+        else:
+            min_x = min(min_x, lo_x)
+            max_x = max(max_x, hi_x)
+            min_y = min(min_y, lo_y)
+            max_y = max(max_y, hi_y)
+        count += 1
+    if count:
+        out[0] = min(max(min_x, xlo), xhi)
+        out[1] = min(max(max_x, xlo), xhi)
+        out[2] = min(max(min_y, ylo), yhi)
+        out[3] = min(max(max_y, ylo), yhi)
+    return count
+
+
+@njit(cache=True, nogil=True)
 def store(values, out, lo, hi, integer):
     """out = values (both flat), rounded half to even and clipped to [lo, hi] when ``integer``."""
     for i in range(values.shape[0]):
