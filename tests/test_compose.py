@@ -91,7 +91,6 @@ def test_similar_polygons_give_the_similarity(name, scale, angle, shift):
 def test_default_density_is_within_the_documented_accuracy():
     """auto density: mean error against a 4x finer mesh at most 0.05 px (README)."""
     from warpcli.maps.fem.mesh import auto_max_area
-    from warpcli.grid import pixel_centres
 
     src = Polygon(star(cx=128, cy=128, r_in=60, r_out=124))
     dst = Polygon(star(cx=128, cy=128, r_in=45, r_out=120, phase=0.3))

@@ -28,7 +28,6 @@ def test_random_pairs_are_bijective_and_respect_the_boundary(pair):
     src, dst = pair
     f = BijectiveMap.between(src, dst)
     assert f.flipped_triangles() == 0
-    n = src.n
     # Vertices and edges: parameter t on source edge i goes to t on target edge i.
     # Every edge's points in one call each way (the same points and bounds as edge by edge).
     t = np.array([0.0, 0.3, 0.7])[None, :, None]

@@ -21,7 +21,6 @@ from hypothesis import strategies as st
 
 from warpcli.errors import PolygonError
 from warpcli.grid import inside_polygon, pixel_centres
-from warpcli.options import MapOptions
 from warpcli.pipeline import warp_image
 from warpcli.polygon import Polygon
 from warpcli.polygon.partition import Partition

@@ -26,7 +26,6 @@ __all__ = [
     "boundary_nodes",
     "caller_parameters",
     "distance_to_boundary",
-    "fast_log",
     "interior_angles",
     "local_edges",
     "load_lstsq",

@@ -12,7 +12,7 @@ import numpy as np
 from ..errors import InputError
 from ..outputs import PendingOutputs, write_checked
 from . import _kernels
-from .compose import IdentityMap, TetMap, VolumeMap, VolumeThetaMap, VoxelGrid
+from .compose import IdentityMap, TetMap, VolumeMap, VolumeThetaMap
 from .fem import solve_dirichlet
 from .surface import Surface, check_pair, read_surface
 from .tetmesh import auto_edge, mesh_polyhedron
