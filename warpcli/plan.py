@@ -250,10 +250,17 @@ class SamplingPlan:
     ) -> NDArray:
         """What a pixel without a pre-image holds in an image of this type and channel count
         (the background, rounded and with the alpha convention as the resampler writes it)."""
+        bg = self.background_values(np.zeros((1, 1, channels), dtype=dtype))
+        return self._no_pre_image(dtype, channels, bg, alpha_channel, associated_alpha)
+
+    def _no_pre_image(
+        self, dtype: np.dtype, channels: int, bg: NDArray, alpha_channel: int | None, associated_alpha: bool
+    ) -> NDArray:
+        """The pixel the resampler writes where there is no pre-image, with background ``bg``."""
         probe = np.zeros((1, 1, channels), dtype=dtype)
         return resample(
-            probe, np.full((1, 1, 2), np.nan), interp=self.interp, background=self.background_values(probe),
-            alpha_channel=alpha_channel, associated_alpha=associated_alpha, part=(0, 0, 1, 1),
+            probe, np.full((1, 1, 2), np.nan), interp=self.interp, background=bg, alpha_channel=alpha_channel,
+            associated_alpha=associated_alpha, part=(0, 0, 1, 1),
         )[0, 0]  # fmt: skip
 
     def sample_window(
@@ -373,8 +380,7 @@ class SamplingPlan:
         r, c = self.pull.origin
         wh, ww = self.pull.points.shape[:2]
         if (wh, ww) != (height, width):
-            fill(out, resample(pixels, np.full((1, 1, 2), np.nan), interp=self.interp, background=bg,
-                               alpha_channel=alpha_channel, associated_alpha=associated_alpha)[0, 0])  # fmt: skip
+            fill(out, self._no_pre_image(pixels.dtype, pixels.shape[2], bg, alpha_channel, associated_alpha))
             if r > 0:
                 yield 0, r
         for a in range(0, wh, band):
@@ -396,8 +402,7 @@ class SamplingPlan:
         # Pixels outside the window have no pre-image: the background, exactly as
         # the resampler writes it for such a pixel (rounded, alpha convention).
         out = np.empty((height, width, window.shape[2]), dtype=window.dtype)
-        fill(out, resample(pixels, np.full((1, 1, 2), np.nan), interp=self.interp, background=bg,
-                           alpha_channel=alpha_channel, associated_alpha=associated_alpha)[0, 0])  # fmt: skip
+        fill(out, self._no_pre_image(pixels.dtype, pixels.shape[2], bg, alpha_channel, associated_alpha))
         r, c = self.pull.origin
         out[r : r + window.shape[0], c : c + window.shape[1]] = window
         return out
