@@ -522,6 +522,39 @@ def test_progress_stays_silent_for_short_runs():
     assert stream.getvalue() == ""
 
 
+def test_progress_says_when_kernels_are_being_compiled_here_or_in_a_forked_child():
+    """A first run compiles kernels for seconds, most of it in the children that build the maps:
+    the line says so while this process or a child it forked compiles, and only then."""
+    import os
+
+    from warpcli import _native
+    from warpcli.cli import Progress
+
+    progress = Progress(_FakeTerminal(True))
+    progress.stage("building the map")
+    note = "compiling warpcli's kernels"
+    assert note not in progress.line(1.0)
+    with _native.compiling_kernel():
+        assert note in progress.line(1.0)
+    assert note not in progress.line(1.0)
+    ready, go = os.pipe(), os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: compiling until told to stop
+        try:
+            with _native.compiling_kernel():
+                os.write(ready[1], b"x")
+                os.read(go[0], 1)
+        finally:
+            os._exit(0)
+    os.read(ready[0], 1)
+    try:
+        assert note in progress.line(1.0)
+    finally:
+        os.write(go[1], b"x")
+        os.waitpid(pid, 0)
+    assert note not in progress.line(1.0)
+
+
 # --- report, grid and heatmap -------------------------------------------------
 
 REPORT_KEYS = [

@@ -73,7 +73,7 @@ def _one_compile_across_processes() -> None:
         from numba.core.dispatcher import Dispatcher
     except ImportError:  # pragma: no cover - another numba
         return
-    from ._native import locked_file
+    from ._native import compiling_kernel, locked_file
     compile_ = Dispatcher.compile
     if getattr(compile_, "serialized", False):
         return
@@ -90,7 +90,7 @@ def _one_compile_across_processes() -> None:
                 lock = locked_file(path + ".compiling")
             except OSError:  # a cache directory numba cannot write either
                 return compile_(self, sig)
-            with lock:
+            with compiling_kernel(), lock:
                 _COMPILING.add(path)
                 try:
                     # Finds in the cache what another process compiled while this one waited.

@@ -43,6 +43,7 @@ import contextlib
 import importlib
 import importlib.util
 import logging
+import mmap
 import os
 import sys
 import threading
@@ -243,9 +244,10 @@ class Kernels:
                 # Processes starting together on a fresh install (a farm, ``pytest -n``) would each
                 # compile the same kernel (seconds of CPU each): one compiles, the others wait for
                 # it and load its file.
-                with _compiling(dirs, filename):
+                with compiling_kernel(), _compiling(dirs, filename):
                     entry = _cached_entry(dirs, filename, symbol)
                     if entry is None:
+                        _say_compiling(dirs)
                         entry = _compile(self.module, name, variant, symbol, jit)
                         jit.add(entry)  # kept only if it loads
                         _write_entry(dirs, filename, entry)
@@ -283,6 +285,54 @@ def _variant(args: tuple) -> tuple | None:
 _LOCK = threading.RLock()
 _JIT = None
 
+#: How many of this process's threads are compiling a kernel, or waiting for another process
+#: compiling it (`compiling`).
+_BUSY = [0]
+_BUSY_LOCK = threading.Lock()
+_SAID = [False]
+#: Each process's count (capped at 255) in the byte of its pid modulo the size, in memory shared
+#: with the children it forks (which build maps, and compile what they need there). Only a
+#: process's own byte is written by it.
+_SHARED_BUSY = mmap.mmap(-1, 4096)
+
+
+def _count_busy(change: int) -> None:
+    with _BUSY_LOCK:
+        _BUSY[0] += change
+        _SHARED_BUSY[os.getpid() % len(_SHARED_BUSY)] = min(_BUSY[0], 255)
+
+
+@contextlib.contextmanager
+def compiling_kernel() -> Iterator[None]:
+    """Mark the block as compiling a kernel (or waiting for one being compiled elsewhere): `compiling`."""
+    _count_busy(1)
+    try:
+        yield
+    finally:
+        _count_busy(-1)
+
+
+def compiling() -> bool:
+    """Whether this process, or a child it forked, is compiling a kernel now (or waiting for another
+    process to).
+
+    That happens on the first runs after an install or an upgrade (each
+    kernel once per argument types, cached on disk after): a first BEM warp
+    compiles for about 10 s, most of it in the children that build the maps.
+    The ``warp`` command's progress line says so (`warpcli.cli.progress`), so
+    that nobody takes it for the warp's speed.
+    """
+    return bool(_SHARED_BUSY[:].strip(b"\0"))
+
+
+def _say_compiling(dirs: list[str]) -> None:
+    """Log once per process (``-v``) that kernels are being compiled, and where they are kept."""
+    if not _SAID[0]:
+        _SAID[0] = True
+        _log.info("compiling warpcli's kernels for this machine (once: they are kept in %s)", dirs[0])
+
+
+
 
 def _hold_for_fork() -> None:
     _LOCK.acquire()
@@ -293,8 +343,10 @@ def _release_after_fork() -> None:
 
 
 def _new_lock_in_child() -> None:
-    global _LOCK
+    global _LOCK, _BUSY_LOCK
     _LOCK = threading.RLock()
+    _BUSY_LOCK = threading.Lock()
+    _BUSY[0] = 0  # the parent's threads, compiling or not, are not this process's
 
 
 if hasattr(os, "register_at_fork"):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 
@@ -67,7 +68,7 @@ class Progress:
     def line(self, elapsed: float) -> str:
         """The text of the line after ``elapsed`` seconds."""
         if self.total is None:
-            return f"warp: {self._stage}... {elapsed:.1f} s"
+            return f"warp: {self._stage}{_compiling_note()}... {elapsed:.1f} s"
         done, total = self._count, self.total
         text = f"warp: {self._what} {done}/{total}"
         if done and elapsed > 0:
@@ -99,6 +100,14 @@ class Progress:
                 self._shown = True
             if self._done.wait(self._interval):
                 return
+
+
+def _compiling_note() -> str:
+    """What the line adds while kernels are being compiled (`warpcli._native.compiling`)."""
+    native = sys.modules.get("warpcli._native")  # not imported: nothing compiled (and no numpy loaded here)
+    if native is None or not native.compiling():
+        return ""
+    return " (compiling warpcli's kernels for this machine: the first runs only)"
 
 
 def _clock(seconds: float) -> str:
