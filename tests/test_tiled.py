@@ -402,6 +402,47 @@ def test_strips_made_ahead_come_in_order_and_an_error_making_one_is_raised_by_th
     endless._task.result()
 
 
+def test_strips_made_from_plans_made_ahead_come_in_order_and_stopping_ends_both_threads():
+    """Two `warpcli.tiled._Ahead` in a row (plans, then strips, as `warp_file_tiled` makes them): the
+    strips in order, an error making a plan raised by the writer, and `stop` ending both threads
+    wherever each one is (a thread left waiting would keep the process from exiting)."""
+    import itertools
+    import time
+
+    from warpcli.errors import ImageInputError
+    from warpcli.tiled import _Ahead
+
+    def chain(plans):
+        ahead = _Ahead(plans, name="warp-plans")
+        return ahead, _Ahead((2 * p for p in ahead), upstream=ahead)
+
+    _, made = chain(np.full(2, k) for k in range(40))
+    assert [int(s[0]) for s in made] == [2 * k for k in range(40)]
+
+    def failing():
+        yield np.zeros(1)
+        raise ImageInputError("in.png: cannot read image: cut short")
+
+    got = []
+    with pytest.raises(ImageInputError, match="cut short"):
+        for strip in chain(failing())[1]:
+            got.append(strip)
+    assert len(got) == 1
+    def slow():  # plans slower than the strips: the strips' thread waits for the next plan
+        for k in itertools.count():
+            time.sleep(0.03)
+            yield np.full(1, k)
+
+    for taken, plans in itertools.product((0, 1, 2, 5), (lambda: (np.full(1, k) for k in itertools.count()), slow)):
+        ahead, made = chain(plans())  # the writer fails after ``taken`` strips
+        for _ in itertools.islice(made, taken):
+            pass
+        made.stop()
+        for task in (made._task, ahead._task):
+            task._thread.join(timeout=10)
+            assert not task._thread.is_alive()
+
+
 @pytest.mark.parametrize("channels, dtype", [(4, np.uint8), (1, np.uint16)])
 def test_strips_of_an_image_decoded_while_the_map_is_built_write_the_bytes_of_strips_read_in_parts(
     tmp_path, monkeypatch, small_strips, channels, dtype

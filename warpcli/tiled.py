@@ -137,8 +137,11 @@ def warp_file_tiled(
     with size_limit_lifted(), atomic_path(output_path) as tmp, parts as reader:
         writer = StripWriter(tmp, output_path, width, height, out_header)
         plans = (sampler.plan(width, height, y, min(height, y + TILE), timings) for y in range(0, height, TILE))
-        strips = (sampler.render(reader, width, planned, timings) for planned in plans)
-        made = _Ahead(strips) if budget() > 1 else None
+        # With cores to spare, three stages at once: the next strips planned, this
+        # one resampled, the last one encoded (`_Ahead`).
+        ahead = _Ahead(plans, name="warp-plans") if budget() > 1 else None
+        strips = (sampler.render(reader, width, planned, timings) for planned in (ahead if ahead is not None else plans))
+        made = _Ahead(strips, upstream=ahead) if ahead is not None else None
         try:
             for strip in made if made is not None else strips:
                 t0 = clock()
@@ -170,17 +173,22 @@ class _Decoded:
 
 
 class _Ahead:
-    """Strips made on a thread of their own, one ahead of the strip being written.
+    """Strips (or their plans) made on a thread of their own, one ahead of the one being used.
 
-    The encoder (zlib, one core, holding the GIL in OpenImageIO) writes strip k
+    The encoder (zlib, one core, GIL released in OpenImageIO) writes strip k
     while the next is pulled back and resampled, in compiled kernels that
     release the GIL, instead of after it: 12 MP in strips, about a third less
-    time for the strips. The strips come in order, so the file is the same.
-    Iterating gives each strip, then raises what making them raised; `stop`
-    makes the thread end after the strip it is making (the writer failed).
+    time for the strips. And the strips' plans are made on a thread of their
+    own too, so that strip k+1 is pulled back while strip k is resampled:
+    each stage has stretches on one core (the edge coverage, the reach of a
+    part, numpy between kernels), which left the second core idle while the
+    encoder waited for the next strip. The items come in order, so the file
+    is the same. Iterating gives each item, then raises what making them
+    raised; `stop` makes the thread end after the item it is making (the
+    writer failed), and the ``upstream`` one it takes its items from.
     """
 
-    def __init__(self, strips) -> None:
+    def __init__(self, items, *, name: str = "warp-strips", upstream: _Ahead | None = None) -> None:
         import queue
         import threading
 
@@ -188,30 +196,39 @@ class _Ahead:
 
         self._made: queue.Queue = queue.Queue(maxsize=1)
         self._stopped = threading.Event()
-        self._task = Task(self._make, strips, name="warp-strips")
+        self._upstream = upstream
+        self._task = Task(self._make, items, name=name)
 
-    def _make(self, strips) -> None:
+    def _make(self, items) -> None:
         try:
-            for strip in strips:
+            for item in items:
                 if self._stopped.is_set():
                     return
-                self._made.put((strip, None))
+                self._made.put((item, None))
         except BaseException as err:  # handed to the writer, which raises it
             self._made.put((None, err))
             return
-        self._made.put((None, None))
+        if not self._stopped.is_set():
+            self._made.put((None, None))
 
     def __iter__(self):
+        import queue
+
         while True:
-            strip, err = self._made.get()
+            try:
+                item, err = self._made.get(timeout=0.05)
+            except queue.Empty:
+                if self._stopped.is_set():  # stopped: its thread may have ended without a last word
+                    return
+                continue
             if err is not None:
                 raise err
-            if strip is None:
+            if item is None:
                 return
-            yield strip
+            yield item
 
     def stop(self) -> None:
-        """End the thread: no more strips are wanted (it finishes the one it is making)."""
+        """End the thread: no more items are wanted (it finishes the one it is making), nor upstream."""
         import queue
 
         self._stopped.set()
@@ -220,6 +237,8 @@ class _Ahead:
                 self._made.get_nowait()  # one that waits to be put finds room, then stops
         except queue.Empty:
             pass
+        if self._upstream is not None:
+            self._upstream.stop()
 
 
 class _Sampler:
