@@ -136,6 +136,25 @@ def test_scatter_band_matches_numba_bitwise():
     _same(MAPS, "outside_columns", lambda: (pixels, 37, 6, 30))
 
 
+def test_scatter_band_cells_match_numba_bitwise_and_scatter_the_gathered_products():
+    """Jacobians from per-cell tables (the last row NaN, for cell -1) give the bits of
+    gathering them first and scattering the products (`scatter_band`)."""
+    pixels, found, _, _ = _band()
+    rng = np.random.default_rng(6)
+    ta, tb = rng.normal(size=(41, 2, 2)), rng.normal(size=(23, 2, 2))
+    ta[5], ta[-1], tb[-1] = np.inf, np.nan, np.nan  # an infinite cell; the NaN rows
+    ca = rng.integers(-1, 40, len(pixels))
+    cb = rng.integers(-1, 22, len(pixels)).astype(np.int32)
+    args = (pixels, 37, 14, 4, 30, 15, 26, found)
+    window = lambda: (np.full((12 * 30, 2), np.nan), np.full((12 * 30, 2, 2), np.nan))  # noqa: E731
+    _same(MAPS, "scatter_band_cells", lambda: (*args, ta, ca, tb, cb, *window()))
+    got, want = window(), window()
+    Kernels(MAPS).scatter_band_cells(*args, ta, ca, tb, cb, *got)
+    gathered_a, gathered_b = ta[np.where(ca < 0, 40, ca)], tb[np.where(cb < 0, 22, cb)]
+    Kernels(MAPS).scatter_band(*args, gathered_a, gathered_b, True, *want)
+    assert got[0].tobytes() == want[0].tobytes() and got[1].tobytes() == want[1].tobytes()
+
+
 @pytest.mark.parametrize("with_jac", [True, False])
 def test_scatter_band_is_the_numpy_scatter(with_jac):
     """What `warpcli.maps.compose._through_theta` did in numpy: rows and columns by divmod, the rows

@@ -330,16 +330,16 @@ def test_strips_of_a_thin_image_compute_each_band_once_and_agree_with_the_whole(
     whole = fmap.pull_back(width, height)
     phi = fmap.phi1
     calls = []
-    real = type(phi).evaluate_grid
+    real = type(phi).grid_cells  # what a pull-back with Jacobians scans a FEM band with
 
     def counted(self, w, h, rows=None, **k):
         calls.append(rows)
         return real(self, w, h, rows, **k)
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(type(phi), "evaluate_grid", counted)
+        mp.setattr(type(phi), "grid_cells", counted)
         strips = [fmap.pull_back(width, height, rows=(r, min(r + 256, height))) for r in range(0, height, 256)]
-    assert len(calls) == len(set(calls))  # no band twice
+    assert len(calls) == len(set(calls)) >= 1  # no band twice (and the bands were counted)
     got = np.full((height, width, 2), np.nan)
     for s in strips:
         (r0, c0), pts = s.origin, s.points

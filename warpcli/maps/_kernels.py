@@ -47,6 +47,33 @@ def scatter_band(pixels, width, r0, c0, ww, start, stop, found, a, b, with_jac, 
 
 
 @njit(cache=True, nogil=True)
+def scatter_band_cells(pixels, width, r0, c0, ww, start, stop, found, ta, ca, tb, cb, points, out):
+    """`scatter_band` of Jacobians constant per cell: ``a[k] = ta[ca[k]]`` and
+    ``b[k] = tb[cb[k]]``, the tables' last row for a cell below 0 (none; a row of
+    NaN, as a gather gives it). The same products of the same values, without
+    gathering each band's Jacobians into two arrays first."""
+    na = ta.shape[0] - 1
+    nb = tb.shape[0] - 1
+    for k in range(pixels.shape[0]):
+        p = pixels[k]
+        row = p // width
+        if row < start or row >= stop:
+            continue
+        i = (row - r0) * ww + (p - row * width - c0)
+        points[i, 0] = found[k, 0]
+        points[i, 1] = found[k, 1]
+        ia = ca[k]
+        if ia < 0:
+            ia = na
+        ib = cb[k]
+        if ib < 0:
+            ib = nb
+        for r in range(2):
+            for c in range(2):
+                out[i, r, c] = ta[ia, r, 0] * tb[ib, 0, c] + ta[ia, r, 1] * tb[ib, 1, c]
+
+
+@njit(cache=True, nogil=True)
 def outside_columns(pixels, width, c0, c1):
     """How many of the grid pixels ``pixels`` (flat indices, ``width`` wide) lie outside the columns ``c0 <= col < c1``."""
     n = 0
