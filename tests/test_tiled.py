@@ -443,6 +443,33 @@ def test_strips_made_from_plans_made_ahead_come_in_order_and_stopping_ends_both_
             assert not task._thread.is_alive()
 
 
+@pytest.mark.parametrize("most, planned_ahead", [(None, True), (0, False)])
+def test_plans_are_made_ahead_only_where_they_are_small(tmp_path, monkeypatch, small_strips, most, planned_ahead):
+    """A strip's plan is 48 bytes a pixel: an image too wide for `tiled.AHEAD_PLAN_BYTES` plans each
+    strip when it is resampled (memory bounded by one plan), with the same bytes."""
+    from warpcli.cores import jobs
+
+    made = []
+    real = tiled._Ahead.__init__
+
+    def named(self, items, *, name="warp-strips", upstream=None):
+        made.append(name)
+        real(self, items, name=name, upstream=upstream)
+
+    monkeypatch.setattr(tiled._Ahead, "__init__", named)
+    if most is not None:
+        monkeypatch.setattr(tiled, "AHEAD_PLAN_BYTES", most)
+    px = np.random.default_rng(3).integers(0, 256, (70, 90, 3)).astype(np.uint8)
+    inp = write_png(tmp_path / "in.png", px)
+    a = write_polygon(tmp_path / "a.json", star(6, 45, 35, 12, 33))
+    b = write_polygon(tmp_path / "b.json", star(6, 45, 35, 10, 33, phase=0.25))
+    with jobs(2):
+        warp_file(inp, tmp_path / "s.png", a, b, tiled=True)
+    warp_file(inp, tmp_path / "w.png", a, b)
+    assert ("warp-plans" in made) == planned_ahead and "warp-strips" in made
+    assert (tmp_path / "s.png").read_bytes() == (tmp_path / "w.png").read_bytes()
+
+
 @pytest.mark.parametrize("channels, dtype", [(4, np.uint8), (1, np.uint16)])
 def test_strips_of_an_image_decoded_while_the_map_is_built_write_the_bytes_of_strips_read_in_parts(
     tmp_path, monkeypatch, small_strips, channels, dtype

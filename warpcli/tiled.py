@@ -64,6 +64,9 @@ CHUNK = 2048
 PART_BYTES = 256 << 20
 #: Extra input pixels around each part for the cubic spline's prefilter.
 CUBIC_MARGIN = 12
+#: The largest strip plan made ahead of the strip being resampled (`_Ahead`): wider
+#: images plan each strip when it is resampled, so that memory stays bounded by a strip's plan.
+AHEAD_PLAN_BYTES = 128 << 20
 
 
 @dataclass
@@ -138,10 +141,11 @@ def warp_file_tiled(
         writer = StripWriter(tmp, output_path, width, height, out_header)
         plans = (sampler.plan(width, height, y, min(height, y + TILE), timings) for y in range(0, height, TILE))
         # With cores to spare, three stages at once: the next strips planned, this
-        # one resampled, the last one encoded (`_Ahead`).
-        ahead = _Ahead(plans, name="warp-plans") if budget() > 1 else None
+        # one resampled, the last one encoded (`_Ahead`); only where the two more
+        # plans that holds are small (a plan is 48 bytes a pixel of the strip).
+        ahead = _Ahead(plans, name="warp-plans") if budget() > 1 and 48 * TILE * width <= AHEAD_PLAN_BYTES else None
         strips = (sampler.render(reader, width, planned, timings) for planned in (ahead if ahead is not None else plans))
-        made = _Ahead(strips, upstream=ahead) if ahead is not None else None
+        made = _Ahead(strips, upstream=ahead) if budget() > 1 else None
         try:
             for strip in made if made is not None else strips:
                 t0 = clock()
@@ -469,6 +473,6 @@ def tiled_needed(header: ImageHeader, width: int, height: int) -> bool:
 
 
 __all__ = [
-    "CHUNK", "CUBIC_MARGIN", "MAX_COMPRESSION", "PART_BYTES", "TiledResult", "check_plausible", "in_parts", "tiled_needed",
+    "AHEAD_PLAN_BYTES", "CHUNK", "CUBIC_MARGIN", "MAX_COMPRESSION", "PART_BYTES", "TiledResult", "check_plausible", "in_parts", "tiled_needed",
     "warp_file_tiled",
 ]  # fmt: skip
