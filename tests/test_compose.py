@@ -283,3 +283,28 @@ def test_theta_points_a_rounding_error_outside_go_through_the_boundary_map():
         m = f.phi0.inverse(outward, jacobian=True, coherent=coherent)
         np.testing.assert_allclose(m.points, expected, atol=1e-9)
         assert np.isnan(m.jacobian).all()
+
+
+@pytest.mark.parametrize("rows", [None, (30, 95)])
+def test_pull_back_jacobians_are_the_products_of_both_maps_jacobians(rows):
+    """The pull-back's Jacobian at each pixel centre is J(phi0^-1) @ J(phi1), each map's own
+    (`evaluate_grid` and `inverse`, in numpy), where FEM scatters products of per-triangle tables
+    (`FEMMap.grid_cells`, `inverse_cells`, `jacobian_table`); NaN where either is unknown."""
+    f = BijectiveMap.between(Polygon(star()), Polygon(star(phase=0.3)))
+    pull = f.pull_back(128, 128, rows=rows)
+    g = f.phi1.evaluate_grid(128, 128, jacobian=True)
+    m = f.phi0.inverse(g.values, jacobian=True, coherent=True)
+    a, b = m.jacobian, g.jacobian
+    prod = np.stack(
+        [np.stack([a[:, r, 0] * b[:, 0, c] + a[:, r, 1] * b[:, 1, c] for c in range(2)], axis=-1) for r in range(2)],
+        axis=-2,
+    )  # fmt: skip
+    want = np.full((128 * 128, 2, 2), np.nan)
+    want[g.pixels] = prod
+    points = np.full((128 * 128, 2), np.nan)
+    points[g.pixels] = m.points
+    (r0, c0), (h, w) = pull.origin, pull.points.shape[:2]
+    want = want.reshape(128, 128, 2, 2)[r0 : r0 + h, c0 : c0 + w]
+    np.testing.assert_array_equal(pull.jacobian, want)
+    np.testing.assert_array_equal(pull.points, points.reshape(128, 128, 2)[r0 : r0 + h, c0 : c0 + w])
+    assert (np.isfinite(pull.jacobian[..., 0, 0]) == np.isfinite(pull.points[..., 0])).mean() > 0.99

@@ -114,6 +114,70 @@ def test_scatter_products_match_numba_bitwise():
     _same(MAPS, "scatter_products", lambda: (a, b, idx, np.full((600, 2, 2), np.nan)))
 
 
+def _band(seed=5, width=37, n=900):
+    """A band's grid pixels in columns 4..33 (some twice, some beyond the rows kept), points and Jacobians."""
+    rng = np.random.default_rng(seed)
+    pixels = rng.integers(10, 30, n) * width + rng.integers(4, 34, n)
+    pixels[::11] = pixels[5]  # one pixel reported again: the last one wins
+    found = rng.normal(size=(n, 2))
+    found[::9] = np.nan
+    a, b = rng.normal(size=(n, 2, 2)), rng.normal(size=(n, 2, 2))
+    a[::7] = np.nan
+    b[3] = np.inf
+    return pixels, found, a, b
+
+
+def test_scatter_band_matches_numba_bitwise():
+    pixels, found, a, b = _band()
+    ww, rows = 30, 12  # the window: columns 4..33, rows 14..25 (a strip cutting the band at 15..25)
+    window = lambda: (np.full((rows * ww, 2), np.nan), np.full((rows * ww, 2, 2), np.nan))  # noqa: E731
+    _same(MAPS, "scatter_band", lambda: (pixels, 37, 14, 4, ww, 15, 26, found, a, b, True, *window()))
+    _same(MAPS, "scatter_band", lambda: (pixels, 37, 14, 4, ww, 15, 26, found, a, b, False, *window()))
+    _same(MAPS, "outside_columns", lambda: (pixels, 37, 6, 30))
+
+
+def test_scatter_band_cells_match_numba_bitwise_and_scatter_the_gathered_products():
+    """Jacobians from per-cell tables (the last row NaN, for cell -1) give the bits of
+    gathering them first and scattering the products (`scatter_band`)."""
+    pixels, found, _, _ = _band()
+    rng = np.random.default_rng(6)
+    ta, tb = rng.normal(size=(41, 2, 2)), rng.normal(size=(23, 2, 2))
+    ta[5], ta[-1], tb[-1] = np.inf, np.nan, np.nan  # an infinite cell; the NaN rows
+    ca = rng.integers(-1, 40, len(pixels))
+    cb = rng.integers(-1, 22, len(pixels)).astype(np.int32)
+    args = (pixels, 37, 14, 4, 30, 15, 26, found)
+    window = lambda: (np.full((12 * 30, 2), np.nan), np.full((12 * 30, 2, 2), np.nan))  # noqa: E731
+    _same(MAPS, "scatter_band_cells", lambda: (*args, ta, ca, tb, cb, *window()))
+    got, want = window(), window()
+    Kernels(MAPS).scatter_band_cells(*args, ta, ca, tb, cb, *got)
+    gathered_a, gathered_b = ta[np.where(ca < 0, 40, ca)], tb[np.where(cb < 0, 22, cb)]
+    Kernels(MAPS).scatter_band(*args, gathered_a, gathered_b, True, *want)
+    assert got[0].tobytes() == want[0].tobytes() and got[1].tobytes() == want[1].tobytes()
+
+
+@pytest.mark.parametrize("with_jac", [True, False])
+def test_scatter_band_is_the_numpy_scatter(with_jac):
+    """What `warpcli.maps.compose._through_theta` did in numpy: rows and columns by divmod, the rows
+    start..stop kept, ``points[idx] = found`` (the last of a repeated index wins) and the products."""
+    from warpcli.maps import _kernels as kernels
+
+    pixels, found, a, b = _band()
+    width, r0, c0, ww, start, stop = 37, 14, 4, 30, 15, 26
+    points, jac = np.full((12 * ww, 2), np.nan), np.full((12 * ww, 2, 2), np.nan)
+    Kernels(MAPS).scatter_band(pixels, width, r0, c0, ww, start, stop, found, a, b, with_jac, points, jac)
+    row, col = np.divmod(pixels, width)
+    cut = (row >= start) & (row < stop)
+    idx = (row[cut] - r0) * ww + (col[cut] - c0)
+    want_points, want_jac = np.full((12 * ww, 2), np.nan), np.full((12 * ww, 2, 2), np.nan)
+    want_points[idx] = found[cut]
+    if with_jac:
+        want_jac[idx] = np.einsum("kij,kjl->kil", a[cut], b[cut])
+    assert points.tobytes() == want_points.tobytes()
+    np.testing.assert_array_equal(jac, want_jac)  # (einsum may sum in another order: equal, NaN where NaN)
+    assert kernels.outside_columns(pixels, width, 4, 34) == 0
+    assert kernels.outside_columns(pixels, width, 6, 30) == ((pixels % width < 6) | (pixels % width >= 30)).sum() > 0
+
+
 def test_arguments_the_native_route_does_not_take_go_to_numba_with_the_same_result():
     kernels = Kernels(RASTER)
     img, xy = _image(np.uint8), _points()

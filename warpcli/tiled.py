@@ -11,7 +11,8 @@ the image:
 - the output is made in strips of `TILE` rows: the pull-back of the strip's
   rows only (`BijectiveMap.pull_back` with ``rows``), the edge coverage of its
   pixels, then chunks of `CHUNK` columns, each resampled from the rectangle
-  of the input its samples reach (`PartReader`), read through the cache;
+  of the input its samples reach (`PartReader`), read through the cache (an
+  image decoded whole, ``pixels``, is resampled as it is, in runs of rows);
 - each strip is written as it is done (`StripWriter`: tiles for TIFF and
   OpenEXR, scanlines for PNG), under a temporary name renamed into place at
   the end.
@@ -56,12 +57,16 @@ from .raster.resample import footprint_bounds
 
 log = logging.getLogger("warpcli")
 
-#: Columns of the output resampled at once within a strip.
+#: Columns of the output resampled at once within a strip (from a decoded image,
+#: runs of whole rows of about `TILE` x `CHUNK` pixels: `_Sampler._row_runs`).
 CHUNK = 2048
 #: Bytes of input one chunk may read at once; a chunk reaching more is split.
 PART_BYTES = 256 << 20
 #: Extra input pixels around each part for the cubic spline's prefilter.
 CUBIC_MARGIN = 12
+#: The largest strip plan made ahead of the strip being resampled (`_Ahead`): wider
+#: images plan each strip when it is resampled, so that memory stays bounded by a strip's plan.
+AHEAD_PLAN_BYTES = 128 << 20
 
 
 @dataclass
@@ -134,8 +139,13 @@ def warp_file_tiled(
     parts = PartReader(input_path, header) if pixels is None else _Decoded(pixels)
     with size_limit_lifted(), atomic_path(output_path) as tmp, parts as reader:
         writer = StripWriter(tmp, output_path, width, height, out_header)
-        strips = (sampler.strip(reader, width, height, y, min(height, y + TILE), timings) for y in range(0, height, TILE))
-        made = _Ahead(strips) if budget() > 1 else None
+        plans = (sampler.plan(width, height, y, min(height, y + TILE), timings) for y in range(0, height, TILE))
+        # With cores to spare, three stages at once: the next strips planned, this
+        # one resampled, the last one encoded (`_Ahead`); only where the two more
+        # plans that holds are small (a plan is 48 bytes a pixel of the strip).
+        ahead = _Ahead(plans, name="warp-plans") if budget() > 1 and 48 * TILE * width <= AHEAD_PLAN_BYTES else None
+        strips = (sampler.render(reader, width, planned, timings) for planned in (ahead if ahead is not None else plans))
+        made = _Ahead(strips, upstream=ahead) if budget() > 1 else None
         try:
             for strip in made if made is not None else strips:
                 t0 = clock()
@@ -167,17 +177,22 @@ class _Decoded:
 
 
 class _Ahead:
-    """Strips made on a thread of their own, one ahead of the strip being written.
+    """Strips (or their plans) made on a thread of their own, one ahead of the one being used.
 
-    The encoder (zlib, one core, holding the GIL in OpenImageIO) writes strip k
+    The encoder (zlib, one core, GIL released in OpenImageIO) writes strip k
     while the next is pulled back and resampled, in compiled kernels that
     release the GIL, instead of after it: 12 MP in strips, about a third less
-    time for the strips. The strips come in order, so the file is the same.
-    Iterating gives each strip, then raises what making them raised; `stop`
-    makes the thread end after the strip it is making (the writer failed).
+    time for the strips. And the strips' plans are made on a thread of their
+    own too, so that strip k+1 is pulled back while strip k is resampled:
+    each stage has stretches on one core (the edge coverage, the reach of a
+    part, numpy between kernels), which left the second core idle while the
+    encoder waited for the next strip. The items come in order, so the file
+    is the same. Iterating gives each item, then raises what making them
+    raised; `stop` makes the thread end after the item it is making (the
+    writer failed), and the ``upstream`` one it takes its items from.
     """
 
-    def __init__(self, strips) -> None:
+    def __init__(self, items, *, name: str = "warp-strips", upstream: _Ahead | None = None) -> None:
         import queue
         import threading
 
@@ -185,30 +200,39 @@ class _Ahead:
 
         self._made: queue.Queue = queue.Queue(maxsize=1)
         self._stopped = threading.Event()
-        self._task = Task(self._make, strips, name="warp-strips")
+        self._upstream = upstream
+        self._task = Task(self._make, items, name=name)
 
-    def _make(self, strips) -> None:
+    def _make(self, items) -> None:
         try:
-            for strip in strips:
+            for item in items:
                 if self._stopped.is_set():
                     return
-                self._made.put((strip, None))
+                self._made.put((item, None))
         except BaseException as err:  # handed to the writer, which raises it
             self._made.put((None, err))
             return
-        self._made.put((None, None))
+        if not self._stopped.is_set():
+            self._made.put((None, None))
 
     def __iter__(self):
+        import queue
+
         while True:
-            strip, err = self._made.get()
+            try:
+                item, err = self._made.get(timeout=0.05)
+            except queue.Empty:
+                if self._stopped.is_set():  # stopped: its thread may have ended without a last word
+                    return
+                continue
             if err is not None:
                 raise err
-            if strip is None:
+            if item is None:
                 return
-            yield strip
+            yield item
 
     def stop(self) -> None:
-        """End the thread: no more strips are wanted (it finishes the one it is making)."""
+        """End the thread: no more items are wanted (it finishes the one it is making), nor upstream."""
         import queue
 
         self._stopped.set()
@@ -217,6 +241,8 @@ class _Ahead:
                 self._made.get_nowait()  # one that waits to be put finds room, then stops
         except queue.Empty:
             pass
+        if self._upstream is not None:
+            self._upstream.stop()
 
 
 class _Sampler:
@@ -227,11 +253,16 @@ class _Sampler:
         self.margin = 1 + (CUBIC_MARGIN if opts.interp == "cubic" else 0)
         self.alpha = {"alpha_channel": header.alpha_channel, "associated_alpha": header.associated_alpha}
 
-    def strip(self, reader: PartReader, width: int, height: int, y0: int, y1: int, timings: dict) -> NDArray:
-        """Output rows ``y0 <= y < y1``: (rows, width, C) in the input's pixel type."""
+    def plan(self, width: int, height: int, y0: int, y1: int, timings: dict) -> tuple[int, int, SamplingPlan]:
+        """The sampling plan of output rows ``y0 <= y < y1``, with those rows (for `render`)."""
         t0 = time.perf_counter()
         plan = plan_for(self.fmap, width, height, self.opts, rows=(y0, y1))
         timings["compose"] += time.perf_counter() - t0
+        return y0, y1, plan
+
+    def render(self, reader: PartReader, width: int, planned: tuple[int, int, SamplingPlan], timings: dict) -> NDArray:
+        """The rows of a `plan`: (rows, width, C) in the input's pixel type."""
+        y0, y1, plan = planned
         if plan.outside == "input":
             return self._pasted(reader, plan, width, y0, y1, timings)
         out = np.empty((y1 - y0, width, self.header.channels), dtype=self.header.dtype)
@@ -239,11 +270,49 @@ class _Sampler:
         if plan.pull.points.size == 0:
             return out
         t0 = time.perf_counter()
-        rows, cols = plan.pull.points.shape[:2]
-        for cx in range(0, cols, CHUNK):
-            self._chunk(reader, plan, (0, rows, cx, min(cols, cx + CHUNK)), out, y0)
+        if isinstance(reader, _Decoded) and self.opts.interp != "cubic":
+            for box in self._row_runs(plan):
+                self._from_whole(reader.pixels, plan, box, out, y0)
+        else:
+            for box in self._boxes(plan):
+                self._chunk(reader, plan, box, out, y0)
         timings["resample"] += time.perf_counter() - t0
         return out
+
+    @staticmethod
+    def _boxes(plan: SamplingPlan) -> list[tuple[int, int, int, int]]:
+        """The chunks ``(first row, last row, first column, last column)`` of a strip's window
+        resampled from parts of the input: `CHUNK` columns of the whole strip."""
+        rows, cols = plan.pull.points.shape[:2]
+        return [(0, rows, cx, min(cols, cx + CHUNK)) for cx in range(0, cols, CHUNK)]
+
+    @staticmethod
+    def _row_runs(plan: SamplingPlan) -> list[tuple[int, int, int, int]]:
+        """The chunks of a strip's window resampled from the whole decoded image: runs of its
+        whole rows, about `TILE` x `CHUNK` pixels each (a row wider than that on its own).
+
+        Their points and Jacobians are contiguous parts of the plan's, which the
+        samplers take as they are; `CHUNK` columns of them were copied, twice
+        (the reach, then the sampler), 1.2 GB of copies into fresh pages in a
+        12 MP warp. The result is the same however the window is cut: each
+        pixel is sampled from its own point, Jacobian and coverage.
+        """
+        rows, cols = plan.pull.points.shape[:2]
+        n = min(rows, max(1, -(-rows * cols // (TILE * CHUNK))))
+        cuts = [rows * k // n for k in range(n + 1)]
+        return [(a, b, 0, cols) for a, b in zip(cuts[:-1], cuts[1:])]
+
+    def _from_whole(self, pixels: NDArray, plan: SamplingPlan, box, out: NDArray, y0: int) -> None:
+        """Resample the window's rows ``box[0]:box[1]`` and columns ``box[2]:box[3]`` into ``out`` (from
+        row y0) from the whole decoded image ``pixels``: what `_chunk` gives from the part the samples
+        reach, with ``nearest`` and ``linear`` (a sampler given part of an image reads the same pixels),
+        without its reach, its copy of the part, or its halving of a part too large."""
+        a, b, c, d = box
+        part_plan = plan.crop((a, b), (c, d))
+        if part_plan.is_empty():
+            return  # no pixel has a pre-image or covers the target's edge: the background already there
+        r, q = part_plan.pull.origin
+        out[r - y0 : r - y0 + (b - a), q : q + (d - c)] = part_plan.sample_window(pixels, **self.alpha)
 
     def _pasted(self, reader: PartReader, plan: SamplingPlan, width: int, y0: int, y1: int, timings: dict) -> NDArray:
         """Rows ``y0 <= y < y1`` of a retouch (``--outside input``): the strip's input with the warp pasted over it,
@@ -260,9 +329,8 @@ class _Sampler:
                 return out
             convert = functools.partial(carrier_pixels, alpha_channel=alpha, associated_alpha=associated)
             kw = {"alpha_channel": nc, "associated_alpha": True, "background": np.zeros(nc + 1)}
-            rows, cols = plan.pull.points.shape[:2]
-            for cx in range(0, cols, CHUNK):
-                self._chunk(reader, plan, (0, rows, cx, min(cols, cx + CHUNK)), out, y0, convert, kw)
+            for box in self._boxes(plan):
+                self._chunk(reader, plan, box, out, y0, convert, kw)
             return out
 
         base = reader.read(0, y0, width, y1)
@@ -405,6 +473,6 @@ def tiled_needed(header: ImageHeader, width: int, height: int) -> bool:
 
 
 __all__ = [
-    "CHUNK", "CUBIC_MARGIN", "MAX_COMPRESSION", "PART_BYTES", "TiledResult", "check_plausible", "in_parts", "tiled_needed",
+    "AHEAD_PLAN_BYTES", "CHUNK", "CUBIC_MARGIN", "MAX_COMPRESSION", "PART_BYTES", "TiledResult", "check_plausible", "in_parts", "tiled_needed",
     "warp_file_tiled",
 ]  # fmt: skip

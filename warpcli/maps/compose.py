@@ -258,6 +258,9 @@ class BijectiveMap(ComposedMap):
         return out
 
 
+#: What `_compiled.scatter_band` is given for Jacobians when none are asked for.
+_NO_JAC = np.zeros((1, 2, 2))
+
 #: The bands the last strip of a pull-back computed, by the map whose grid they scan
 #: (see `_through_theta`); weak, so that they go with their map.
 _STRIP_BANDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
@@ -280,18 +283,28 @@ def _through_theta(
     points = empty(((r1 - r0) * ww, 2))
     jac = empty(((r1 - r0) * ww, 2, 2)) if jacobian else None
 
+    # Methods whose Jacobians are constant per cell (FEM) give the cells, and the
+    # products are made from their tables as the band is scattered (`scatter_band_cells`).
+    cells = jacobian and hasattr(phi_grid, "grid_cells") and hasattr(phi_other, "inverse_cells")
+
     def band_values(first: int, last: int) -> tuple:
-        g = phi_grid.evaluate_grid(width, height, (first, last), jacobian=jacobian)
-        row, col = np.divmod(g.pixels, width)
+        if cells:
+            g, grid_cells = phi_grid.grid_cells(width, height, (first, last))
+            pixels, values, jac_grid = g.pixels, g.values, grid_cells
+        else:
+            g = phi_grid.evaluate_grid(width, height, (first, last), jacobian=jacobian)
+            pixels, values, jac_grid = g.pixels, g.values, g.jacobian
         # The window holds every centre in the polygon (its bounding box and
         # a margin); a method that reported one beyond it would be dropped.
-        keep = (col >= c0) & (col < c1)
-        values, jac_grid = g.values, g.jacobian
-        if not keep.all():
-            row, col, values = row[keep], col[keep], values[keep]
+        pixels = np.ascontiguousarray(pixels, dtype=np.int64)
+        if _compiled.outside_columns(pixels, width, c0, c1):
+            keep = (pixels % width >= c0) & (pixels % width < c1)
+            pixels, values = pixels[keep], values[keep]
             jac_grid = None if jac_grid is None else jac_grid[keep]
+        if cells:
+            return (pixels, *phi_other.inverse_cells(values, coherent=True), jac_grid)
         m = phi_other.inverse(values, jacobian=jacobian, coherent=True)
-        return row, col, m.points, jac_grid, m.jacobian
+        return pixels, m.points, m.jacobian, jac_grid
 
     # Strips (``rows``) of a narrow image are thinner than a band (BAND_PIXELS
     # over the width): each strip would compute its whole band again, so a
@@ -323,16 +336,21 @@ def _through_theta(
         if kept is not None:
             with lock:
                 made[key] = hit
-        row, col, found, jac_grid, jac_found = hit
-        if start != first or stop != last:
-            cut = (row >= start) & (row < stop)
-            row, col, found = row[cut], col[cut], found[cut]
-            jac_grid = None if jac_grid is None else jac_grid[cut]
-            jac_found = None if jac_found is None else jac_found[cut]
-        idx = (row - r0) * ww + (col - c0)
-        points[idx] = found
-        if jac is not None:
-            _compiled.scatter_products(np.ascontiguousarray(jac_found), np.ascontiguousarray(jac_grid), idx, jac)
+        pixels, found, jac_found, jac_grid = hit
+        found = np.ascontiguousarray(found, dtype=np.float64)
+        # Each pixel of the band in the rows wanted, into its place in the window (one compiled pass).
+        if cells:
+            _compiled.scatter_band_cells(
+                pixels, width, r0, c0, ww, start, stop, found, phi_other.jacobian_table("inverse"),
+                np.ascontiguousarray(jac_found), phi_grid.jacobian_table("grid"), np.ascontiguousarray(jac_grid),
+                points, jac,
+            )  # fmt: skip
+        else:
+            pairs = (np.ascontiguousarray(jac_found), np.ascontiguousarray(jac_grid)) if jac is not None else (_NO_JAC, _NO_JAC)
+            _compiled.scatter_band(
+                pixels, width, r0, c0, ww, start, stop, found, *pairs, jac is not None, points,
+                _NO_JAC if jac is None else jac,
+            )  # fmt: skip
 
     if r1 > r0:
         firsts = range(w0 + (r0 - w0) // band * band, r1, band)
