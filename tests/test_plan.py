@@ -144,3 +144,30 @@ def test_a_shipped_plan_cache_renders_the_same_bytes_and_makes_no_new_plans():
     assert np.array_equal(shipped.get((128, 128)).render(img), cache.get((128, 128)).render(img))
     with pytest.raises(ImageIOError, match="no sampling plan was made for an output of 64x64"):
         shipped.get((64, 64))
+
+
+@pytest.mark.parametrize("alpha, associated, copies", [(3, False, 1), (3, True, 0), (None, False, 0)])
+def test_rendering_band_by_band_copies_the_image_at_most_once(monkeypatch, alpha, associated, copies):
+    """`SamplingPlan.render_rows` samples the image band by band: straight colour is premultiplied
+    into one working copy for all of them (each band's `resample` copied the whole image again),
+    and the bands give `render`'s bytes."""
+    import warpcli.plan as plan_module
+    import warpcli.raster.resample as resample_module
+
+    made = []
+    real = resample_module.working_copy
+
+    def counted(*args, **kwargs):
+        out = real(*args, **kwargs)
+        made.append(out is not None and out.shape[:2] == img.shape[:2])  # copies of the whole image
+        return out
+
+    monkeypatch.setattr(plan_module, "working_copy", counted)
+    monkeypatch.setattr(resample_module, "working_copy", counted)
+    img = _image(c=4)
+    img[..., 3] = np.random.default_rng(3).integers(0, 256, img.shape[:2])
+    plan = SamplingPlan.from_map(_map(star(6, 65, 60, 25, 55), star(6, 65, 60, 22, 50, 0.2)), 130, 120)
+    out = np.empty_like(img)
+    bands = list(plan.render_rows(img, out, alpha_channel=alpha, associated_alpha=associated, band=16))
+    assert len(bands) > 4 and sum(made) == copies
+    assert out.tobytes() == plan.render(img, alpha_channel=alpha, associated_alpha=associated).tobytes()

@@ -30,7 +30,7 @@ from .errors import InputError
 from .maps.compose import PullBack
 from .polygon import Polygon
 from .raster.pixels import fill, unit
-from .raster.resample import EdgeCoverage, edge_coverage, resample
+from .raster.resample import EdgeCoverage, edge_coverage, resample, working_copy
 
 if TYPE_CHECKING:
     from .options import WarpOptions
@@ -271,6 +271,7 @@ class SamplingPlan:
         associated_alpha: bool = False,
         background: NDArray | None = None,
         part: tuple[int, int, int, int] | None = None,
+        working: NDArray | None = None,
     ) -> NDArray:
         """The window's pixels resampled from ``pixels``: (h, w, C) in their type.
 
@@ -285,12 +286,15 @@ class SamplingPlan:
         part : (x0, y0, W, H) or None
             ``pixels`` is the part of a W x H image at column x0, row y0
             (see `warpcli.raster.resample.resample`).
+        working : ndarray or None
+            `warpcli.raster.resample.working_copy` of ``pixels``, made once by a
+            caller that samples them window part by window part.
         """
         bg = self.background_values(pixels) if background is None else background
         jac = self.pull.jacobian if self.footprints else None
         return resample(
             pixels, self.pull.points, interp=self.interp, background=bg, alpha_channel=alpha_channel,
-            associated_alpha=associated_alpha, jacobian=jac, coverage=self.coverage, part=part,
+            associated_alpha=associated_alpha, jacobian=jac, coverage=self.coverage, part=part, working=working,
         )  # fmt: skip
 
     def whole_points(self) -> NDArray[np.float64]:
@@ -376,6 +380,8 @@ class SamplingPlan:
         if self.outside != "background":
             raise ValueError("render_rows pastes nothing: outside must be 'background'")
         bg = self.background_values(pixels)
+        # Straight colour premultiplied (or an unusual type converted) once, not for every band.
+        working = working_copy(pixels, interp=self.interp, alpha_channel=alpha_channel, associated_alpha=associated_alpha)
         width, height = self.size
         r, c = self.pull.origin
         wh, ww = self.pull.points.shape[:2]
@@ -387,7 +393,7 @@ class SamplingPlan:
             b = min(wh, a + band)
             part = self.crop((a, b), (0, ww))
             out[r + a : r + b, c : c + ww] = part.sample_window(
-                pixels, alpha_channel=alpha_channel, associated_alpha=associated_alpha, background=bg
+                pixels, alpha_channel=alpha_channel, associated_alpha=associated_alpha, background=bg, working=working
             )
             yield r + a, r + b
         if r + wh < height:

@@ -53,7 +53,7 @@ from .polygon import Polygon
 from .raster.imageio import ImageHeader, read_header, size_limit_lifted, with_compression
 from .raster.parts import TILE, PartReader, StripWriter, check_writable_in_parts, output_format
 from .raster.pixels import fill
-from .raster.resample import footprint_bounds
+from .raster.resample import footprint_bounds, working_copy
 
 log = logging.getLogger("warpcli")
 
@@ -206,14 +206,28 @@ class _Ahead:
     def _make(self, items) -> None:
         try:
             for item in items:
-                if self._stopped.is_set():
+                if self._stopped.is_set() or not self._put((item, None)):
                     return
-                self._made.put((item, None))
         except BaseException as err:  # handed to the writer, which raises it
-            self._made.put((None, err))
+            self._put((None, err))
             return
-        if not self._stopped.is_set():
-            self._made.put((None, None))
+        self._put((None, None))
+
+    def _put(self, entry: tuple) -> bool:
+        """Hand ``entry`` on, unless `stop` comes first (then nobody takes it: False).
+
+        A plain ``put`` could wait for ever: once stopped, nobody reads the queue,
+        and a strip made after the writer failed (its input closed meanwhile)
+        would raise, with its error put into a full queue."""
+        import queue
+
+        while not self._stopped.is_set():
+            try:
+                self._made.put(entry, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
 
     def __iter__(self):
         import queue
@@ -232,17 +246,20 @@ class _Ahead:
             yield item
 
     def stop(self) -> None:
-        """End the thread: no more items are wanted (it finishes the one it is making), nor upstream."""
+        """End the thread, and the ``upstream`` one: no more items are wanted. Returns once both
+        have ended (each finishes the item it is making), so that what they read (the input's
+        parts) may be closed."""
         import queue
 
         self._stopped.set()
         try:
             while True:
-                self._made.get_nowait()  # one that waits to be put finds room, then stops
+                self._made.get_nowait()  # drop what was made: nobody takes it
         except queue.Empty:
             pass
         if self._upstream is not None:
             self._upstream.stop()
+        self._task.result()  # its errors went to the queue: this only waits
 
 
 class _Sampler:
@@ -270,7 +287,7 @@ class _Sampler:
         if plan.pull.points.size == 0:
             return out
         t0 = time.perf_counter()
-        if isinstance(reader, _Decoded) and self.opts.interp != "cubic":
+        if isinstance(reader, _Decoded) and self._reads_as_is(reader.pixels):
             for box in self._row_runs(plan):
                 self._from_whole(reader.pixels, plan, box, out, y0)
         else:
@@ -278,6 +295,13 @@ class _Sampler:
                 self._chunk(reader, plan, box, out, y0)
         timings["resample"] += time.perf_counter() - t0
         return out
+
+    def _reads_as_is(self, pixels: NDArray) -> bool:
+        """Whether the samplers read the decoded image as it is: then runs of rows are sampled
+        from it whole (`_from_whole`). Otherwise (straight alpha to premultiply, a type the
+        kernels do not read, ``cubic``'s prefilter) every call would first copy the whole
+        image, so parts of it are read as from a file (`_chunk`), each copied alone."""
+        return self.opts.interp != "cubic" and working_copy(pixels[:1, :1], interp=self.opts.interp, **self.alpha) is None
 
     @staticmethod
     def _boxes(plan: SamplingPlan) -> list[tuple[int, int, int, int]]:

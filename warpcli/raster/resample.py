@@ -35,6 +35,7 @@ def resample(
     jacobian: ArrayLike | None = None,
     coverage: EdgeCoverage | None = None,
     part: tuple[int, int, int, int] | None = None,
+    working: NDArray | None = None,
 ) -> NDArray:
     """Sample ``image`` at the source positions of the output pixels.
 
@@ -81,6 +82,10 @@ def resample(
         whole image, bit for bit with ``nearest`` and ``linear``; ``cubic``
         prefilters the part only, so it agrees to rounding given a margin of
         a dozen pixels.
+    working : ndarray or None
+        `working_copy` of ``image`` with these ``interp``, ``alpha_channel``
+        and ``associated_alpha``, made once by a caller that resamples one
+        image in many calls; None: made here when needed.
 
     Returns
     -------
@@ -138,24 +143,12 @@ def resample(
             xy[:, 1] = np.clip(xy[:, 1], 0.0, h)
             patch, patch_xy = _merged(patch, patch_xy, border[0], xy)
     bg = np.ascontiguousarray(np.broadcast_to(np.asarray(background, dtype=np.float64), (nc,)))
-    work_dtype = np.float64 if img.dtype == np.float64 else np.float32
-    if associated_alpha or interp == "nearest":
-        alpha_channel_blend = None  # nothing to premultiply
-    else:
-        alpha_channel_blend = alpha_channel
-    # The kernels read uint8, uint16, float32 and float64 as they are; other
-    # types (half, 32-bit integers) and straight colour to premultiply are
-    # copied to the working type first.
-    if alpha_channel_blend is not None or img.dtype not in _NATIVE:
-        src = img.astype(work_dtype, copy=True)
-    else:
-        src = np.ascontiguousarray(img)
+    work_dtype = _work_dtype(img.dtype)
+    alpha_channel_blend = _premultiplied_by(interp, alpha_channel, associated_alpha)
+    if working is None:
+        working = working_copy(img, interp=interp, alpha_channel=alpha_channel, associated_alpha=associated_alpha)
+    src = np.ascontiguousarray(img) if working is None else working
     alpha_scale = unit(img.dtype)
-    if alpha_channel_blend is not None:
-        a = src[:, :, alpha_channel_blend] / alpha_scale
-        for c in range(nc):
-            if c != alpha_channel_blend:
-                src[:, :, c] *= a
     out = np.empty((points.shape[0], nc), dtype=work_dtype)
     if interp == "cubic":
         from scipy.ndimage import map_coordinates
@@ -208,6 +201,41 @@ def resample(
     if border is not None:
         _blend(out, border[0], border[1].astype(work_dtype), bg.astype(work_dtype), alpha_channel, associated_alpha)
     return _to_dtype(out.reshape(*out_shape, nc), img.dtype)
+
+
+def _work_dtype(dtype: np.dtype) -> type:
+    """The type samples are computed in: float64 for float64 images, float32 otherwise."""
+    return np.float64 if dtype == np.float64 else np.float32
+
+
+def _premultiplied_by(interp: str, alpha_channel: int | None, associated_alpha: bool) -> int | None:
+    """The alpha channel colour is premultiplied by to be resampled (straight colour blended), or None."""
+    return None if associated_alpha or interp == "nearest" else alpha_channel
+
+
+def working_copy(
+    image: NDArray, *, interp: str, alpha_channel: int | None = None, associated_alpha: bool = False
+) -> NDArray | None:
+    """What `resample` samples instead of ``image``, or None when it samples ``image`` as it is.
+
+    The kernels read uint8, uint16, float32 and float64 as they are; other
+    types (half, 32-bit integers), and straight colour to premultiply by its
+    alpha (every interpolation but ``nearest``), are copied to the working type
+    first: the whole image, whatever part of it the call samples. A caller
+    that resamples one image in many calls (`warpcli.plan.SamplingPlan.render_rows`,
+    band by band) makes it once and passes it as ``working``.
+    """
+    img = image if image.ndim == 3 else image[:, :, None]
+    blend = _premultiplied_by(interp, alpha_channel, associated_alpha)
+    if blend is None and img.dtype in _NATIVE:
+        return None
+    src = img.astype(_work_dtype(img.dtype), copy=True)
+    if blend is not None:
+        a = src[:, :, blend] / unit(img.dtype)
+        for c in range(src.shape[2]):
+            if c != blend:
+                src[:, :, c] *= a
+    return src
 
 
 def _blend(out, pixels, fraction, bg, alpha_channel, associated_alpha) -> None:
