@@ -553,6 +553,25 @@ def test_progress_says_when_kernels_are_being_compiled_here_or_in_a_forked_child
         os.write(go[1], b"x")
         os.waitpid(pid, 0)
     assert note not in progress.line(1.0)
+    # A child killed while it compiles (a build no longer wanted: `Forked.cancel`) is forgotten.
+    from warpcli._fork import Forked
+
+    ready = os.pipe()
+    child = Forked(_compile_for_ever, ready[1])
+    os.read(ready[0], 1)
+    assert note in progress.line(1.0)
+    child.cancel()
+    assert note not in progress.line(1.0)
+
+
+def _compile_for_ever(fd):
+    import time
+
+    from warpcli import _native
+
+    with _native.compiling_kernel():
+        os.write(fd, b"x")
+        time.sleep(60)
 
 
 # --- report, grid and heatmap -------------------------------------------------

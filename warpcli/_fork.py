@@ -110,6 +110,7 @@ class Forked:
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+            _killed(pid)
 
     def _reap_later(self) -> None:
         """Reap the child when it has ended, on a thread of its own (it is ending: its result
@@ -137,6 +138,13 @@ class Forked:
                 continue
             except ChildProcessError:
                 return 0
+
+
+def _killed(pid: int) -> None:
+    """Child ``pid`` was killed: if it was compiling a kernel, it no longer is (`warpcli._native.compiling`)."""
+    native = sys.modules.get("warpcli._native")
+    if native is not None:
+        native.process_gone(pid)
 
 
 def _wait_for(pid: int) -> None:
@@ -462,6 +470,7 @@ class Worker:
                 os.kill(self._pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+            _killed(self._pid)
         for fd in (self._to, self._from):
             if fd >= 0:
                 _WORKER_FDS.discard(fd)

@@ -312,6 +312,11 @@ def compiling_kernel() -> Iterator[None]:
         _count_busy(-1)
 
 
+def process_gone(pid: int) -> None:
+    """A child forked by this process was killed: what it was compiling no longer counts."""
+    _SHARED_BUSY[pid % len(_SHARED_BUSY)] = 0
+
+
 def compiling() -> bool:
     """Whether this process, or a child it forked, is compiling a kernel now (or waiting for another
     process to).
@@ -347,6 +352,7 @@ def _new_lock_in_child() -> None:
     _LOCK = threading.RLock()
     _BUSY_LOCK = threading.Lock()
     _BUSY[0] = 0  # the parent's threads, compiling or not, are not this process's
+    _SHARED_BUSY[os.getpid() % len(_SHARED_BUSY)] = 0  # nor a byte left by a process of this pid before
 
 
 if hasattr(os, "register_at_fork"):

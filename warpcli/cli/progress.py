@@ -105,7 +105,8 @@ class Progress:
 def _compiling_note() -> str:
     """What the line adds while kernels are being compiled (`warpcli._native.compiling`)."""
     native = sys.modules.get("warpcli._native")  # not imported: nothing compiled (and no numpy loaded here)
-    if native is None or not native.compiling():
+    compiling = getattr(native, "compiling", None)  # None also while the module is being imported
+    if compiling is None or not compiling():
         return ""
     return " (compiling warpcli's kernels for this machine: the first runs only)"
 
