@@ -22,6 +22,16 @@ def scatter_products(a, b, index, out):
 
 
 @njit(cache=True, nogil=True)
+def _window_pixel(p, width, r0, c0, ww, start, stop):
+    """The window index of grid pixel ``p`` (flat, in a grid ``width`` wide; its column at least
+    ``c0``) if its row is ``start <= row < stop``, else -1."""
+    row = p // width
+    if row < start or row >= stop:
+        return -1
+    return (row - r0) * ww + (p - row * width - c0)
+
+
+@njit(cache=True, nogil=True)
 def scatter_band(pixels, width, r0, c0, ww, start, stop, found, a, b, with_jac, points, out):
     """A band's values into the window: for each grid pixel ``pixels[k]`` (flat index in a
     grid ``width`` wide) of a row ``start <= row < stop``, window pixel
@@ -33,11 +43,9 @@ def scatter_band(pixels, width, r0, c0, ww, start, stop, found, a, b, with_jac, 
     assignment, each over the band's quarter million pixels.
     """
     for k in range(pixels.shape[0]):
-        p = pixels[k]
-        row = p // width
-        if row < start or row >= stop:
+        i = _window_pixel(pixels[k], width, r0, c0, ww, start, stop)
+        if i < 0:
             continue
-        i = (row - r0) * ww + (p - row * width - c0)
         points[i, 0] = found[k, 0]
         points[i, 1] = found[k, 1]
         if with_jac:
@@ -55,11 +63,9 @@ def scatter_band_cells(pixels, width, r0, c0, ww, start, stop, found, ta, ca, tb
     na = ta.shape[0] - 1
     nb = tb.shape[0] - 1
     for k in range(pixels.shape[0]):
-        p = pixels[k]
-        row = p // width
-        if row < start or row >= stop:
+        i = _window_pixel(pixels[k], width, r0, c0, ww, start, stop)
+        if i < 0:
             continue
-        i = (row - r0) * ww + (p - row * width - c0)
         points[i, 0] = found[k, 0]
         points[i, 1] = found[k, 1]
         ia = ca[k]
