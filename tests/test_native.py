@@ -106,14 +106,6 @@ def test_fem_kernels_match_numba_bitwise():
     _same(FEM, "walk", walk, ("locate.py",))
 
 
-def test_scatter_products_match_numba_bitwise():
-    rng = np.random.default_rng(4)
-    a, b = rng.normal(size=(300, 2, 2)), rng.normal(size=(300, 2, 2))
-    a[::7] = np.nan
-    idx = rng.permutation(600)[:300]
-    _same(MAPS, "scatter_products", lambda: (a, b, idx, np.full((600, 2, 2), np.nan)))
-
-
 def _band(seed=5, width=37, n=900):
     """A band's grid pixels in columns 4..33 (some twice, some beyond the rows kept), points and Jacobians."""
     rng = np.random.default_rng(seed)
@@ -127,18 +119,24 @@ def _band(seed=5, width=37, n=900):
     return pixels, found, a, b
 
 
+def _per_pixel(a, b):
+    """`scatter_band`'s tables for Jacobians given per pixel: the arrays, indexed 0..n-1."""
+    k = np.arange(len(a))
+    return a, k, b, k.astype(np.int32)
+
+
 def test_scatter_band_matches_numba_bitwise():
     pixels, found, a, b = _band()
     ww, rows = 30, 12  # the window: columns 4..33, rows 14..25 (a strip cutting the band at 15..25)
     window = lambda: (np.full((rows * ww, 2), np.nan), np.full((rows * ww, 2, 2), np.nan))  # noqa: E731
-    _same(MAPS, "scatter_band", lambda: (pixels, 37, 14, 4, ww, 15, 26, found, a, b, True, *window()))
-    _same(MAPS, "scatter_band", lambda: (pixels, 37, 14, 4, ww, 15, 26, found, a, b, False, *window()))
+    for with_jac in (True, False):
+        _same(MAPS, "scatter_band", lambda: (pixels, 37, 14, 4, ww, 15, 26, found, *_per_pixel(a, b), with_jac, *window()))
     _same(MAPS, "outside_columns", lambda: (pixels, 37, 6, 30))
 
 
-def test_scatter_band_cells_match_numba_bitwise_and_scatter_the_gathered_products():
+def test_scatter_band_from_cell_tables_matches_numba_bitwise_and_scatters_the_gathered_products():
     """Jacobians from per-cell tables (the last row NaN, for cell -1) give the bits of
-    gathering them first and scattering the products (`scatter_band`)."""
+    gathering them first and scattering the products per pixel."""
     pixels, found, _, _ = _band()
     rng = np.random.default_rng(6)
     ta, tb = rng.normal(size=(41, 2, 2)), rng.normal(size=(23, 2, 2))
@@ -147,11 +145,11 @@ def test_scatter_band_cells_match_numba_bitwise_and_scatter_the_gathered_product
     cb = rng.integers(-1, 22, len(pixels)).astype(np.int32)
     args = (pixels, 37, 14, 4, 30, 15, 26, found)
     window = lambda: (np.full((12 * 30, 2), np.nan), np.full((12 * 30, 2, 2), np.nan))  # noqa: E731
-    _same(MAPS, "scatter_band_cells", lambda: (*args, ta, ca, tb, cb, *window()))
+    _same(MAPS, "scatter_band", lambda: (*args, ta, ca, tb, cb, True, *window()))
     got, want = window(), window()
-    Kernels(MAPS).scatter_band_cells(*args, ta, ca, tb, cb, *got)
+    Kernels(MAPS).scatter_band(*args, ta, ca, tb, cb, True, *got)
     gathered_a, gathered_b = ta[np.where(ca < 0, 40, ca)], tb[np.where(cb < 0, 22, cb)]
-    Kernels(MAPS).scatter_band(*args, gathered_a, gathered_b, True, *want)
+    Kernels(MAPS).scatter_band(*args, *_per_pixel(gathered_a, gathered_b), True, *want)
     assert got[0].tobytes() == want[0].tobytes() and got[1].tobytes() == want[1].tobytes()
 
 
@@ -164,7 +162,7 @@ def test_scatter_band_is_the_numpy_scatter(with_jac):
     pixels, found, a, b = _band()
     width, r0, c0, ww, start, stop = 37, 14, 4, 30, 15, 26
     points, jac = np.full((12 * ww, 2), np.nan), np.full((12 * ww, 2, 2), np.nan)
-    Kernels(MAPS).scatter_band(pixels, width, r0, c0, ww, start, stop, found, a, b, with_jac, points, jac)
+    Kernels(MAPS).scatter_band(pixels, width, r0, c0, ww, start, stop, found, *_per_pixel(a, b), with_jac, points, jac)
     row, col = np.divmod(pixels, width)
     cut = (row >= start) & (row < stop)
     idx = (row[cut] - r0) * ww + (col[cut] - c0)
@@ -511,15 +509,14 @@ def test_processes_needing_a_kernel_at_once_compile_it_once(tmp_path):
             time.sleep(1.0)
             return compile_(*args)
         _native._compile = slow_compile
-        k = _native.Kernels("warpcli.maps._kernels")
-        out = np.zeros((1, 2, 2))
-        eye = np.eye(2)[None]
-        k.scatter_products(eye, eye * 2.0, np.zeros(1, dtype=np.int64), out)
+        k = _native.Kernels("warpcli.raster._kernels")
+        out = np.zeros(3)
+        k.store(np.array([0.4, 2.5, 300.0]), out, 0.0, 255.0, True)
         assert all(hasattr(f, "_native") for f in k._calls.values())  # the native route, not numba's
         print(out.tolist())
         """
     )
-    assert _compiles_of_two_at_once(script, tmp_path, "[[[2.0, 0.0], [0.0, 2.0]]]", WARPCLI_NATIVE="1") == "compiled\n"
+    assert _compiles_of_two_at_once(script, tmp_path, "[0.0, 2.0, 255.0]", WARPCLI_NATIVE="1") == "compiled\n"
     assert len(list((tmp_path / "cache" / "warpcli").glob("*.native"))) == 1
 
 

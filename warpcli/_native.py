@@ -157,12 +157,11 @@ class Kernels:
 
     Examples
     --------
-    >>> k = Kernels("warpcli.maps._kernels")
-    >>> out = np.zeros((1, 2, 2))
-    >>> eye = np.eye(2)[None]
-    >>> k.scatter_products(eye, eye * 2.0, np.zeros(1, dtype=np.int64), out)
-    >>> out[0].tolist()
-    [[2.0, 0.0], [0.0, 2.0]]
+    >>> k = Kernels("warpcli.raster._kernels")
+    >>> out = np.zeros(3)
+    >>> k.store(np.array([0.4, 2.5, 300.0]), out, 0.0, 255.0, True)
+    >>> out.tolist()
+    [0.0, 2.0, 255.0]
     """
 
     def __init__(self, module: str, depends: Sequence[str] = ()) -> None:

@@ -258,8 +258,9 @@ class BijectiveMap(ComposedMap):
         return out
 
 
-#: What `_compiled.scatter_band` is given for Jacobians when none are asked for.
+#: What `_compiled.scatter_band` is given for Jacobians and their indices when none are asked for.
 _NO_JAC = np.zeros((1, 2, 2))
+_NO_INDEX, _NO_INDEX32 = np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int32)
 
 #: The bands the last strip of a pull-back computed, by the map whose grid they scan
 #: (see `_through_theta`); weak, so that they go with their map.
@@ -284,7 +285,7 @@ def _through_theta(
     jac = empty(((r1 - r0) * ww, 2, 2)) if jacobian else None
 
     # Methods whose Jacobians are constant per cell (FEM) give the cells, and the
-    # products are made from their tables as the band is scattered (`scatter_band_cells`).
+    # products are made from their tables as the band is scattered (`scatter_band`).
     cells = jacobian and hasattr(phi_grid, "grid_cells") and hasattr(phi_other, "inverse_cells")
 
     def band_values(first: int, last: int) -> tuple:
@@ -338,19 +339,20 @@ def _through_theta(
                 made[key] = hit
         pixels, found, jac_found, jac_grid = hit
         found = np.ascontiguousarray(found, dtype=np.float64)
-        # Each pixel of the band in the rows wanted, into its place in the window (one compiled pass).
-        if cells:
-            _compiled.scatter_band_cells(
-                pixels, width, r0, c0, ww, start, stop, found, phi_other.jacobian_table("inverse"),
-                np.ascontiguousarray(jac_found), phi_grid.jacobian_table("grid"), np.ascontiguousarray(jac_grid),
-                points, jac,
-            )  # fmt: skip
+        # Each pixel of the band in the rows wanted, into its place in the window, the Jacobians'
+        # products from per-cell tables (FEM) or per pixel (one compiled pass).
+        if jac is None:
+            tables = (_NO_JAC, _NO_INDEX, _NO_JAC, _NO_INDEX32)
+        elif cells:
+            tables = (phi_other.jacobian_table("inverse"), np.ascontiguousarray(jac_found),
+                      phi_grid.jacobian_table("grid"), np.ascontiguousarray(jac_grid))  # fmt: skip
         else:
-            pairs = (np.ascontiguousarray(jac_found), np.ascontiguousarray(jac_grid)) if jac is not None else (_NO_JAC, _NO_JAC)
-            _compiled.scatter_band(
-                pixels, width, r0, c0, ww, start, stop, found, *pairs, jac is not None, points,
-                _NO_JAC if jac is None else jac,
-            )  # fmt: skip
+            k = np.arange(len(pixels))
+            tables = (np.ascontiguousarray(jac_found), k, np.ascontiguousarray(jac_grid), k.astype(np.int32))
+        _compiled.scatter_band(
+            pixels, width, r0, c0, ww, start, stop, found, *tables, jac is not None, points,
+            _NO_JAC if jac is None else jac,
+        )  # fmt: skip
 
     if r1 > r0:
         firsts = range(w0 + (r0 - w0) // band * band, r1, band)
