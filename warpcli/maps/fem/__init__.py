@@ -192,11 +192,11 @@ class FEMMap(ThetaMap):
 
     def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:
         out, tri = PiecewiseLinear(self.values, self.mesh.triangles, self._domain_locator).evaluate(as_points(points))
-        return Mapped(out, _gather(self._jacobians, tri) if jacobian else None)
+        return Mapped(out, self._gather("grid", tri) if jacobian else None)
 
     def inverse(self, points: ArrayLike, *, jacobian: bool = False, coherent: bool = False) -> Mapped:
         out, tri = self.inverse_cells(points, coherent=coherent)
-        return Mapped(out, _gather(self._inverse_jacobians, tri) if jacobian else None)
+        return Mapped(out, self._gather("inverse", tri) if jacobian else None)
 
     def inverse_cells(self, points: ArrayLike, *, coherent: bool = False) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """`inverse`'s points, and the triangle each one was found in (-1: none), whose
@@ -234,6 +234,12 @@ class FEMMap(ThetaMap):
         (none): the values `inverse` and `evaluate_grid` gather, NaN for none."""
         return self._tables[side]
 
+    def _gather(self, side: str, tri: NDArray[np.integer]) -> NDArray[np.float64]:
+        """The Jacobians of ``side`` on triangles ``tri``, NaN where it is -1: rows of
+        `jacobian_table`, whose last row is that NaN (`numpy.take`: 0.6 ms per 262k pixels against
+        4-5 ms for fancy indexing, twice per band of a pull-back)."""
+        return np.take(self._tables[side], tri, axis=0)
+
     @cached_property
     def _tables(self) -> dict[str, NDArray[np.float64]]:
         nan = np.full((1, 2, 2), np.nan)
@@ -269,7 +275,7 @@ class FEMMap(ThetaMap):
     ) -> GridSample:
         """phi at pixel centres by one compiled scan conversion of the mesh (see `_kernels.scan_grid`)."""
         sample, where = self.grid_cells(width, height, rows)
-        return sample._replace(jacobian=_gather(self._jacobians, where) if jacobian else None)
+        return sample._replace(jacobian=self._gather("grid", where) if jacobian else None)
 
     def grid_cells(
         self, width: int, height: int, rows: tuple[int, int] | None = None
@@ -328,20 +334,6 @@ class FEMMap(ThetaMap):
         row = np.floor(c[:, 1] / 8.0)
         x = np.where(row % 2 == 0, c[:, 0], -c[:, 0])
         return np.lexsort((x, row)).astype(np.int64)
-
-
-def _gather(table: NDArray[np.float64], tri: NDArray[np.integer]) -> NDArray[np.float64]:
-    """table[tri], NaN where tri is -1.
-
-    By `numpy.take` (-1 clipped to row 0, then NaN): for the (M, 2, 2) Jacobians of a
-    pull-back's band, 0.6 ms per 262k pixels against 4-5 ms for ``table[np.maximum(tri,
-    0)]`` (fancy indexing), twice per band: 35 ms of CPU of a 1 MP warp.
-    """
-    out = np.take(table, tri, axis=0, mode="clip")
-    lost = np.flatnonzero(tri < 0)
-    if lost.size:
-        out[lost] = np.nan
-    return out
 
 
 def triangle_jacobians(
