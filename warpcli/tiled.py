@@ -53,7 +53,7 @@ from .polygon import Polygon
 from .raster.imageio import ImageHeader, read_header, size_limit_lifted, with_compression
 from .raster.parts import TILE, PartReader, StripWriter, check_writable_in_parts, output_format
 from .raster.pixels import fill
-from .raster.resample import footprint_bounds, working_copy
+from .raster.resample import footprint_bounds, samples_as_is
 
 log = logging.getLogger("warpcli")
 
@@ -301,7 +301,7 @@ class _Sampler:
         from it whole (`_from_whole`). Otherwise (straight alpha to premultiply, a type the
         kernels do not read, ``cubic``'s prefilter) every call would first copy the whole
         image, so parts of it are read as from a file (`_chunk`), each copied alone."""
-        return self.opts.interp != "cubic" and working_copy(pixels[:1, :1], interp=self.opts.interp, **self.alpha) is None
+        return self.opts.interp != "cubic" and samples_as_is(pixels.dtype, interp=self.opts.interp, **self.alpha)
 
     @staticmethod
     def _boxes(plan: SamplingPlan) -> list[tuple[int, int, int, int]]:

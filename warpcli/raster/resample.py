@@ -213,6 +213,13 @@ def _premultiplied_by(interp: str, alpha_channel: int | None, associated_alpha: 
     return None if associated_alpha or interp == "nearest" else alpha_channel
 
 
+def samples_as_is(dtype: np.dtype, *, interp: str, alpha_channel: int | None = None, associated_alpha: bool = False) -> bool:
+    """Whether `resample` samples an image of this type as it is (`working_copy` makes none):
+    a type the kernels read (uint8, uint16, float32, float64) with no straight colour to
+    premultiply by its alpha."""
+    return _premultiplied_by(interp, alpha_channel, associated_alpha) is None and np.dtype(dtype) in _NATIVE
+
+
 def working_copy(
     image: NDArray, *, interp: str, alpha_channel: int | None = None, associated_alpha: bool = False
 ) -> NDArray | None:
@@ -226,9 +233,9 @@ def working_copy(
     band by band) makes it once and passes it as ``working``.
     """
     img = image if image.ndim == 3 else image[:, :, None]
-    blend = _premultiplied_by(interp, alpha_channel, associated_alpha)
-    if blend is None and img.dtype in _NATIVE:
+    if samples_as_is(img.dtype, interp=interp, alpha_channel=alpha_channel, associated_alpha=associated_alpha):
         return None
+    blend = _premultiplied_by(interp, alpha_channel, associated_alpha)
     src = img.astype(_work_dtype(img.dtype), copy=True)
     if blend is not None:
         a = src[:, :, blend] / unit(img.dtype)
