@@ -11,12 +11,23 @@ import pytest
 
 from conftest import REPO
 from helpers import star
-from warpcli import _native
+from warpcli import _elf, _native
 from warpcli._native import Kernels, parallel
 
 RASTER = "warpcli.raster._kernels"
 FEM = "warpcli.maps.fem._kernels"
 MAPS = "warpcli.maps._kernels"
+
+
+@pytest.fixture(params=["elf", "mcjit"])
+def route(request, monkeypatch):
+    """Load kernels in this test by `warpcli._elf` (where it can) or by MCJIT, and check it was so."""
+    if request.param == "elf" and not _elf.supported():
+        pytest.skip("warpcli._elf loads x86-64 Linux objects only")
+    monkeypatch.setattr(_native, "_JIT", None)
+    monkeypatch.setattr(_native, "ELF_LOADER", request.param == "elf")
+    yield request.param
+    assert set(_native._jit().routes.values()) == {request.param}
 
 
 def _same(module, name, make_args, depends=()):
@@ -50,6 +61,7 @@ def _points(n=4000, seed=1):
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32, np.float64])
+@pytest.mark.usefixtures("route")
 def test_samplers_match_numba_bitwise(dtype):
     work = np.float64 if dtype == np.float64 else np.float32
     img, xy = _image(dtype), _points()
@@ -66,6 +78,7 @@ def test_samplers_match_numba_bitwise(dtype):
     )  # fmt: skip
 
 
+@pytest.mark.usefixtures("route")
 def test_rounding_and_border_kernels_match_numba_bitwise():
     values = np.random.default_rng(3).normal(100.0, 120.0, 5000).astype(np.float32)
     values[::50] = np.float32(0.5)  # ties round to even
@@ -76,6 +89,7 @@ def test_rounding_and_border_kernels_match_numba_bitwise():
     _same(RASTER, "near_border", lambda: (xy, 31.0, 23.0, np.zeros(len(xy), dtype=np.int64)))
 
 
+@pytest.mark.usefixtures("route")
 def test_fem_kernels_match_numba_bitwise():
     from warpcli.maps.compose import BijectiveMap
     from warpcli.polygon import Polygon
@@ -125,6 +139,7 @@ def _per_pixel(a, b):
     return a, k, b, k.astype(np.int32)
 
 
+@pytest.mark.usefixtures("route")
 def test_scatter_band_matches_numba_bitwise():
     pixels, found, a, b = _band()
     ww, rows = 30, 12  # the window: columns 4..33, rows 14..25 (a strip cutting the band at 15..25)
@@ -134,6 +149,7 @@ def test_scatter_band_matches_numba_bitwise():
     _same(MAPS, "outside_columns", lambda: (pixels, 37, 6, 30))
 
 
+@pytest.mark.usefixtures("route")
 def test_scatter_band_from_cell_tables_matches_numba_bitwise_and_scatters_the_gathered_products():
     """Jacobians from per-cell tables (the last row NaN, for cell -1) give the bits of
     gathering them first and scattering the products per pixel."""
@@ -345,6 +361,7 @@ def test_a_kernel_compiles_the_kernels_it_calls_once_for_plain_types():
     assert results[0] == results[1]
 
 
+@pytest.mark.usefixtures("route")
 def test_mfs_kernel_matches_numba_bitwise():
     rng = np.random.default_rng(9)
     K, m = 500, 64
@@ -364,6 +381,7 @@ def test_mfs_kernel_matches_numba_bitwise():
         _same("warpcli.maps._smooth_kernels", "mfs_evaluate", args)
 
 
+@pytest.mark.usefixtures("route")
 def test_near_boundary_filter_matches_numba_bitwise():
     P = star() * 40.0 + 64.0
     rng = np.random.default_rng(4)
@@ -375,6 +393,7 @@ def test_near_boundary_filter_matches_numba_bitwise():
     _same("warpcli.maps._smooth_kernels", "near_boundary", args)
 
 
+@pytest.mark.usefixtures("route")
 def test_compiled_mfs_newton_matches_numba_bitwise():
     from warpcli.maps.mfs import fit_mfs
 
@@ -402,6 +421,7 @@ def test_compiled_mfs_newton_matches_numba_bitwise():
 BEM = "warpcli.maps._bem_kernels"
 
 
+@pytest.mark.usefixtures("route")
 def test_bem_kernels_match_numba_bitwise():
     """The collocation integrals, the evaluation's block sums (near, Gauss and far fields, all three
     quantities) and the certificate's bounds, natively and as numba's functions."""

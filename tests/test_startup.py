@@ -11,10 +11,12 @@ import numpy as np
 import pytest
 
 from helpers import star, write_png, write_polygon
+from warpcli import _elf
 
 #: Imported only when a run needs them (scipy: --interp cubic, BEM and MFS;
-#: numba: compiling a kernel the first time on a machine).
-HEAVY = ("numpy", "scipy", "numba", "llvmlite", "OpenImageIO", "triangle")
+#: numba and llvmlite: compiling a kernel the first time on a machine, and llvmlite to load
+#: kernels where `warpcli._elf` cannot; _hashlib: OpenSSL, which warpcli does not need).
+HEAVY = ("numpy", "scipy", "numba", "llvmlite", "OpenImageIO", "triangle", "_hashlib")
 
 _PROBE = """
 import json, sys
@@ -67,7 +69,11 @@ def test_a_default_warp_imports_neither_scipy_nor_numba(tmp_path):
     code, modules, _ = _imports(args, full=True)
     assert code == 0
     assert "scipy" not in modules and "numba" not in modules
-    assert {"numpy", "OpenImageIO", "llvmlite"} <= modules
+    assert {"numpy", "OpenImageIO"} <= modules
+    # The cached kernels are loaded by warpcli._elf where it can (no LLVM: 0.04 s of CPU and
+    # 50 MB of memory less a process), else by llvmlite; their keys are hashed without OpenSSL.
+    assert ("llvmlite" in modules) != _elf.supported()
+    assert "_hashlib" not in modules
     # Both maps are meshed in forked children (warpcli._fork): triangle is theirs.
     assert "triangle" not in modules
     # np.unique's test for masked arrays imports numpy.ma (10-20 ms); meshing and

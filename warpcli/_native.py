@@ -1,4 +1,4 @@
-"""Compiled kernels without numba at run time: numba compiles them once, llvmlite loads the machine code.
+"""Compiled kernels without numba at run time: numba compiles them once, later processes load the machine code.
 
 warpcli's inner loops are numba functions (``@njit`` in the ``_kernels``
 modules). Importing numba and loading even cached functions costs about 0.4 s
@@ -6,9 +6,13 @@ in every process (numba builds its typing and lowering registries, which also
 import scipy.linalg): more than a whole 1-megapixel warp. So a kernel is called
 through `Kernels`, which compiles it with numba only once per argument types,
 as a C-callable wrapper (`numba.cfunc` over `numba.carray` views of the
-arrays), keeps that machine code on disk, and in later processes loads it with
-llvmlite's MCJIT and calls it through ctypes: about 0.03 s to import llvmlite
-and a millisecond per kernel, with numba never imported.
+arrays), keeps that machine code on disk (the object file LLVM emits for
+MCJIT), and in later processes loads it and calls it through ctypes, with
+numba never imported. On x86-64 Linux `warpcli._elf` loads the object (a
+fraction of a millisecond per kernel, no LLVM in the process); elsewhere, or
+for an object it refuses, llvmlite's MCJIT does (0.04 s of CPU and 50 MB of
+memory to load llvmlite, then a millisecond per kernel). Both run the same
+bytes of machine code.
 
 The code is numba's own: the same function compiled for the same array types
 (C-contiguous, as numba types a contiguous array), emitted for this CPU with
@@ -31,7 +35,9 @@ The cache lives beside numba's: ``__pycache__`` next to the kernel module, or
 ``$NUMBA_CACHE_DIR/warpcli``, or the user's cache directory when the package's
 is not writable. Each entry is keyed by the kernel's source (and the sources
 it names), the argument types, numba's and llvmlite's versions and this CPU,
-so an edit, an upgrade or another machine compiles anew; files are written
+so an edit, an upgrade or another machine compiles anew (LLVM's name of this
+CPU and its features are kept in the cache too, `_identity`, so that loading
+needs no LLVM); files are written
 atomically, so concurrent processes are safe, and a process about to compile
 a kernel another one is compiling waits for that one's file (a lock file
 beside it) instead of compiling it too.
@@ -52,7 +58,7 @@ from typing import IO, Any
 
 import numpy as np
 
-# ctypes, hashlib, json and tempfile are imported where kernels are loaded
+# ctypes, json and tempfile are imported where kernels are loaded
 # (usually on the thread that loads them while the maps are solved), not here.
 
 __all__ = ["Kernels", "cores", "locked_file", "native_enabled", "parallel"]
@@ -137,6 +143,19 @@ def parallel(fn: Callable[[Any], None], parts: Sequence[Any]) -> None:
         raise errors[0]
 
 
+def _sha256(data: bytes = b"") -> Any:
+    """``hashlib.sha256(data)``, from the interpreter's own SHA-256 where it has one: importing
+    hashlib loads OpenSSL first (8-15 ms a process, measured), for the same digests."""
+    for name in ("_sha2", "_sha256"):  # CPython 3.12+, 3.11
+        try:
+            return importlib.import_module(name).sha256(data)
+        except (ImportError, AttributeError):
+            continue
+    import hashlib
+
+    return hashlib.sha256(data)
+
+
 def native_enabled() -> bool:
     """Whether kernels may run as cached machine code (else as numba functions)."""
     return os.environ.get(NATIVE_ENV, "1") != "0" and os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
@@ -211,13 +230,12 @@ class Kernels:
     def _source(self) -> tuple[str, str]:
         """A digest of the kernel module's source (and of the files it depends on), and its folder."""
         if self._source_digest is None:
-            import hashlib
 
             spec = importlib.util.find_spec(self.module)
             if spec is None or not spec.origin:
                 raise ImportError(f"no source for {self.module}")
             folder = os.path.dirname(spec.origin)
-            h = hashlib.sha256()
+            h = _sha256()
             for path in (spec.origin, *(os.path.join(folder, d) for d in self.depends)):
                 with open(path, "rb") as fh:
                     h.update(fh.read())
@@ -225,17 +243,16 @@ class Kernels:
         return self._source_digest
 
     def _native(self, name: str, variant: tuple) -> Callable[..., Any]:
-        import hashlib
         import json
 
         jit = _jit()
         digest, folder = self._source()
-        key = hashlib.sha256(json.dumps([_FORMAT, self.module, name, variant, digest, jit.identity]).encode())
+        key = _sha256(json.dumps([_FORMAT, self.module, name, variant, digest, jit.identity]).encode())
         symbol = f"warpcli_{name}_{key.hexdigest()[:24]}"
         if not jit.has(symbol):
             # One file per kernel and argument types; a new source, numba or
             # CPU gives it a new key, and the file it replaces is removed.
-            kind = hashlib.sha256(json.dumps([self.module, name, variant]).encode()).hexdigest()[:8]
+            kind = _sha256(json.dumps([self.module, name, variant]).encode()).hexdigest()[:8]
             filename = f"{self.module.rsplit('.', 1)[-1]}.{name}.{kind}-{key.hexdigest()[:24]}.native"
             dirs = _cache_dirs(folder)
             entry = _cached_entry(dirs, filename, symbol)
@@ -247,7 +264,7 @@ class Kernels:
                     entry = _cached_entry(dirs, filename, symbol)
                     if entry is None:
                         _say_compiling(dirs)
-                        entry = _compile(self.module, name, variant, symbol, jit)
+                        entry = _compile(self.module, name, variant, symbol, _llvm())
                         jit.add(entry)  # kept only if it loads
                         _write_entry(dirs, filename, entry)
                         return jit.function(symbol, variant)
@@ -283,6 +300,7 @@ def _variant(args: tuple) -> tuple | None:
 
 _LOCK = threading.RLock()
 _JIT = None
+_LLVM = None
 
 #: How many of this process's threads are compiling a kernel, or waiting for another process
 #: compiling it (`compiling`).
@@ -361,12 +379,11 @@ if hasattr(os, "register_at_fork"):
     os.register_at_fork(before=_hold_for_fork, after_in_parent=_release_after_fork, after_in_child=_new_lock_in_child)
 
 
-class _JitEngine:
-    """One MCJIT engine holding every kernel loaded in this process."""
+class _Llvm:
+    """llvmlite's MCJIT engine and this CPU's target machine: to compile kernels, and to load those
+    `warpcli._elf` does not (another machine, or an object it refuses)."""
 
     def __init__(self) -> None:
-        import hashlib
-
         import llvmlite
         import llvmlite.binding as llvm
 
@@ -388,24 +405,11 @@ class _JitEngine:
         )
         self.engine = llvm.create_mcjit_compiler(llvm.parse_assembly(""), self.tm)
         self._objects: list = []
-        self._loaded: dict[str, tuple[int, str]] = {}  # symbol: (address, return type)
-        numba_spec = importlib.util.find_spec("numba")
-        numba_version = ""
-        if numba_spec is not None and numba_spec.origin:
-            try:
-                with open(os.path.join(os.path.dirname(numba_spec.origin), "_version.py"), "rb") as fh:
-                    numba_version = hashlib.sha256(fh.read()).hexdigest()[:16]
-            except OSError:
-                pass
         #: What the machine code depends on besides the kernel and its arguments.
-        self.identity = [triple, cpu, features, llvmlite.__version__, numba_version, sys.implementation.cache_tag]
+        self.identity = [triple, cpu, features, llvmlite.__version__, _numba_version(), sys.implementation.cache_tag]
 
-    def has(self, symbol: str) -> bool:
-        """Whether the kernel ``symbol`` is loaded (a kernel is loaded once per process)."""
-        return symbol in self._loaded
-
-    def add(self, entry: dict) -> None:
-        """Load a compiled kernel (an entry of `_compile` or of the cache)."""
+    def add(self, entry: dict) -> int:
+        """Load a compiled kernel (an entry of `_compile` or of the cache); the address of its function."""
         llvm = self.llvm
         missing = [s for s in entry["externs"] if not llvm.address_of_symbol(s)]
         if missing:
@@ -418,7 +422,133 @@ class _JitEngine:
         address = self.engine.get_function_address(entry["symbol"])
         if not address:
             raise RuntimeError(f"no symbol {entry['symbol']} in the compiled code")
+        return address
+
+
+def _numba_version() -> str:
+    """A digest of the installed numba's version file, read without importing numba ("" if none)."""
+
+    spec = importlib.util.find_spec("numba")
+    if spec is None or not spec.origin:
+        return ""
+    try:
+        with open(os.path.join(os.path.dirname(spec.origin), "_version.py"), "rb") as fh:
+            return _sha256(fh.read()).hexdigest()[:16]
+    except OSError:
+        return ""
+
+
+def _identity() -> list:
+    """What the machine code depends on besides the kernel and its arguments: `_Llvm.identity`.
+
+    Asking LLVM for this CPU's name and features means loading llvmlite (most
+    of the 0.04 s that `warpcli._elf` saves), so the answer is kept in the
+    cache, in a file named by a digest of everything it depends on that can be
+    read without LLVM (`_machine_probe`): the CPU as the kernel describes it,
+    llvmlite's and numba's installed files, the interpreter. A new CPU, an
+    upgrade or another machine sharing the cache finds no file and asks LLVM.
+    """
+    import json
+
+    probe = _machine_probe()
+    if probe is None:
+        return _llvm().identity
+    filename = f"identity-{_sha256(json.dumps(probe).encode()).hexdigest()[:24]}.json"
+    dirs = _cache_dirs(os.path.dirname(os.path.abspath(__file__)))
+    for d in dirs:
+        try:
+            with open(os.path.join(d, filename), "rb") as fh:
+                stored = json.loads(fh.read())
+        except (OSError, ValueError):
+            continue
+        if isinstance(stored, dict) and stored.get("probe") == probe and isinstance(stored.get("identity"), list):
+            return stored["identity"]
+    identity = _llvm().identity
+    _write_file(dirs, filename, json.dumps({"probe": probe, "identity": identity}).encode())
+    return identity
+
+
+#: Lines of /proc/cpuinfo that describe the CPU (not its clock or its place among the cores).
+_CPU_KEYS = frozenset(
+    {
+        "vendor_id", "cpu family", "model", "model name", "stepping", "flags", "Features",
+        "CPU implementer", "CPU architecture", "CPU variant", "CPU part", "CPU revision",
+    }
+)  # fmt: skip
+
+
+def _machine_probe() -> list | None:
+    """What `_identity` depends on, read without LLVM; None where the kernel does not say (not Linux)."""
+    cpu = []
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                if not line.strip():
+                    break  # the first processor's block
+                key, _, value = line.partition(":")
+                if key.strip() in _CPU_KEYS:
+                    cpu.append([key.strip(), value.strip()])
+    except OSError:
+        return None
+    if not cpu:
+        return None
+    spec = importlib.util.find_spec("llvmlite")
+    if spec is None or not spec.origin:
+        return None
+    folder = os.path.dirname(spec.origin)
+    try:
+        with open(os.path.join(folder, "_version.py"), "rb") as fh:
+            version = fh.read().decode("utf-8", "replace")
+        library = os.stat(os.path.join(folder, "binding", "libllvmlite.so"))
+    except OSError:
+        return None
+    return [_FORMAT, os.uname().machine, cpu, version, [library.st_size, library.st_mtime_ns], _numba_version(),
+            sys.implementation.cache_tag]  # fmt: skip
+
+
+#: Whether cached kernels are loaded by `warpcli._elf` where it can (else always by MCJIT).
+ELF_LOADER = True
+
+
+class _Code:
+    """Every kernel loaded in this process, by symbol; and what their machine code depends on.
+
+    A kernel's object is loaded by `warpcli._elf` where it can be (x86-64
+    Linux: no llvmlite in the process), else by MCJIT; the bytes run are the
+    same either way.
+    """
+
+    def __init__(self) -> None:
+        self._loaded: dict[str, tuple[int, str]] = {}  # symbol: (address, return type)
+        self._identity: list | None = None
+        #: How each kernel was loaded: "elf" or "mcjit".
+        self.routes: dict[str, str] = {}
+
+    @property
+    def identity(self) -> list:
+        """What the machine code depends on besides the kernel and its arguments (`_identity`)."""
+        if self._identity is None:
+            self._identity = _identity()
+        return self._identity
+
+    def has(self, symbol: str) -> bool:
+        """Whether the kernel ``symbol`` is loaded (a kernel is loaded once per process)."""
+        return symbol in self._loaded
+
+    def add(self, entry: dict) -> None:
+        """Load a compiled kernel (an entry of `_compile` or of the cache)."""
+        from . import _elf
+
+        address, route = None, "elf"
+        if ELF_LOADER and _elf.supported():
+            try:
+                address = _elf.load(entry["object"], _LIBC).address(entry["symbol"])
+            except _elf.Unsupported as err:
+                _log.debug("kernel %s: loaded by MCJIT (%s)", entry["symbol"], err)
+        if address is None:
+            address, route = _llvm().add(entry), "mcjit"
         self._loaded[entry["symbol"]] = (address, entry["restype"])
+        self.routes[entry["symbol"]] = route
 
     def function(self, symbol: str, variant: tuple) -> Callable[..., Any]:
         """A Python callable for the loaded kernel ``symbol``, taking arguments of ``variant``."""
@@ -450,11 +580,18 @@ class _JitEngine:
         return call
 
 
-def _jit() -> _JitEngine:
+def _jit() -> _Code:
     global _JIT
     if _JIT is None:
-        _JIT = _JitEngine()
+        _JIT = _Code()
     return _JIT
+
+
+def _llvm() -> _Llvm:
+    global _LLVM
+    if _LLVM is None:
+        _LLVM = _Llvm()
+    return _LLVM
 
 
 def _cache_dirs(folder: str) -> list[str]:
@@ -517,7 +654,6 @@ def locked_file(path: str) -> IO[str]:
 
 
 def _read_entry(path: str) -> dict | None:
-    import hashlib
     import json
 
     try:
@@ -534,21 +670,26 @@ def _read_entry(path: str) -> dict | None:
         entry = json.loads(head)
     except ValueError:
         return None
-    if len(obj) != entry.get("size") or hashlib.sha256(obj).hexdigest() != entry.get("sha256"):
+    if len(obj) != entry.get("size") or _sha256(obj).hexdigest() != entry.get("sha256"):
         return None  # cut short or damaged: compiled again
     entry["object"] = obj
     return entry
 
 
 def _write_entry(dirs: list[str], filename: str, entry: dict) -> None:
-    import hashlib
     import json
-    import tempfile
 
     head = {k: v for k, v in entry.items() if k != "object"}
     head["size"] = len(entry["object"])
-    head["sha256"] = hashlib.sha256(entry["object"]).hexdigest()
-    data = _MAGIC + json.dumps(head).encode() + b"\n" + entry["object"]
+    head["sha256"] = _sha256(entry["object"]).hexdigest()
+    _write_file(dirs, filename, _MAGIC + json.dumps(head).encode() + b"\n" + entry["object"])
+
+
+def _write_file(dirs: list[str], filename: str, data: bytes) -> None:
+    """Write ``data`` atomically to ``filename`` in the first writable of ``dirs``, removing the
+    files it replaces there: those of the same name up to its last ``-`` (older keys)."""
+    import tempfile
+
     for d in dirs:
         try:
             os.makedirs(d, exist_ok=True)
@@ -561,9 +702,9 @@ def _write_entry(dirs: list[str], filename: str, entry: dict) -> None:
             except BaseException:
                 os.unlink(tmp)
                 raise
-            stem = filename.rsplit("-", 1)[0] + "-"
+            stem, suffix = filename.rsplit("-", 1)[0] + "-", os.path.splitext(filename)[1]
             for old in os.listdir(d):
-                if old.startswith(stem) and old.endswith(".native") and old != filename:
+                if old.startswith(stem) and old.endswith(suffix) and old != filename:
                     with contextlib.suppress(OSError):
                         os.unlink(os.path.join(d, old))
             return
@@ -572,7 +713,7 @@ def _write_entry(dirs: list[str], filename: str, entry: dict) -> None:
     _log.debug("no writable cache directory for %s (tried %s)", filename, ", ".join(dirs))
 
 
-def _compile(module: str, name: str, variant: tuple, symbol: str, jit: _JitEngine) -> dict:
+def _compile(module: str, name: str, variant: tuple, symbol: str, llvm: _Llvm) -> dict:
     """Compile kernel ``name`` of ``module`` for ``variant`` with numba; its machine code and how to call it."""
     from numba import carray, cfunc, from_dtype, types
 
@@ -602,18 +743,18 @@ def _compile(module: str, name: str, variant: tuple, symbol: str, jit: _JitEngin
     namespace = {"kernel": dispatcher, "carray": carray}
     exec(f"def wrapper({', '.join(names)}):\n    return kernel({', '.join(call)})\n", namespace)  # noqa: S102
     wrapper = cfunc(sig)(namespace["wrapper"])
-    obj, externs = _machine_code(jit, wrapper.inspect_llvm(), wrapper.native_name, symbol)
+    obj, externs = _machine_code(llvm, wrapper.inspect_llvm(), wrapper.native_name, symbol)
     return {"format": _FORMAT, "symbol": symbol, "restype": ret, "externs": externs, "object": obj}
 
 
-def _machine_code(jit: _JitEngine, ir: str, entry_name: str, symbol: str) -> tuple[bytes, list[str]]:
+def _machine_code(target: _Llvm, ir: str, entry_name: str, symbol: str) -> tuple[bytes, list[str]]:
     """The object code of a wrapper's module, self-contained but for the C library.
 
     The entry is renamed to ``symbol`` and everything else made internal, so
     kernels compiled in different processes never clash in one engine; numba's
     error-path references are bound to a trap (see the module docstring).
     """
-    llvm = jit.llvm
+    llvm = target.llvm
     mod = llvm.parse_assembly(ir)
     externs, stubs = [], []
     for fn in mod.functions:
@@ -644,4 +785,4 @@ def _machine_code(jit: _JitEngine, ir: str, entry_name: str, symbol: str) -> tup
         if not gv.is_declaration:
             gv.linkage = "internal"
     mod.verify()
-    return jit.tm.emit_object(mod), sorted(externs)
+    return target.tm.emit_object(mod), sorted(externs)

@@ -1013,7 +1013,8 @@ class _Method:
 
 
 def _load_runtime() -> None:
-    """The compiled kernels' runtime (llvmlite and its JIT engine: 0.04 s quiet) and the polygon
+    """The compiled kernels' runtime (`warpcli._native`: llvmlite and its JIT engine where
+    `warpcli._elf` cannot load them, 0.04 s quiet) and the polygon
     test every certificate and pull-back calls, loaded by a call on a triangle."""
     v = np.array([0.0, 1.0, 0.0])
     _compiled.inside_points(np.zeros(1), np.zeros(1), v, v[::-1].copy(), np.zeros(1, dtype=np.bool_))
