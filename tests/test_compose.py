@@ -308,3 +308,19 @@ def test_pull_back_jacobians_are_the_products_of_both_maps_jacobians(rows):
     np.testing.assert_array_equal(pull.jacobian, want)
     np.testing.assert_array_equal(pull.points, points.reshape(128, 128, 2)[r0 : r0 + h, c0 : c0 + w])
     assert (np.isfinite(pull.jacobian[..., 0, 0]) == np.isfinite(pull.points[..., 0])).mean() > 0.99
+
+
+def test_a_pull_back_makes_each_map_only_the_jacobian_table_it_reads():
+    """The target's map is scanned on the grid and the source's inverted: a pull-back reads the
+    target's "grid" table and the source's "inverse" one, made with the maps (in the children that
+    built them, where they fork), and makes neither map's other table (a table of both sides made
+    the unread one's Jacobians in the parent, once per thread of the pull-back)."""
+    f = BijectiveMap.between(Polygon(star()), Polygon(star(phase=0.3)))
+    f.pull_back(128, 128)
+    assert "_grid_table" in vars(f.phi1) and "_inverse_table" not in vars(f.phi1)
+    assert "_inverse_table" in vars(f.phi0) and "_grid_table" not in vars(f.phi0)
+    for phi, side in ((f.phi1, "grid"), (f.phi0, "inverse")):
+        table = phi.jacobian_table(side)
+        assert table.shape == (phi.mesh.n_triangles + 1, 2, 2) and np.isnan(table[-1]).all()
+    with pytest.raises(ValueError, match="side"):
+        f.phi0.jacobian_table("forward")
