@@ -319,3 +319,27 @@ def test_a_warp_imports_its_own_command_module_only_and_every_command_is_still_t
     assert doc["commands"] == {
         "warp": "warp", "apply-map": "apply-map", "edit": "edit", "points": "points", "texture": "texture", "volume": "volume"
     }
+
+
+_GC_PROBE = """
+import gc, json, sys
+before = gc.get_threshold()
+import warpcli, warpcli.cli, warpcli.pipeline
+imported = gc.get_threshold()
+r = sys.modules["warpcli.cli.run"]
+
+def probe():
+    print(json.dumps([before, imported, gc.get_threshold(), gc.isenabled()]))
+    return 0
+
+r.main = probe  # what run() calls once it has set the process up
+r.run()
+"""
+
+
+def test_the_command_collects_garbage_less_often_and_a_library_import_does_not_change_it():
+    done = subprocess.run([sys.executable, "-c", _GC_PROBE], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    before, imported, running, enabled = json.loads(done.stdout.strip().splitlines()[-1])
+    assert imported == before  # importing warpcli changes nothing
+    assert running[0] >= 20_000 and running[1:] == imported[1:] and enabled
