@@ -537,3 +537,37 @@ def test_strips_of_an_image_decoded_while_the_map_is_built_write_the_bytes_of_st
     warp_file(inp, tmp_path / "w.png", a, b)
     assert len(decoded) == 1  # --tiled reads parts of the file
     assert (tmp_path / "s.png").read_bytes() == (tmp_path / "t.png").read_bytes() == (tmp_path / "w.png").read_bytes()
+
+
+def test_a_writer_that_cannot_open_stops_the_plans_made_meanwhile(tmp_path, monkeypatch, small_strips):
+    """The strips' plans start before the output is opened (its first opening in a process loads
+    OpenImageIO's colour configuration): a writer that fails to open stops them, and leaves no
+    thread and no output behind."""
+    import threading
+
+    from warpcli.cores import jobs
+    from warpcli.errors import ImageIOError
+
+    planned, started = [], threading.Event()
+    real_plan = tiled._Sampler.plan
+
+    def plan(self, *args):
+        started.set()
+        planned.append(args[2])
+        return real_plan(self, *args)
+
+    def refuse(self, filename, shown_name, *args):
+        assert started.wait(10)  # planning began before the writer opened
+        raise ImageIOError(f"{shown_name}: cannot write: refused for the test")
+
+    monkeypatch.setattr(tiled._Sampler, "plan", plan)
+    monkeypatch.setattr(tiled, "StripWriter", type("Refusing", (), {"__init__": refuse}))
+    px = np.random.default_rng(4).integers(0, 256, (70, 90, 3)).astype(np.uint8)
+    inp = write_png(tmp_path / "in.png", px)
+    a = write_polygon(tmp_path / "a.json", star(6, 45, 35, 12, 33))
+    b = write_polygon(tmp_path / "b.json", star(6, 45, 35, 10, 33, phase=0.25))
+    with jobs(2), pytest.raises(ImageIOError, match="refused for the test"):
+        warp_file(inp, tmp_path / "s.png", a, b, tiled=True)
+    assert planned  # the plans thread ran
+    assert not [t for t in threading.enumerate() if t.name == "warp-plans" and t.is_alive()]
+    assert sorted(os.listdir(tmp_path)) == ["a.json", "b.json", "in.png"]

@@ -852,8 +852,10 @@ def _warp_file_tiled(
             if progress is not None:
                 progress("reading")
             t0 = time.perf_counter()
-            pixels = read_image(input_path).pixels
+            image = read_image(input_path)
+            pixels = image.pixels
             timings["read"] = time.perf_counter() - t0
+            ready_to_write(image)  # while the map is built, not when the first strip is (`ready_to_write`)
         if progress is not None:
             progress("building the map")
         t0 = time.perf_counter()
