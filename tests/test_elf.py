@@ -175,6 +175,21 @@ def _first_relocation(data: bytearray) -> int:
     raise AssertionError("no relocation in a loaded section")
 
 
+def _set_section(data: bytearray, name: str, flags: int = 0, align: int | None = None) -> None:
+    """Add ``flags`` to section ``name``'s, and set its alignment."""
+    shoff, shnum, shstrndx = struct.unpack_from("<Q", data, 40)[0], *struct.unpack_from("<HH", data, 60)
+    names = struct.unpack_from("<IIQQQQIIQQ", data, shoff + 64 * shstrndx)[4]
+    for i in range(shnum):
+        at = shoff + 64 * i
+        header = list(struct.unpack_from("<IIQQQQIIQQ", data, at))
+        if bytes(data[names + header[0] : names + header[0] + len(name) + 1]) == name.encode() + b"\0":
+            header[2] |= flags
+            header[8] = header[8] if align is None else align
+            struct.pack_into("<IIQQQQIIQQ", data, at, *header)
+            return
+    raise AssertionError(f"no section {name}")
+
+
 def test_what_it_cannot_load_is_refused_not_loaded_wrong():
     ir = f"declare double @cbrt(double)\ndefine double @f(double %x) {{\n  %y = fmul double %x, {_hex(1.1)}\n" \
          "  %z = call double @cbrt(double %y)\n  ret double %z\n}"  # fmt: skip
@@ -195,6 +210,8 @@ def test_what_it_cannot_load_is_refused_not_loaded_wrong():
         "empty": b"",
         # a relocation of a kind it does not apply (R_X86_64_GOTPCREL)
         "relocation": _patched(obj, lambda d: struct.pack_into("<I", d, _first_relocation(d) + 8, 9)),
+        "thread-local": _patched(obj, lambda d: _set_section(d, ".ltext", flags=0x400)),
+        "over-aligned": _patched(obj, lambda d: _set_section(d, ".ltext", align=1 << 16)),
     }
     for why, data in refused.items():
         with pytest.raises(_elf.Unsupported):

@@ -37,7 +37,7 @@ class Unsupported(Exception):
 _ET_REL, _EM_X86_64 = 1, 62
 _SHT_PROGBITS, _SHT_SYMTAB, _SHT_STRTAB, _SHT_RELA, _SHT_NOBITS, _SHT_REL = 1, 2, 3, 4, 8, 9
 _SHT_NOTE, _SHT_X86_64_UNWIND = 7, 0x70000001
-_SHF_WRITE, _SHF_ALLOC, _SHF_EXECINSTR = 0x1, 0x2, 0x4
+_SHF_WRITE, _SHF_ALLOC, _SHF_EXECINSTR, _SHF_TLS = 0x1, 0x2, 0x4, 0x400
 _SHN_UNDEF, _SHN_LORESERVE, _SHN_ABS = 0, 0xFF00, 0xFFF1
 _STT_SECTION = 3
 _R_X86_64_64, _R_X86_64_PC32, _R_X86_64_PC64 = 1, 2, 24
@@ -132,6 +132,10 @@ def _load(data: memoryview, externs: frozenset[str]) -> Loaded:
         code = bool(flags & _SHF_EXECINSTR)
         if code and flags & _SHF_WRITE:
             raise Unsupported("writable code")
+        if flags & _SHF_TLS:
+            raise Unsupported("thread-local storage")
+        if align > _PAGE:  # the regions start on a page
+            raise Unsupported(f"section {i} aligned to {align} bytes")
         at = _round_up(ends[code], max(int(align), 1))
         loaded[i] = (code, at)
         ends[code] = at + size
