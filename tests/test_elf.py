@@ -175,19 +175,25 @@ def _first_relocation(data: bytearray) -> int:
     raise AssertionError("no relocation in a loaded section")
 
 
-def _set_section(data: bytearray, name: str, flags: int = 0, align: int | None = None) -> None:
-    """Add ``flags`` to section ``name``'s, and set its alignment."""
+def _section(data: bytearray, name: str) -> list:
+    """Section ``name``'s header fields, and its header's offset last."""
     shoff, shnum, shstrndx = struct.unpack_from("<Q", data, 40)[0], *struct.unpack_from("<HH", data, 60)
     names = struct.unpack_from("<IIQQQQIIQQ", data, shoff + 64 * shstrndx)[4]
     for i in range(shnum):
-        at = shoff + 64 * i
-        header = list(struct.unpack_from("<IIQQQQIIQQ", data, at))
+        header = list(struct.unpack_from("<IIQQQQIIQQ", data, shoff + 64 * i))
         if bytes(data[names + header[0] : names + header[0] + len(name) + 1]) == name.encode() + b"\0":
-            header[2] |= flags
-            header[8] = header[8] if align is None else align
-            struct.pack_into("<IIQQQQIIQQ", data, at, *header)
-            return
+            return header + [shoff + 64 * i]
     raise AssertionError(f"no section {name}")
+
+
+def _set_section(data: bytearray, name: str, flags: int = 0, align: int | None = None, kind: int | None = None,
+                 offset: int | None = None, size: int | None = None) -> None:
+    """Add ``flags`` to section ``name``'s, and set its alignment, type, offset or size."""
+    *header, at = _section(data, name)
+    header[2] |= flags
+    for field, value in ((8, align), (1, kind), (4, offset), (5, size)):
+        header[field] = header[field] if value is None else value
+    struct.pack_into("<IIQQQQIIQQ", data, at, *header)
 
 
 def test_what_it_cannot_load_is_refused_not_loaded_wrong():
@@ -212,6 +218,14 @@ def test_what_it_cannot_load_is_refused_not_loaded_wrong():
         "relocation": _patched(obj, lambda d: struct.pack_into("<I", d, _first_relocation(d) + 8, 9)),
         "thread-local": _patched(obj, lambda d: _set_section(d, ".ltext", flags=0x400)),
         "over-aligned": _patched(obj, lambda d: _set_section(d, ".ltext", align=1 << 16)),
+        # relocations in a section of a type it does not read (LLVM 19's compact SHT_CREL)
+        "relocation section": _patched(obj, lambda d: _set_section(d, ".rela.ltext", kind=0x40000014)),
+        "beyond the file": _patched(obj, lambda d: _set_section(d, ".ltext", offset=len(d) - 8)),
+        "huge": _patched(obj, lambda d: _set_section(d, ".ltext", size=2**64 - 1)),
+        # an 8-byte relocation at the last 4 bytes of its section (within the page's padding)
+        "relocation beyond": _patched(
+            obj, lambda d: struct.pack_into("<Q", d, _first_relocation(d), _section(d, ".ltext")[5] - 4)
+        ),
     }
     for why, data in refused.items():
         with pytest.raises(_elf.Unsupported):
@@ -258,8 +272,87 @@ def test_the_identity_is_llvms_and_is_kept_by_what_can_be_read_without_llvm(tmp_
     files[0].write_text(json.dumps(stored))  # the name of one probe, the contents of another
     assert _native._identity() == truth and len(asked) == 3
     probe = _native._machine_probe()
-    monkeypatch.setattr(_native, "_machine_probe", lambda: probe[:2] + [probe[2] + [["flags", "none"]]] + probe[3:])
+    other_cpu = [probe[1][0] + [[0x7, 0, 0, 0, 0, 0]], probe[1][1]]  # another leaf 7: other features
+    monkeypatch.setattr(_native, "_machine_probe", lambda: probe[:1] + [other_cpu] + probe[2:])
     assert _native._identity() == truth and len(asked) == 4  # another CPU: asked, and kept apart
-    assert [f.name for f in (tmp_path / "warpcli").glob("identity-*.json")] != [files[0].name]
+    kept = sorted(f.name for f in (tmp_path / "warpcli").glob("identity-*.json"))
+    assert len(kept) == 2 and files[0].name in kept  # each probe's file kept: a shared cache does not thrash
     monkeypatch.setattr(_native, "_machine_probe", lambda: None)
     assert _native._identity() == truth and len(asked) == 5  # nothing to key it by: always asked
+
+
+def _protection(address: int) -> str:
+    with open("/proc/self/maps") as fh:
+        for line in fh:
+            span, perms = line.split()[:2]
+            lo, hi = (int(x, 16) for x in span.split("-"))
+            if lo <= address < hi:
+                return perms[:3]
+    raise AssertionError(f"{address:#x} is not mapped")
+
+
+def test_constants_are_read_only_and_globals_writable():
+    ir = f"""
+@k = constant double {_hex(1.5)}
+@v = global double 0.0
+define ptr @constant() {{
+  ret ptr @k
+}}
+define ptr @variable() {{
+  ret ptr @v
+}}
+"""
+    loaded = _elf.load(_object(ir))
+    k = _function(loaded.address("constant"), 0, restype=ctypes.c_void_p)()
+    v = _function(loaded.address("variable"), 0, restype=ctypes.c_void_p)()
+    assert ctypes.c_double.from_address(k).value == 1.5
+    assert _protection(k) == "r--" and _protection(v) == "rw-"
+    assert _protection(loaded.address("constant")) == "r-x"
+
+
+def test_an_indirect_function_is_refused():
+    ir = """
+define internal ptr @resolve() {
+  ret ptr @impl
+}
+define i64 @impl() {
+  ret i64 7
+}
+@pick = ifunc i64 (), ptr @resolve
+define i64 @call() {
+  %r = call i64 @pick()
+  ret i64 %r
+}
+"""
+    with pytest.raises(_elf.Unsupported, match="indirect"):
+        _elf.load(_object(ir))
+
+
+def test_processor_is_what_the_kernel_reads_of_the_cpu():
+    """`processor`'s leaves (its own ``cpuid``, run as machine code) against /proc/cpuinfo's
+    account of the same CPU: vendor, family, model, stepping and feature flags."""
+    leaves, xcr0 = _elf.processor()
+    by_leaf = {(n, sub): regs for n, sub, *regs in leaves}
+    with open("/proc/cpuinfo") as fh:
+        block = fh.read().split("\n\n")[0]
+    info = dict((k.strip(), v.strip()) for k, _, v in (line.partition(":") for line in block.splitlines()))
+    eax, ebx, ecx, edx = by_leaf[(0, 0)]
+    assert struct.pack("<III", ebx, edx, ecx).decode() == info["vendor_id"]
+    eax1, _, ecx1, edx1 = by_leaf[(1, 0)]
+    family = (eax1 >> 8) & 0xF
+    model = (eax1 >> 4) & 0xF
+    if family in (6, 15):
+        model |= ((eax1 >> 16) & 0xF) << 4
+    if family == 15:
+        family += (eax1 >> 20) & 0xFF
+    assert (family, model, eax1 & 0xF) == (int(info["cpu family"]), int(info["model"]), int(info["stepping"]))
+    flags = set(info["flags"].split())
+    ebx7 = by_leaf[(7, 0)][1] if (7, 0) in by_leaf else 0
+    bits = {"sse2": edx1 >> 26, "sse4_2": ecx1 >> 20, "avx": ecx1 >> 28, "avx2": ebx7 >> 5, "avx512f": ebx7 >> 16}
+    for flag, bit in bits.items():
+        if flag in flags:  # the kernel prints a feature the CPU has (and it has not turned off)
+            assert bit & 1, flag
+    assert "sse2" in flags
+    if "avx" in flags:  # the OS saves the AVX registers: xgetbv runs and says so
+        assert xcr0 is not None and xcr0 & 0b110 == 0b110
+    assert _elf.processor() == [leaves, xcr0]

@@ -464,33 +464,20 @@ def _identity() -> list:
         if isinstance(stored, dict) and stored.get("probe") == probe and isinstance(stored.get("identity"), list):
             return stored["identity"]
     identity = _llvm().identity
-    _write_file(dirs, filename, json.dumps({"probe": probe, "identity": identity}).encode())
+    # Kept beside those of other probes (interpreters or machines sharing the cache).
+    _write_file(dirs, filename, json.dumps({"probe": probe, "identity": identity}).encode(), replace=False)
     return identity
 
 
-#: Lines of /proc/cpuinfo that describe the CPU (not its clock or its place among the cores).
-_CPU_KEYS = frozenset(
-    {
-        "vendor_id", "cpu family", "model", "model name", "stepping", "flags", "Features",
-        "CPU implementer", "CPU architecture", "CPU variant", "CPU part", "CPU revision",
-    }
-)  # fmt: skip
-
-
 def _machine_probe() -> list | None:
-    """What `_identity` depends on, read without LLVM; None where the kernel does not say (not Linux)."""
-    cpu = []
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
-            for line in fh:
-                if not line.strip():
-                    break  # the first processor's block
-                key, _, value = line.partition(":")
-                if key.strip() in _CPU_KEYS:
-                    cpu.append([key.strip(), value.strip()])
-    except OSError:
-        return None
-    if not cpu:
+    """What `_identity` depends on, read without LLVM: what LLVM reads of the processor
+    (`warpcli._elf.processor`: the ``cpuid`` leaves and the OS's enabled register state, so a
+    CPU, a VM or an emulator that reports other features gets another file), llvmlite's and
+    numba's installed files and the interpreter; None where `warpcli._elf` does not load the
+    kernels (they are loaded with llvmlite then, which answers at no extra cost)."""
+    from . import _elf
+
+    if not _elf.supported():
         return None
     spec = importlib.util.find_spec("llvmlite")
     if spec is None or not spec.origin:
@@ -500,9 +487,10 @@ def _machine_probe() -> list | None:
         with open(os.path.join(folder, "_version.py"), "rb") as fh:
             version = fh.read().decode("utf-8", "replace")
         library = os.stat(os.path.join(folder, "binding", "libllvmlite.so"))
-    except OSError:
+        cpu = _elf.processor()
+    except (OSError, _elf.Unsupported):
         return None
-    return [_FORMAT, os.uname().machine, cpu, version, [library.st_size, library.st_mtime_ns], _numba_version(),
+    return [_FORMAT, cpu, version, [library.st_size, library.st_mtime_ns], _numba_version(),
             sys.implementation.cache_tag]  # fmt: skip
 
 
@@ -541,10 +529,11 @@ class _Code:
 
         address, route = None, "elf"
         if ELF_LOADER and _elf.supported():
+            symbol = entry["symbol"]
             try:
-                address = _elf.load(entry["object"], _LIBC).address(entry["symbol"])
-            except _elf.Unsupported as err:
-                _log.debug("kernel %s: loaded by MCJIT (%s)", entry["symbol"], err)
+                address = _elf.load(entry["object"], _LIBC, (symbol,)).address(symbol)
+            except Exception as err:  # noqa: BLE001  (MCJIT loads whatever this loader does not)
+                _log.debug("kernel %s: loaded by MCJIT (%s: %s)", symbol, type(err).__name__, err)
         if address is None:
             address, route = _llvm().add(entry), "mcjit"
         self._loaded[entry["symbol"]] = (address, entry["restype"])
@@ -685,9 +674,10 @@ def _write_entry(dirs: list[str], filename: str, entry: dict) -> None:
     _write_file(dirs, filename, _MAGIC + json.dumps(head).encode() + b"\n" + entry["object"])
 
 
-def _write_file(dirs: list[str], filename: str, data: bytes) -> None:
-    """Write ``data`` atomically to ``filename`` in the first writable of ``dirs``, removing the
-    files it replaces there: those of the same name up to its last ``-`` (older keys)."""
+def _write_file(dirs: list[str], filename: str, data: bytes, replace: bool = True) -> None:
+    """Write ``data`` atomically to ``filename`` in the first writable of ``dirs``; with
+    ``replace``, removing the files it replaces there: those of the same name up to its last
+    ``-`` (older keys)."""
     import tempfile
 
     for d in dirs:
@@ -703,7 +693,7 @@ def _write_file(dirs: list[str], filename: str, data: bytes) -> None:
                 os.unlink(tmp)
                 raise
             stem, suffix = filename.rsplit("-", 1)[0] + "-", os.path.splitext(filename)[1]
-            for old in os.listdir(d):
+            for old in os.listdir(d) if replace else ():
                 if old.startswith(stem) and old.endswith(suffix) and old != filename:
                     with contextlib.suppress(OSError):
                         os.unlink(os.path.join(d, old))
