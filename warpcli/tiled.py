@@ -152,16 +152,20 @@ def warp_file_tiled(
                 ahead.stop()
             raise
         strips = (sampler.render(reader, width, planned, timings) for planned in (ahead if ahead is not None else plans))
-        made = _Ahead(strips, upstream=ahead) if budget() > 1 else None
+        made = None
         try:
+            made = _Ahead(strips, upstream=ahead) if budget() > 1 else None
             for strip in made if made is not None else strips:
                 t0 = clock()
                 writer.write(strip if not opts.dtype else convert_pixels(strip, opts.dtype))
                 timings["write"] += clock() - t0
             writer.close()
         except BaseException:
+            # Both threads end (the strips' stops its upstream) before the input is closed.
             if made is not None:
                 made.stop()
+            elif ahead is not None:
+                ahead.stop()
             writer.abandon()
             raise
     return TiledResult(fmap, (width, height), timings)
