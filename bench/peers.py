@@ -159,6 +159,12 @@ def parse_args(argv):
 
 def main(argv=None) -> int:
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    # The runs change directory (below): paths given relative to the caller's are resolved now,
+    # and an --out that cannot be written is said now, not after ten minutes of runs.
+    args.out = os.path.abspath(args.out) if args.out else None
+    args.before = os.path.abspath(args.before) if args.before else None
+    if args.out and not os.access(os.path.dirname(args.out), os.W_OK):
+        sys.exit(f"peers: cannot write {args.out}: no such directory, or not writable")
     startup.compile_bytecode()
     from warpcli.pipeline import warp_image
     from warpcli.raster import dtypes
