@@ -230,7 +230,6 @@ class Kernels:
     def _source(self) -> tuple[str, str]:
         """A digest of the kernel module's source (and of the files it depends on), and its folder."""
         if self._source_digest is None:
-
             spec = importlib.util.find_spec(self.module)
             if spec is None or not spec.origin:
                 raise ImportError(f"no source for {self.module}")
@@ -427,7 +426,6 @@ class _Llvm:
 
 def _numba_version() -> str:
     """A digest of the installed numba's version file, read without importing numba ("" if none)."""
-
     spec = importlib.util.find_spec("numba")
     if spec is None or not spec.origin:
         return ""
@@ -444,7 +442,7 @@ def _identity() -> list:
     Asking LLVM for this CPU's name and features means loading llvmlite (most
     of the 0.04 s that `warpcli._elf` saves), so the answer is kept in the
     cache, in a file named by a digest of everything it depends on that can be
-    read without LLVM (`_machine_probe`): the CPU as the kernel describes it,
+    read without LLVM (`_machine_probe`): what LLVM reads of the processor,
     llvmlite's and numba's installed files, the interpreter. A new CPU, an
     upgrade or another machine sharing the cache finds no file and asks LLVM.
     """
