@@ -151,8 +151,8 @@ def fewer_collections() -> None:
     """
     import gc
 
-    _, older, oldest = gc.get_threshold()
-    gc.set_threshold(max(GC_THRESHOLD, gc.get_threshold()[0]), older, oldest)
+    youngest, older, oldest = gc.get_threshold()
+    gc.set_threshold(max(GC_THRESHOLD, youngest), older, oldest)
 
 
 def _exit_now(code: int) -> None:
