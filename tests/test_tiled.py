@@ -545,7 +545,6 @@ def test_a_writer_that_cannot_open_stops_the_plans_made_meanwhile(tmp_path, monk
     thread and no output behind."""
     import threading
 
-    from warpcli.cores import jobs
     from warpcli.errors import ImageIOError
 
     planned, started = [], threading.Event()
@@ -562,13 +561,22 @@ def test_a_writer_that_cannot_open_stops_the_plans_made_meanwhile(tmp_path, monk
 
     monkeypatch.setattr(tiled._Sampler, "plan", plan)
     monkeypatch.setattr(tiled, "StripWriter", type("Refusing", (), {"__init__": refuse}))
+    _strips_fail_cleanly(tmp_path, ImageIOError, "refused for the test")
+    assert planned  # the plans thread ran
+
+
+def _strips_fail_cleanly(tmp_path, error, match):
+    """A strip-by-strip warp on two cores raises ``error``, leaving no plans thread and no file."""
+    import threading
+
+    from warpcli.cores import jobs
+
     px = np.random.default_rng(4).integers(0, 256, (70, 90, 3)).astype(np.uint8)
     inp = write_png(tmp_path / "in.png", px)
     a = write_polygon(tmp_path / "a.json", star(6, 45, 35, 12, 33))
     b = write_polygon(tmp_path / "b.json", star(6, 45, 35, 10, 33, phase=0.25))
-    with jobs(2), pytest.raises(ImageIOError, match="refused for the test"):
+    with jobs(2), pytest.raises(error, match=match):
         warp_file(inp, tmp_path / "s.png", a, b, tiled=True)
-    assert planned  # the plans thread ran
     assert not [t for t in threading.enumerate() if t.name == "warp-plans" and t.is_alive()]
     assert sorted(os.listdir(tmp_path)) == ["a.json", "b.json", "in.png"]
 
@@ -576,10 +584,6 @@ def test_a_writer_that_cannot_open_stops_the_plans_made_meanwhile(tmp_path, monk
 def test_strips_whose_thread_cannot_start_abandon_the_output_and_stop_the_plans(tmp_path, monkeypatch, small_strips):
     """No thread left for the strips (``can't start new thread``): the plans' thread stops, the
     half-opened output is abandoned, and the error is the run's."""
-    import threading
-
-    from warpcli.cores import jobs
-
     real = tiled._Ahead.__init__
 
     def no_strips_thread(self, items, *, name="warp-strips", upstream=None):
@@ -588,11 +592,4 @@ def test_strips_whose_thread_cannot_start_abandon_the_output_and_stop_the_plans(
         real(self, items, name=name, upstream=upstream)
 
     monkeypatch.setattr(tiled._Ahead, "__init__", no_strips_thread)
-    px = np.random.default_rng(5).integers(0, 256, (70, 90, 3)).astype(np.uint8)
-    inp = write_png(tmp_path / "in.png", px)
-    a = write_polygon(tmp_path / "a.json", star(6, 45, 35, 12, 33))
-    b = write_polygon(tmp_path / "b.json", star(6, 45, 35, 10, 33, phase=0.25))
-    with jobs(2), pytest.raises(RuntimeError, match="new thread"):
-        warp_file(inp, tmp_path / "s.png", a, b, tiled=True)
-    assert not [t for t in threading.enumerate() if t.name == "warp-plans" and t.is_alive()]
-    assert sorted(os.listdir(tmp_path)) == ["a.json", "b.json", "in.png"]
+    _strips_fail_cleanly(tmp_path, RuntimeError, "new thread")
