@@ -63,12 +63,12 @@ def supported() -> bool:
     return sys.platform.startswith("linux") and os.uname().machine in ("x86_64", "amd64") and sys.maxsize > 2**32
 
 
-_LIBC = None
+_C_LIBRARY = None
 
 
 def _libc():
-    global _LIBC
-    if _LIBC is None:
+    global _C_LIBRARY
+    if _C_LIBRARY is None:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.mmap.restype = ctypes.c_void_p
         libc.mmap.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_long]
@@ -76,8 +76,16 @@ def _libc():
         libc.mprotect.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
         libc.munmap.restype = ctypes.c_int
         libc.munmap.argtypes = [ctypes.c_void_p, ctypes.c_size_t]
-        _LIBC = libc
-    return _LIBC
+        _C_LIBRARY = libc
+    return _C_LIBRARY
+
+
+def _pages(size: int) -> int:
+    """The address of ``size`` bytes (a whole number of pages) of fresh private read-write memory."""
+    address = _libc().mmap(None, size, _PROT_READ | _PROT_WRITE, _MAP_PRIVATE | _MAP_ANONYMOUS, -1, 0)
+    if address is None or address == ctypes.c_void_p(-1).value:
+        raise Unsupported(f"no memory: {os.strerror(ctypes.get_errno())}")
+    return address
 
 
 class Loaded:
@@ -168,10 +176,7 @@ def _load(data: memoryview, externs: frozenset[str], entries: tuple[str, ...]) -
     bases: dict[str, int] = {}
     try:
         for region, size in sizes.items():
-            address = libc.mmap(None, size, _PROT_READ | _PROT_WRITE, _MAP_PRIVATE | _MAP_ANONYMOUS, -1, 0)
-            if address is None or address == ctypes.c_void_p(-1).value:
-                raise Unsupported(f"no memory: {os.strerror(ctypes.get_errno())}")
-            bases[region] = address
+            bases[region] = _pages(size)
         out = _place(data, sections, loaded, sizes, bases, externs)
         for name in entries:
             out.address(name)
@@ -301,9 +306,7 @@ def _machine_code(code: bytes, restype, *argtypes):
     """``code`` as a function in fresh read-and-execute pages (never unmapped)."""
     libc = _libc()
     size = _round_up(len(code), _PAGE)
-    address = libc.mmap(None, size, _PROT_READ | _PROT_WRITE, _MAP_PRIVATE | _MAP_ANONYMOUS, -1, 0)
-    if address is None or address == ctypes.c_void_p(-1).value:
-        raise Unsupported(f"no memory: {os.strerror(ctypes.get_errno())}")
+    address = _pages(size)
     ctypes.memmove(address, code, len(code))
     if libc.mprotect(address, size, _PROT_READ | _PROT_EXEC) != 0:
         libc.munmap(address, size)
