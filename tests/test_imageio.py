@@ -8,7 +8,9 @@ import pytest
 
 from helpers import write_polygon
 from warpcli.cli import main
-from warpcli.raster.imageio import convert_pixels, read_image
+from warpcli.raster.imageio import (
+    PNG_SRGB_NAMES, RasterImage, convert_pixels, output_spec, read_image, ready_to_write, write_image, written_attributes,
+)
 
 TYPES = {np.dtype(np.uint8): "uint8", np.dtype(np.uint16): "uint16", np.dtype(np.float16): "half", np.dtype(np.float32): "float"}
 
@@ -424,3 +426,52 @@ def test_image_io_reaches_neither_maps_nor_options():
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     loaded = [m for m in json.loads(done.stdout) if m.startswith(("warpcli.maps", "warpcli.options", "warpcli.pipeline"))]
     assert loaded == []
+
+
+SRGB_PNG_CASES = [(name, dtype, c) for name in PNG_SRGB_NAMES for dtype in (np.uint8, np.uint16) for c in (1, 3, 4)]
+
+
+@pytest.mark.parametrize("name,dtype,channels", SRGB_PNG_CASES, ids=[f"{n}-{np.dtype(d).name}-{c}ch" for n, d, c in SRGB_PNG_CASES])
+def test_an_srgb_png_is_the_file_openimageio_writes_told_its_colour_space(tmp_path, name, dtype, channels):
+    # The writer is not told an sRGB colour space (which costs it a load of the colour
+    # configuration): its file must be, byte for byte, the one it writes when told.
+    px = pattern(13, 17, channels, dtype)
+    names = ("R", "G", "B", "A")[:channels] if channels > 1 else ("Y",)
+    attrs = (("oiio:ColorSpace", "string", name), ("ImageDescription", "string", "kept"), ("XResolution", "float", 72.0))
+    image = RasterImage(px, names, 3 if channels == 4 else None, attrs, associated_alpha=False)
+    ours = tmp_path / "ours.png"
+    write_image(ours, image)
+    spec, premultiply = output_spec(oiio, "png", (17, 13, channels), TYPES[px.dtype], names, image.alpha_channel, False, attrs)
+    assert premultiply is None and spec.get_string_attribute("oiio:ColorSpace") == ""
+    assert spec.get_string_attribute("ImageDescription") == "kept"  # the rest is kept
+    spec.attribute("oiio:ColorSpace", name)  # what the writer was given before
+    told = tmp_path / "told.png"
+    out = oiio.ImageOutput.create(str(told))
+    assert out.open(str(told), spec) and out.write_image(np.ascontiguousarray(px)) and out.close()
+    assert ours.read_bytes() == told.read_bytes()
+
+
+@pytest.mark.parametrize("ext,fmt", [("png", "png"), ("tif", "tiff"), ("exr", "openexr"), ("jpg", "jpeg")])
+@pytest.mark.parametrize("name", ["lin_rec709_scene", "g22_rec709_scene", "srgb_rec709_scene"])
+def test_only_a_png_leaves_srgb_to_the_writers_default(tmp_path, ext, fmt, name):
+    attrs = (("oiio:ColorSpace", "string", name),)
+    kept = written_attributes(fmt, attrs)
+    assert kept == (() if fmt == "png" and name == "srgb_rec709_scene" else attrs)
+    # Written as a PNG, another colour space than sRGB is the file's (not the writer's default).
+    if fmt == "png" and name != "srgb_rec709_scene":
+        px = pattern(8, 8, 3, np.uint8)
+        write_image(tmp_path / "out.png", RasterImage(px, ("R", "G", "B"), None, attrs))
+        assert spec_of(tmp_path / "out.png")[0].get_string_attribute("oiio:ColorSpace") == name
+
+
+@pytest.mark.parametrize("ext,loads", [("png", False), ("tif", True), ("jpg", True)])
+def test_the_colour_configuration_is_loaded_ahead_only_for_a_writer_that_will_load_it(tmp_path, monkeypatch, ext, loads):
+    calls = []
+    real = oiio.ColorConfig.default_colorconfig
+    monkeypatch.setattr(oiio.ColorConfig, "default_colorconfig", lambda: calls.append(1) or real())
+    px = pattern(8, 8, 3, np.uint8)
+    ready_to_write(RasterImage(px, ("R", "G", "B"), None, (("oiio:ColorSpace", "string", "srgb_rec709_scene"),)), tmp_path / f"o.{ext}")
+    assert bool(calls) == loads
+    calls.clear()
+    ready_to_write(RasterImage(px, ("R", "G", "B"), None, ()), tmp_path / f"o.{ext}")  # no colour space: nothing to load
+    assert not calls

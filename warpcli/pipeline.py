@@ -681,7 +681,7 @@ def warp_file(
         label_images = [_read_labels(label_in, image) for label_in, _ in labels]
         t_read = clock() - t0
         if early is not None:
-            ready_to_write(image)  # while the map is built elsewhere: not at the encoder's start
+            ready_to_write(image, output_path)  # while the map is built elsewhere: not at the encoder's start
         warn_if_outside(src, (image.width, image.height), os.fspath(input_path), "all background")
         out_size = opts.size if opts.size is not None else (image.width, image.height)
         warn_if_outside(dst, out_size, os.fspath(output_path), "all background")
@@ -855,7 +855,7 @@ def _warp_file_tiled(
             image = read_image(input_path)
             pixels = image.pixels
             timings["read"] = time.perf_counter() - t0
-            ready_to_write(image)  # while the map is built, not when the first strip is (`ready_to_write`)
+            ready_to_write(image, output_path)  # while the map is built, not when the first strip is (`ready_to_write`)
         if progress is not None:
             progress("building the map")
         t0 = time.perf_counter()

@@ -155,24 +155,50 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
     return RasterImage(np.ascontiguousarray(pixels), tuple(spec.channelnames), alpha, attrs, associated)
 
 
-def ready_to_write(image: RasterImage) -> None:
-    """Do now the set-up OpenImageIO would do when a file with ``image``'s colour space is opened
-    for writing: for a caller that has a moment to spare (a warp waiting for its map).
+def ready_to_write(image: RasterImage, path: str | os.PathLike[str]) -> None:
+    """Do now the set-up OpenImageIO would do when ``image`` is opened for writing at ``path``:
+    for a caller that has a moment to spare (a warp waiting for its map).
 
-    A writer given an ``oiio:ColorSpace`` (every PNG, JPEG and TIFF read carries one) loads
-    OpenImageIO's colour configuration when the file is opened, the first time in a process:
-    about 20 ms, during which OpenImageIO holds the GIL. In a warp that was the start of the
-    encoder, when the rows it encodes were being resampled on another thread: that thread
-    stood still too (measured at 1 MP, 20 ms of a 60 ms write). Done here, it happens
-    while nothing else waits for it. The configuration is OpenImageIO's own and the same
-    whoever loads it: the files written are the same bytes.
+    A writer given an ``oiio:ColorSpace`` (every JPEG and TIFF read carries one, and
+    every PNG that `output_spec` does not write without it) loads OpenImageIO's
+    colour configuration when the file is opened, the first time in a process:
+    about 20 ms, during which OpenImageIO holds the GIL. In a warp that was the start
+    of the encoder, when the rows it encodes were being resampled on another thread:
+    that thread stood still too (measured at 1 MP, 20 ms of a 60 ms write). Done here,
+    it happens while nothing else waits for it. The configuration is OpenImageIO's own
+    and the same whoever loads it: the files written are the same bytes.
     """
-    if not any(attr[0] == "oiio:ColorSpace" for attr in image.attributes):
+    if not any(attr[0] == "oiio:ColorSpace" for attr in written_attributes(output_format(path), image.attributes)):
         return
     import OpenImageIO as oiio
 
     with contextlib.suppress(Exception):  # only ever a head start: the writer loads it anyway
         oiio.ColorConfig.default_colorconfig().getNumColorSpaces()
+
+
+def output_format(path: str | os.PathLike[str]) -> str:
+    """The format OpenImageIO writes for ``path``'s extension ("" if none)."""
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(os.fspath(path))
+    oiio.geterror()
+    return "" if out is None else out.format_name()
+
+
+#: OpenImageIO's names of sRGB, as its readers give them (PNG, JPEG: ``srgb_rec709_scene``).
+#: A PNG writer told one of them writes the sRGB chunks it writes for an image told no colour
+#: space, the same bytes (``tests/test_imageio.py`` writes both and compares them), but it
+#: first loads OpenImageIO's colour configuration to find that out: 24 ms of CPU in every
+#: process that writes a PNG (measured, OpenImageIO 3.2), a sixteenth of a 1 MP warp.
+PNG_SRGB_NAMES = ("srgb_rec709_scene", "sRGB")
+
+
+def written_attributes(fmt: str, attributes: tuple) -> tuple:
+    """``attributes`` as a writer of format ``fmt`` is given them: a PNG's sRGB colour space
+    left for the writer's default, which is the same (`PNG_SRGB_NAMES`)."""
+    if fmt != "png":
+        return tuple(attributes)
+    return tuple(a for a in attributes if not (a[0] == "oiio:ColorSpace" and a[2] in PNG_SRGB_NAMES))
 
 
 def _file_metadata(spec) -> tuple[tuple, int | None, bool]:
@@ -513,7 +539,8 @@ def output_spec(oiio, fmt: str, size: tuple[int, int, int], type_name: str, chan
     associated_alpha : bool
         Whether the pixels' colour is premultiplied by alpha.
     attributes : tuple of (name, type name, value)
-        Metadata; what OpenImageIO cannot store is dropped. A PNG is written
+        Metadata; what OpenImageIO cannot store is dropped, and a PNG's sRGB
+        colour space is left to the writer's default (`written_attributes`). A PNG is written
         at zlib level `warpcli.raster.dtypes.PNG_COMPRESSION` unless it has a
         ``png:compressionLevel`` (`with_compression`).
 
@@ -535,7 +562,7 @@ def output_spec(oiio, fmt: str, size: tuple[int, int, int], type_name: str, chan
             premultiply = alpha_channel
         else:
             spec.attribute("oiio:UnassociatedAlpha", 1)  # store the straight colour as it is
-    for attr_name, attr_type, value in attributes:
+    for attr_name, attr_type, value in written_attributes(fmt, attributes):
         try:
             spec.attribute(attr_name, oiio.TypeDesc(attr_type), value)
         except (TypeError, ValueError, RuntimeError):

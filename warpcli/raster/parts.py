@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from ..capture import c_stderr, one_line
 from ..errors import ImageInputError, ImageIOError
 from ..outputs import check_room, file_size_limit, write_failure_message
-from .imageio import OIIO_TYPES, ImageHeader, output_spec, size_limit_lifted, verify_written
+from .imageio import OIIO_TYPES, ImageHeader, output_format, output_spec, size_limit_lifted, verify_written
 from .pixels import premultiplied
 
 #: Rows of a strip, and the side of a tile in tiled outputs.
@@ -108,15 +108,6 @@ def check_writable_in_parts(fmt: str, shown_name: str) -> None:
 #: that was cut short, although their writers report no error (a full disk, a
 #: file size limit: BMP, SGI and FITS writers ignore failed writes).
 UNCOMPRESSED = ("bmp", "cineon", "dpx", "fits", "pnm", "sgi", "targa")
-
-
-def output_format(path: str) -> str:
-    """The format OpenImageIO writes for ``path``'s extension ("" if none)."""
-    import OpenImageIO as oiio
-
-    out = oiio.ImageOutput.create(path)
-    oiio.geterror()
-    return "" if out is None else out.format_name()
 
 
 def _uncompressed(spec) -> bool:
