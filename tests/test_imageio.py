@@ -204,7 +204,7 @@ from warpcli import budget  # noqa: E402
 from warpcli.budget import MAX_IMAGE_BYTES_ENV, max_image_bytes  # noqa: E402
 from warpcli.errors import ImageInputError, ImageIOError  # noqa: E402
 from warpcli.outputs import atomic_path, check_output_path  # noqa: E402
-from warpcli.raster.imageio import RasterImage, check_image_output, write_image  # noqa: E402
+from warpcli.raster.imageio import check_image_output  # noqa: E402
 from warpcli.raster.stmap import save_stmap  # noqa: E402
 
 # Every format and pixel type warpcli writes, as (extension, dtype, channels).
