@@ -817,7 +817,8 @@ STRIP_PIXELS = 8_000_000
 
 def _strips_pay(header: ImageHeader | None, opts: WarpOptions, output_path, extra: list, report_path) -> bool:
     """Whether a warp that could go whole is better strip by strip (`warp_file`'s ``prefer_strips``)."""
-    from .raster.parts import NOT_IN_PARTS, output_format
+    from .raster.imageio import output_format
+    from .raster.parts import NOT_IN_PARTS
 
     if header is None or header.oriented or extra or report_path is not None:
         return False
@@ -840,7 +841,8 @@ def _warp_file_tiled(
         )
     fmap, timings, pixels = None, {}, None
     if early is not None and not header.oriented:  # (strips refuse an oriented image before any map)
-        from .raster.parts import check_writable_in_parts, output_format
+        from .raster.imageio import output_format
+        from .raster.parts import check_writable_in_parts
         from .tiled import tiled_needed
 
         check_writable_in_parts(output_format(os.fspath(output_path)), os.fspath(output_path))

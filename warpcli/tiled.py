@@ -50,8 +50,8 @@ from .maps.compose import BijectiveMap
 from .options import WarpOptions
 from .plan import SamplingPlan, check_paste, plan_for, warn_if_outside
 from .polygon import Polygon
-from .raster.imageio import ImageHeader, read_header, size_limit_lifted, with_compression
-from .raster.parts import TILE, PartReader, StripWriter, check_writable_in_parts, output_format
+from .raster.imageio import ImageHeader, output_format, read_header, size_limit_lifted, with_compression
+from .raster.parts import TILE, PartReader, StripWriter, check_writable_in_parts
 from .raster.pixels import fill
 from .raster.resample import footprint_bounds, samples_as_is
 

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from ..capture import c_stderr, one_line
 from ..errors import ImageInputError, ImageIOError
 from ..outputs import check_room, file_size_limit, write_failure_message
-from .imageio import OIIO_TYPES, ImageHeader, output_format, output_spec, size_limit_lifted, verify_written
+from .imageio import OIIO_TYPES, ImageHeader, output_spec, size_limit_lifted, verify_written
 from .pixels import premultiplied
 
 #: Rows of a strip, and the side of a tile in tiled outputs.
