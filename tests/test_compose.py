@@ -324,3 +324,25 @@ def test_a_pull_back_makes_each_map_only_the_jacobian_table_it_reads():
         assert table.shape == (phi.mesh.n_triangles + 1, 2, 2) and np.isnan(table[-1]).all()
     with pytest.raises(ValueError, match="side"):
         f.phi0.jacobian_table("forward")
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_the_triangles_a_band_of_rows_scans_are_every_triangle_that_can_reach_it_in_coherent_order(name):
+    """`FEMMap._order_within` (from `_row_index`) against a brute force over every triangle: those
+    whose corners' y span reaches within a pixel of rows r0 <= r < r1, in `_coherent_order`."""
+    poly = Polygon(SHAPES[name])
+    phi = BijectiveMap.between(poly, poly).phi1
+    y = phi.mesh.vertices[:, 1]
+    tri = phi.mesh.triangles
+    low = np.array([min(y[a], y[b], y[c]) for a, b, c in tri])
+    high = np.array([max(y[a], y[b], y[c]) for a, b, c in tri])
+    ymin_sorted, ymax, by_ymin, rank, tallest = phi._row_index
+    assert np.array_equal(ymax, high) and np.array_equal(ymin_sorted, np.sort(low))
+    assert np.array_equal(by_ymin, np.argsort(low, kind="stable")) and tallest == (high - low).max()
+    assert np.array_equal(phi._coherent_order[rank], np.arange(len(tri)))
+    order = list(phi._coherent_order)
+    top, bottom = int(np.floor(y.min())), int(np.ceil(y.max()))
+    for r0 in range(top - 2, bottom + 2, 7):
+        for r1 in (r0 + 1, r0 + 5, r0 + 40):
+            reach = {t for t in range(len(tri)) if high[t] >= r0 - 1.0 and low[t] <= r1 + 1.0}
+            assert list(phi._order_within(r0, r1)) == [t for t in order if t in reach]

