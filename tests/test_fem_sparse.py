@@ -93,3 +93,61 @@ def test_superlu_is_loaded_on_its_own():
     from scipy.sparse.linalg._dsolve import _superlu
 
     assert _superlu is module  # a later import of scipy.sparse.linalg finds the same module
+
+
+def _generated_meshes(count=12, seed=2026_11_25):
+    """Meshes of random simple polygons (star-shaped, 5-40 vertices, some right angles) at random densities."""
+    rng = np.random.default_rng(seed)
+    for k in range(count):
+        n = int(rng.integers(5, 41))
+        angles = np.sort(rng.uniform(0, 2 * np.pi, n))
+        radii = rng.uniform(20, 60, n)
+        pts = np.stack([64 + radii * np.cos(angles), 64 + radii * np.sin(angles)], axis=1)
+        if k % 3 == 0:
+            pts = np.round(pts)  # integer corners: axis-aligned edges, cotangents of exactly 0
+        yield f"random-{k}", mesh_polygon(Polygon(pts), float(rng.uniform(0.5, 12.0)))
+
+
+def _brute_force_edges(tri):
+    """{(lo, hi): sorted half-edges} by a dictionary over every half-edge h = k * M + t."""
+    m = len(tri)
+    edges = {}
+    for k in range(3):
+        for t in range(m):
+            a, b = int(tri[t, (k + 1) % 3]), int(tri[t, (k + 2) % 3])
+            edges.setdefault((min(a, b), max(a, b)), []).append(k * m + t)
+    return edges
+
+
+@pytest.mark.parametrize("name, mesh", list(_generated_meshes()))
+def test_edges_and_system_of_generated_meshes(name, mesh):
+    e = topology.mesh_edges(mesh.triangles, mesh.n_vertices)
+    expected = _brute_force_edges(mesh.triangles)
+    assert list(zip(e.lo.tolist(), e.hi.tolist())) == sorted(expected)
+    for lo, hi, first, second in zip(e.lo, e.hi, e.first, e.second):
+        halves = expected[(lo, hi)]
+        assert [first] + ([second] if second >= 0 else []) == halves and (second < 0) == (len(halves) == 1)
+    # The system, bit for bit scipy's (as above, on shapes drawn at random).
+    k_ref = solve.cotan_laplacian(mesh.vertices, mesh.triangles)
+    k_ref.sort_indices()
+    k = sparse.cotan_stiffness(mesh.vertices, mesh.triangles, e)
+    assert np.array_equal(k.indptr, k_ref.indptr) and np.array_equal(k.indices, k_ref.indices)
+    assert _bits(k.data) == _bits(k_ref.data)
+    rng = np.random.default_rng(len(name))
+    for _ in range(3):
+        rows = np.flatnonzero(rng.random(mesh.n_vertices) < rng.uniform(0.1, 0.9))
+        cols = np.flatnonzero(rng.random(mesh.n_vertices) < rng.uniform(0.1, 0.9))
+        ref = k_ref[rows][:, cols]
+        ref.sort_indices()
+        mine = sparse.submatrix(k, rows, cols)
+        assert np.array_equal(mine.indptr, ref.indptr) and np.array_equal(mine.indices, ref.indices)
+        assert _bits(mine.data) == _bits(ref.data)
+
+
+def test_a_triangle_with_a_repeated_or_missing_vertex_is_refused():
+    t = np.array([[0, 1, 2], [2, 1, 1]])
+    with pytest.raises(topology.NotManifold, match="repeated vertex"):
+        topology.mesh_edges(t, 3)
+    for bad in ([[0, 1, 3]], [[0, -1, 2]]):
+        with pytest.raises(ValueError, match="outside the mesh"):
+            topology.mesh_edges(np.array(bad), 3)

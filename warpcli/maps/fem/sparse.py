@@ -2,8 +2,9 @@
 
 Importing scipy.sparse and scipy.sparse.linalg (which imports scipy.linalg)
 costs about 0.25 s per process, half of a whole 1-megapixel warp now, for a
-matrix assembly and one factorization. This module builds the same system in
-numpy and hands it to SuperLU, the C extension that ``scipy.sparse.linalg.splu``
+matrix assembly and one factorization. This module builds the same system with
+numpy and compiled passes over the mesh's edges and rows (`_sparse_kernels`:
+placements of values, no arithmetic but an edge's one addition) and hands it to SuperLU, the C extension that ``scipy.sparse.linalg.splu``
 calls, loaded on its own. It reproduces scipy's arithmetic operation by
 operation, so the matrix, the right-hand side and the solution are bit for bit
 those of the scipy route in `warpcli.maps.fem.solve` (tested):
@@ -30,8 +31,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..._extensions import scipy_extension
+from ..._native import Kernels
 from .mesh import triangle_areas
 from .topology import Edges, mesh_edges
+
+_compiled = Kernels("warpcli.maps.fem._sparse_kernels")
 
 
 class Unsupported(Exception):
@@ -123,27 +127,17 @@ def cotan_stiffness(
     # coo -> csr -> sum_duplicates: an edge's entries (i, j) and (j, i) both sum
     # its one or two corner terms; two terms add up alike in either order.
     weight = np.concatenate(_corner_weights(vertices, triangles))
-    value = weight[e.first]
-    inner = e.second >= 0
-    value[inner] += weight[e.second[inner]]
+    count = len(e.lo)
     # Each row: its entries below the diagonal (edges ending at it), then
     # those above (edges starting at it), columns ascending in both.
-    below = np.argsort(e.hi * n + e.lo)
-    n_up = np.bincount(e.lo, minlength=n)
-    n_down = np.bincount(e.hi, minlength=n)
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(n_up + n_down, out=indptr[1:])
-    first_up = np.cumsum(n_up) - n_up  # where each row's edges start among those sorted by (lo, hi)
-    first_down = np.cumsum(n_down) - n_down
-    count = len(e.lo)
+    indptr = np.empty(n + 1, dtype=np.int64)
     cols = np.empty(2 * count, dtype=np.int64)
     data = np.empty(2 * count)
-    rank = np.arange(count)
-    at = indptr[e.lo] + n_down[e.lo] + rank - first_up[e.lo]
-    cols[at], data[at] = e.hi, value
-    hi_sorted = e.hi[below]
-    at = indptr[hi_sorted] + rank - first_down[hi_sorted]
-    cols[at], data[at] = e.lo[below], value[below]
+    n_down = np.zeros(n, dtype=np.int64)
+    _compiled.laplacian_rows(
+        n, count, *(np.ascontiguousarray(a, dtype=np.int64) for a in e), weight, n_down,
+        np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), indptr, cols, data,
+    )  # fmt: skip
     # -off.sum(axis=1): scipy reduces each non-empty row with np.add.reduceat.
     diag = np.zeros(n)
     nonempty = np.flatnonzero(np.diff(indptr))
@@ -153,19 +147,11 @@ def cotan_stiffness(
     # off + diags(diag): the diagonal merged in after each row's entries below
     # it, and exact zeros dropped, as scipy's canonical sparse addition does (a
     # stored entry plus 0 is itself).
-    rows = np.arange(n)
-    at = indptr[:-1] + n_down + rows  # where each diagonal entry lands
-    is_off = np.ones(2 * count + n, dtype=bool)
-    is_off[at] = False
-    merged_cols = np.empty(2 * count + n, dtype=np.int64)
-    merged_cols[is_off], merged_cols[at] = cols, rows
-    merged = np.empty(2 * count + n)
-    merged[is_off], merged[at] = data, diag
-    keep = merged != 0
-    row_of = np.repeat(rows, np.diff(indptr) + 1)
-    out_indptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(row_of[keep], minlength=n), out=out_indptr[1:])
-    return CSR(out_indptr, merged_cols[keep], merged[keep], (n, n))
+    out_indptr = np.empty(n + 1, dtype=np.int64)
+    out_cols = np.empty(2 * count + n, dtype=np.int64)
+    out_data = np.empty(2 * count + n)
+    kept = _compiled.with_diagonal(n, indptr, cols, data, n_down, diag, out_indptr, out_cols, out_data)
+    return CSR(out_indptr, out_cols[:kept], out_data[:kept], (n, n))
 
 
 def submatrix(k: CSR, rows: NDArray[np.integer], cols: NDArray[np.integer]) -> CSR:
@@ -176,17 +162,17 @@ def submatrix(k: CSR, rows: NDArray[np.integer], cols: NDArray[np.integer]) -> C
     for idx, size in ((rows, n_rows), (cols, n_cols)):
         if idx.size and (np.any(np.diff(idx) <= 0) or idx[0] < 0 or idx[-1] >= size):
             raise Unsupported("indices not sorted and distinct")
-    new_row = np.full(n_rows, -1, dtype=np.int64)
-    new_row[rows] = np.arange(len(rows))
     new_col = np.full(n_cols, -1, dtype=np.int64)
     new_col[cols] = np.arange(len(cols))
-    r = new_row[k.rows()]
-    c = new_col[k.indices]
-    keep = (r >= 0) & (c >= 0)
-    r, c, d = r[keep], c[keep], k.data[keep]
-    indptr = np.zeros(len(rows) + 1, dtype=np.int64)
-    np.cumsum(np.bincount(r, minlength=len(rows)), out=indptr[1:])
-    return CSR(indptr, c, d, (len(rows), len(cols)))
+    indptr = np.empty(len(rows) + 1, dtype=np.int64)
+    most = int(np.diff(k.indptr)[rows].sum()) if rows.size else 0
+    c = np.empty(most, dtype=np.int64)
+    d = np.empty(most)
+    kept = _compiled.submatrix(
+        rows, np.ascontiguousarray(k.indptr, dtype=np.int64), np.ascontiguousarray(k.indices, dtype=np.int64),
+        np.ascontiguousarray(k.data, dtype=np.float64), new_col, indptr, c, d,
+    )  # fmt: skip
+    return CSR(indptr, c[:kept], d[:kept], (len(rows), len(cols)))
 
 
 def to_csc(a: CSR) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
