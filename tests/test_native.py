@@ -17,6 +17,7 @@ from warpcli._native import Kernels, parallel
 RASTER = "warpcli.raster._kernels"
 FEM = "warpcli.maps.fem._kernels"
 MAPS = "warpcli.maps._kernels"
+SPARSE = "warpcli.maps.fem._sparse_kernels"
 
 
 @pytest.fixture(params=["elf", "mcjit"])
@@ -118,6 +119,54 @@ def test_fem_kernels_match_numba_bitwise():
         )  # fmt: skip
 
     _same(FEM, "walk", walk, ("locate.py",))
+
+
+@pytest.mark.usefixtures("route")
+def test_fem_sparse_kernels_match_numba_bitwise():
+    from warpcli.maps.fem import sparse
+    from warpcli.maps.fem.mesh import mesh_polygon
+    from warpcli.polygon import Polygon
+
+    mesh = mesh_polygon(Polygon(star()), 3.0)
+    tri = mesh.triangles.astype(np.int64)
+    n, halves = mesh.n_vertices, 3 * len(tri)
+
+    def edges():
+        return (tri, n, np.zeros(n + 1, dtype=np.int64), *(np.zeros(halves, dtype=np.int64) for _ in range(6)))
+
+    _same(SPARSE, "mesh_edges", edges)
+    e = mesh.edges
+    count = len(e.lo)
+    weight = np.concatenate(sparse._corner_weights(mesh.vertices, mesh.triangles))
+
+    def rows():
+        return (
+            n, count, *(np.ascontiguousarray(a) for a in e), weight, np.zeros(n, dtype=np.int64),
+            np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros(n + 1, dtype=np.int64),
+            np.zeros(2 * count, dtype=np.int64), np.zeros(2 * count),
+        )  # fmt: skip
+
+    _same(SPARSE, "laplacian_rows", rows)
+    args = rows()
+    importlib.import_module(SPARSE).laplacian_rows(*args)
+    n_down, indptr, cols, data = args[7], args[10], args[11], args[12]
+    diag = np.random.default_rng(3).normal(size=n)
+    diag[::5] = 0.0  # left out, as exact zeros of the rows are
+
+    def merged():
+        return (n, indptr, cols, data, n_down, diag, np.zeros(n + 1, dtype=np.int64),
+                np.zeros(2 * count + n, dtype=np.int64), np.zeros(2 * count + n))  # fmt: skip
+
+    _same(SPARSE, "with_diagonal", merged)
+    k = sparse.cotan_stiffness(mesh.vertices, mesh.triangles, e)
+    rows_kept = np.flatnonzero(np.arange(n) % 3 != 1)
+    new_col = np.where(np.arange(n) % 2 == 0, np.arange(n) // 2, -1)
+
+    def sub():
+        return (rows_kept, k.indptr, k.indices, k.data, new_col, np.zeros(len(rows_kept) + 1, dtype=np.int64),
+                np.zeros(len(k.data), dtype=np.int64), np.zeros(len(k.data)))  # fmt: skip
+
+    _same(SPARSE, "submatrix", sub)
 
 
 def _band(seed=5, width=37, n=900):
