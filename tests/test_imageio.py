@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import types
+
 import numpy as np
 import OpenImageIO as oiio
 import pytest
@@ -9,7 +11,15 @@ import pytest
 from helpers import write_polygon
 from warpcli.cli import main
 from warpcli.raster.imageio import (
-    PNG_SRGB_NAMES, RasterImage, convert_pixels, output_spec, read_image, ready_to_write, write_image, written_attributes,
+    PNG_DEFAULT_SRGB,
+    PNG_SRGB_NAMES,
+    RasterImage,
+    convert_pixels,
+    output_spec,
+    read_image,
+    ready_to_write,
+    write_image,
+    written_attributes,
 )
 
 TYPES = {np.dtype(np.uint8): "uint8", np.dtype(np.uint16): "uint16", np.dtype(np.float16): "half", np.dtype(np.float32): "float"}
@@ -428,43 +438,56 @@ def test_image_io_reaches_neither_maps_nor_options():
     assert loaded == []
 
 
-SRGB_PNG_CASES = [(name, dtype, c) for name in PNG_SRGB_NAMES for dtype in (np.uint8, np.uint16) for c in (1, 3, 4)]
+SRGB_PNG_CASES = [
+    (name, dtype, c, associated) for name in PNG_SRGB_NAMES for dtype in (np.uint8, np.uint16) for c in (1, 2, 3, 4)
+    for associated in ((False, True) if c in (2, 4) else (False,))
+]  # fmt: skip
 
 
-@pytest.mark.parametrize("name,dtype,channels", SRGB_PNG_CASES, ids=[f"{n}-{np.dtype(d).name}-{c}ch" for n, d, c in SRGB_PNG_CASES])
-def test_an_srgb_png_is_the_file_openimageio_writes_told_its_colour_space(tmp_path, name, dtype, channels):
+@pytest.mark.skipif(oiio.VERSION < PNG_DEFAULT_SRGB, reason="OpenImageIO before 3.2 is given the colour space as it is")
+@pytest.mark.parametrize(
+    "name,dtype,channels,associated", SRGB_PNG_CASES,
+    ids=[f"{n}-{np.dtype(d).name}-{c}ch{'-premultiplied' if a else ''}" for n, d, c, a in SRGB_PNG_CASES],
+)  # fmt: skip
+def test_an_srgb_png_is_the_file_openimageio_writes_told_its_colour_space(tmp_path, name, dtype, channels, associated):
     # The writer is not told an sRGB colour space (which costs it a load of the colour
     # configuration): its file must be, byte for byte, the one it writes when told.
     px = pattern(13, 17, channels, dtype)
-    names = ("R", "G", "B", "A")[:channels] if channels > 1 else ("Y",)
+    names = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}[channels]
+    alpha = channels - 1 if channels in (2, 4) else None
     attrs = (("oiio:ColorSpace", "string", name), ("ImageDescription", "string", "kept"), ("XResolution", "float", 72.0))
-    image = RasterImage(px, names, 3 if channels == 4 else None, attrs, associated_alpha=False)
+    image = RasterImage(px, names, alpha, attrs, associated_alpha=associated)
     ours = tmp_path / "ours.png"
     write_image(ours, image)
-    spec, premultiply = output_spec(oiio, "png", (17, 13, channels), TYPES[px.dtype], names, image.alpha_channel, False, attrs)
-    assert premultiply is None and spec.get_string_attribute("oiio:ColorSpace") == ""
+    spec, premultiply = output_spec(oiio, "png", (17, 13, channels), TYPES[px.dtype], names, alpha, associated, attrs)
+    assert spec.get_string_attribute("oiio:ColorSpace") == ""
     assert spec.get_string_attribute("ImageDescription") == "kept"  # the rest is kept
     spec.attribute("oiio:ColorSpace", name)  # what the writer was given before
     told = tmp_path / "told.png"
     out = oiio.ImageOutput.create(str(told))
+    assert premultiply is None  # PNG stores straight colour: the pixels go as they are
     assert out.open(str(told), spec) and out.write_image(np.ascontiguousarray(px)) and out.close()
     assert ours.read_bytes() == told.read_bytes()
 
 
-@pytest.mark.parametrize("ext,fmt", [("png", "png"), ("tif", "tiff"), ("exr", "openexr"), ("jpg", "jpeg")])
-@pytest.mark.parametrize("name", ["lin_rec709_scene", "g22_rec709_scene", "srgb_rec709_scene"])
-def test_only_a_png_leaves_srgb_to_the_writers_default(tmp_path, ext, fmt, name):
-    attrs = (("oiio:ColorSpace", "string", name),)
-    kept = written_attributes(fmt, attrs)
-    assert kept == (() if fmt == "png" and name == "srgb_rec709_scene" else attrs)
-    # Written as a PNG, another colour space than sRGB is the file's (not the writer's default).
-    if fmt == "png" and name != "srgb_rec709_scene":
-        px = pattern(8, 8, 3, np.uint8)
-        write_image(tmp_path / "out.png", RasterImage(px, ("R", "G", "B"), None, attrs))
-        assert spec_of(tmp_path / "out.png")[0].get_string_attribute("oiio:ColorSpace") == name
+@pytest.mark.parametrize("fmt", ["png", "tiff", "openexr", "jpeg"])
+@pytest.mark.parametrize("name", ["lin_rec709_scene", "g22_rec709_scene", *PNG_SRGB_NAMES])
+@pytest.mark.parametrize("version", [30000, 30105, PNG_DEFAULT_SRGB, 30300])
+def test_only_a_png_from_openimageio_3_2_leaves_srgb_to_the_writers_default(fmt, name, version):
+    module = types.SimpleNamespace(VERSION=version)
+    attrs = (("oiio:ColorSpace", "string", name), ("ImageDescription", "string", "kept"))
+    left = fmt == "png" and name in PNG_SRGB_NAMES and version >= PNG_DEFAULT_SRGB
+    assert written_attributes(module, fmt, attrs) == (attrs[1:] if left else attrs)
 
 
-@pytest.mark.parametrize("ext,loads", [("png", False), ("tif", True), ("jpg", True)])
+@pytest.mark.parametrize("name", ["lin_rec709_scene", "g22_rec709_scene"])
+def test_a_png_of_another_colour_space_is_written_with_it(tmp_path, name):
+    px = pattern(8, 8, 3, np.uint8)
+    write_image(tmp_path / "out.png", RasterImage(px, ("R", "G", "B"), None, (("oiio:ColorSpace", "string", name),)))
+    assert spec_of(tmp_path / "out.png")[0].get_string_attribute("oiio:ColorSpace") == name
+
+
+@pytest.mark.parametrize("ext,loads", [("png", oiio.VERSION < PNG_DEFAULT_SRGB), ("tif", True), ("jpg", True)])
 def test_the_colour_configuration_is_loaded_ahead_only_for_a_writer_that_will_load_it(tmp_path, monkeypatch, ext, loads):
     calls = []
     real = oiio.ColorConfig.default_colorconfig

@@ -39,6 +39,7 @@ from .raster.imageio import (
     RasterImage,
     check_image_output,
     convert_pixels,
+    output_format,
     read_header,
     read_image,
     ready_to_write,
@@ -817,7 +818,6 @@ STRIP_PIXELS = 8_000_000
 
 def _strips_pay(header: ImageHeader | None, opts: WarpOptions, output_path, extra: list, report_path) -> bool:
     """Whether a warp that could go whole is better strip by strip (`warp_file`'s ``prefer_strips``)."""
-    from .raster.imageio import output_format
     from .raster.parts import NOT_IN_PARTS
 
     if header is None or header.oriented or extra or report_path is not None:
@@ -841,7 +841,6 @@ def _warp_file_tiled(
         )
     fmap, timings, pixels = None, {}, None
     if early is not None and not header.oriented:  # (strips refuse an oriented image before any map)
-        from .raster.imageio import output_format
         from .raster.parts import check_writable_in_parts
         from .tiled import tiled_needed
 

@@ -160,7 +160,7 @@ def ready_to_write(image: RasterImage, path: str | os.PathLike[str]) -> None:
     for a caller that has a moment to spare (a warp waiting for its map).
 
     A writer given an ``oiio:ColorSpace`` (every JPEG and TIFF read carries one, and
-    every PNG that `output_spec` does not write without it) loads OpenImageIO's
+    every PNG that `output_spec` does not leave to the writer's sRGB) loads OpenImageIO's
     colour configuration when the file is opened, the first time in a process:
     about 20 ms, during which OpenImageIO holds the GIL. In a warp that was the start
     of the encoder, when the rows it encodes were being resampled on another thread:
@@ -168,10 +168,10 @@ def ready_to_write(image: RasterImage, path: str | os.PathLike[str]) -> None:
     it happens while nothing else waits for it. The configuration is OpenImageIO's own
     and the same whoever loads it: the files written are the same bytes.
     """
-    if not any(attr[0] == "oiio:ColorSpace" for attr in written_attributes(output_format(path), image.attributes)):
-        return
     import OpenImageIO as oiio
 
+    if not any(attr[0] == "oiio:ColorSpace" for attr in written_attributes(oiio, output_format(path), image.attributes)):
+        return
     with contextlib.suppress(Exception):  # only ever a head start: the writer loads it anyway
         oiio.ColorConfig.default_colorconfig().getNumColorSpaces()
 
@@ -186,17 +186,24 @@ def output_format(path: str | os.PathLike[str]) -> str:
 
 
 #: OpenImageIO's names of sRGB, as its readers give them (PNG, JPEG: ``srgb_rec709_scene``).
-#: A PNG writer told one of them writes the sRGB chunks it writes for an image told no colour
-#: space, the same bytes (``tests/test_imageio.py`` writes both and compares them), but it
-#: first loads OpenImageIO's colour configuration to find that out: 24 ms of CPU in every
-#: process that writes a PNG (measured, OpenImageIO 3.2), a sixteenth of a 1 MP warp.
+#: From OpenImageIO 3.2 (`PNG_DEFAULT_SRGB`), a PNG writer told one of them writes the sRGB
+#: chunks it writes for an image told no colour space, the same bytes (``tests/test_imageio.py``
+#: writes both and compares them), but it first loads OpenImageIO's colour configuration to
+#: find that out: 24 ms of CPU in every process that writes a PNG (measured, 3.2.2), a
+#: sixteenth of a 1 MP warp.
 PNG_SRGB_NAMES = ("srgb_rec709_scene", "sRGB")
 
+#: The first OpenImageIO whose PNG writer takes sRGB for an image told no colour space without
+#: loading the colour configuration (3.0 writes no sRGB chunks for one; 3.1 writes them but
+#: loads the configuration all the same): before it, every attribute is given as it is.
+PNG_DEFAULT_SRGB = 30200
 
-def written_attributes(fmt: str, attributes: tuple) -> tuple:
-    """``attributes`` as a writer of format ``fmt`` is given them: a PNG's sRGB colour space
-    left for the writer's default, which is the same (`PNG_SRGB_NAMES`)."""
-    if fmt != "png":
+
+def written_attributes(oiio, fmt: str, attributes: tuple) -> tuple:
+    """``attributes`` as a writer of format ``fmt`` is given them: with OpenImageIO 3.2 or
+    later (``oiio``, the module), a PNG's sRGB colour space is left for the writer's default,
+    which is the same (`PNG_SRGB_NAMES`)."""
+    if fmt != "png" or int(getattr(oiio, "VERSION", 0)) < PNG_DEFAULT_SRGB:
         return tuple(attributes)
     return tuple(a for a in attributes if not (a[0] == "oiio:ColorSpace" and a[2] in PNG_SRGB_NAMES))
 
@@ -562,7 +569,7 @@ def output_spec(oiio, fmt: str, size: tuple[int, int, int], type_name: str, chan
             premultiply = alpha_channel
         else:
             spec.attribute("oiio:UnassociatedAlpha", 1)  # store the straight colour as it is
-    for attr_name, attr_type, value in written_attributes(fmt, attributes):
+    for attr_name, attr_type, value in written_attributes(oiio, fmt, attributes):
         try:
             spec.attribute(attr_name, oiio.TypeDesc(attr_type), value)
         except (TypeError, ValueError, RuntimeError):

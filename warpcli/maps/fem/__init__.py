@@ -3,9 +3,10 @@
 - `mesh`: graded quality meshes over `triangle`;
 - `topology`: the mesh's edges and the triangles across them;
 - `solve`: cotangent / mean-value Laplacians and the Dirichlet solve;
-- `sparse`: the default Dirichlet system in numpy and SuperLU, without scipy.sparse;
+- `sparse`: the default Dirichlet system (numpy and `_sparse_kernels`) and SuperLU, without scipy.sparse;
 - `locate`: point location (bucket grid, triangle neighbours);
-- `_kernels`: compiled scan conversion and walks for pixel grids.
+- `_kernels`: compiled scan conversion and walks for pixel grids;
+- `_sparse_kernels`: compiled passes over the mesh's edges and the Laplacian's rows.
 """
 
 from __future__ import annotations

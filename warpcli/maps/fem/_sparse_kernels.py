@@ -1,11 +1,15 @@
 """Compiled (numba) assembly of the FEM system: a mesh's edges, the Laplacian's rows, submatrices.
 
 Integer work and placement of values, and one addition of an edge's two corner
-terms (exact in either order): the arrays `warpcli.maps.fem.topology` and
-`warpcli.maps.fem.sparse` make with these are those their numpy passes made,
-entry for entry, bit for bit scipy.sparse's (tests/test_fem_sparse.py). Called
+terms (exact in either order): the matrices `warpcli.maps.fem.sparse` makes with
+these are those its numpy passes made, entry for entry, bit for bit
+scipy.sparse's (tests/test_fem_sparse.py); the edges are those numpy's sort of
+the half-edges found, an edge's two half-edges now always in increasing order
+(numpy's unstable sort gave either; every reader is symmetric in them). Called
 through `warpcli._native.Kernels` like every kernel of warpcli; they allocate
-nothing (the callers pass every array) and read no index they have not checked.
+nothing (the callers pass every array). `mesh_edges` checks every vertex index
+it reads; the others index arrays by the edges and rows they are given, which
+their callers check first (`warpcli.maps.fem.sparse`).
 """
 
 from __future__ import annotations
@@ -56,7 +60,8 @@ def mesh_edges(tri, n, start, slot, upper, lo, hi, first, second):
     s0 = 0
     for v in range(n):
         s1 = start[v]
-        # A vertex's few half-edges by their upper vertex (insertion sort: stable, so h ascends too).
+        # A vertex's few half-edges by their upper vertex (insertion sort: stable, so h ascends
+        # too; quadratic in a vertex's degree, which a quality mesh keeps small).
         for i in range(s0 + 1, s1):
             h = slot[i]
             key = upper[i]

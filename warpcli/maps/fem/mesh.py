@@ -119,6 +119,8 @@ class TriMesh:
         ------
         warpcli.maps.fem.topology.NotManifold
             For a mesh with an edge of more than two triangles (never made here).
+        ValueError
+            For triangles naming a vertex the mesh does not have.
         """
         return mesh_edges(self.triangles, self.n_vertices)
 

@@ -175,7 +175,7 @@ class DirichletSolver:
                 parts.append((coords, unknown, known, None, None))
                 continue
             if weights == "cotan" and not free:
-                # The default system, built in numpy and factorized by SuperLU
+                # The default system, built by `sparse` and factorized by SuperLU
                 # without importing scipy.sparse (see `sparse`): the same bits.
                 try:
                     parts.append((coords, unknown, known, *_cotan_system(mesh, unknown, known)))

@@ -4,8 +4,9 @@ Importing scipy.sparse and scipy.sparse.linalg (which imports scipy.linalg)
 costs about 0.25 s per process, half of a whole 1-megapixel warp now, for a
 matrix assembly and one factorization. This module builds the same system with
 numpy and compiled passes over the mesh's edges and rows (`_sparse_kernels`:
-placements of values, no arithmetic but an edge's one addition) and hands it to SuperLU, the C extension that ``scipy.sparse.linalg.splu``
-calls, loaded on its own. It reproduces scipy's arithmetic operation by
+placements of values, no arithmetic but an edge's one addition) and hands it
+to SuperLU, the C extension that ``scipy.sparse.linalg.splu`` calls, loaded on
+its own. It reproduces scipy's arithmetic operation by
 operation, so the matrix, the right-hand side and the solution are bit for bit
 those of the scipy route in `warpcli.maps.fem.solve` (tested):
 
@@ -31,15 +32,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..._extensions import scipy_extension
-from ..._native import Kernels
 from .mesh import triangle_areas
-from .topology import Edges, mesh_edges
-
-_compiled = Kernels("warpcli.maps.fem._sparse_kernels")
+from .topology import Edges, kernels, mesh_edges
 
 
 class Unsupported(Exception):
-    """This system or this scipy is not for the numpy route; use scipy.sparse."""
+    """This system or this scipy is not for this route; use scipy.sparse."""
 
 
 class CSR(NamedTuple):
@@ -123,7 +121,7 @@ def cotan_stiffness(
         order would matter).
     """
     n = len(vertices)
-    e = mesh_edges(triangles, n) if edges is None else edges
+    e = mesh_edges(triangles, n) if edges is None else _checked_edges(edges, n, 3 * len(triangles))
     # coo -> csr -> sum_duplicates: an edge's entries (i, j) and (j, i) both sum
     # its one or two corner terms; two terms add up alike in either order.
     weight = np.concatenate(_corner_weights(vertices, triangles))
@@ -134,8 +132,8 @@ def cotan_stiffness(
     cols = np.empty(2 * count, dtype=np.int64)
     data = np.empty(2 * count)
     n_down = np.zeros(n, dtype=np.int64)
-    _compiled.laplacian_rows(
-        n, count, *(np.ascontiguousarray(a, dtype=np.int64) for a in e), weight, n_down,
+    kernels.laplacian_rows(
+        n, count, *e, weight, n_down,
         np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), indptr, cols, data,
     )  # fmt: skip
     # -off.sum(axis=1): scipy reduces each non-empty row with np.add.reduceat.
@@ -150,8 +148,23 @@ def cotan_stiffness(
     out_indptr = np.empty(n + 1, dtype=np.int64)
     out_cols = np.empty(2 * count + n, dtype=np.int64)
     out_data = np.empty(2 * count + n)
-    kept = _compiled.with_diagonal(n, indptr, cols, data, n_down, diag, out_indptr, out_cols, out_data)
+    kept = kernels.with_diagonal(n, indptr, cols, data, n_down, diag, out_indptr, out_cols, out_data)
     return CSR(out_indptr, out_cols[:kept], out_data[:kept], (n, n))
+
+
+def _checked_edges(edges: Edges, n: int, halves: int) -> Edges:
+    """``edges`` as the compiled passes read them (int64, contiguous), if they can be the edges
+    of a mesh of ``n`` vertices and ``halves`` half-edges; else ValueError (they index arrays
+    of those sizes unchecked)."""
+    lo, hi, first, second = (np.ascontiguousarray(a, dtype=np.int64) for a in edges)
+    if not (lo.ndim == 1 and lo.shape == hi.shape == first.shape == second.shape):
+        raise ValueError("edges: lo, hi, first and second must be 1-D arrays of one length")
+    if lo.size and not (
+        lo.min() >= 0 and hi.max() < n and (lo < hi).all() and first.min() >= 0 and first.max() < halves
+        and second.min() >= -1 and second.max() < halves
+    ):  # fmt: skip
+        raise ValueError(f"edges: not those of a mesh of {n} vertices and {halves // 3} triangles")
+    return Edges(lo, hi, first, second)
 
 
 def submatrix(k: CSR, rows: NDArray[np.integer], cols: NDArray[np.integer]) -> CSR:
@@ -162,16 +175,21 @@ def submatrix(k: CSR, rows: NDArray[np.integer], cols: NDArray[np.integer]) -> C
     for idx, size in ((rows, n_rows), (cols, n_cols)):
         if idx.size and (np.any(np.diff(idx) <= 0) or idx[0] < 0 or idx[-1] >= size):
             raise Unsupported("indices not sorted and distinct")
+    k_indptr, k_indices = (np.ascontiguousarray(a, dtype=np.int64) for a in (k.indptr, k.indices))
+    k_data = np.ascontiguousarray(k.data, dtype=np.float64)
+    if not (
+        k_indptr.shape == (n_rows + 1,) and k_indices.shape == k_data.shape and k_indptr[0] == 0
+        and k_indptr[-1] == len(k_indices) and (np.diff(k_indptr) >= 0).all()
+        and (not k_indices.size or (k_indices.min() >= 0 and k_indices.max() < n_cols))
+    ):  # fmt: skip
+        raise ValueError(f"not a CSR matrix of shape {k.shape}")  # the compiled pass indexes it unchecked
     new_col = np.full(n_cols, -1, dtype=np.int64)
     new_col[cols] = np.arange(len(cols))
     indptr = np.empty(len(rows) + 1, dtype=np.int64)
-    most = int(np.diff(k.indptr)[rows].sum()) if rows.size else 0
+    most = int(np.diff(k_indptr)[rows].sum()) if rows.size else 0
     c = np.empty(most, dtype=np.int64)
     d = np.empty(most)
-    kept = _compiled.submatrix(
-        rows, np.ascontiguousarray(k.indptr, dtype=np.int64), np.ascontiguousarray(k.indices, dtype=np.int64),
-        np.ascontiguousarray(k.data, dtype=np.float64), new_col, indptr, c, d,
-    )  # fmt: skip
+    kept = kernels.submatrix(np.ascontiguousarray(rows), k_indptr, k_indices, k_data, new_col, indptr, c, d)
     return CSR(indptr, c[:kept], d[:kept], (len(rows), len(cols)))
 
 

@@ -14,7 +14,8 @@ from numpy.typing import NDArray
 
 from ..._native import Kernels
 
-_compiled = Kernels("warpcli.maps.fem._sparse_kernels")
+#: The compiled passes of the mesh's edges and of the Laplacian's rows (`warpcli.maps.fem.sparse` calls them too).
+kernels = Kernels("warpcli.maps.fem._sparse_kernels")
 
 
 class NotManifold(Exception):
@@ -49,13 +50,18 @@ def mesh_edges(triangles: NDArray[np.integer], n_vertices: int) -> Edges:
     NotManifold
         If an edge has more than two triangles, or a triangle a repeated vertex.
     ValueError
-        If a triangle names a vertex that is not one of the ``n_vertices``.
+        If ``triangles`` is not (M, 3), or a triangle names a vertex that is
+        not one of the ``n_vertices``.
     """
-    tri = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    tri = np.ascontiguousarray(triangles, dtype=np.int64)
+    if tri.size == 0:
+        tri = tri.reshape(0, 3)
+    if tri.ndim != 2 or tri.shape[1] != 3:
+        raise ValueError(f"triangles must be an (M, 3) array, got shape {tri.shape}")
     n = int(n_vertices)
     halves = 3 * len(tri)
     lo, hi, first, second = (np.empty(halves, dtype=np.int64) for _ in range(4))
-    count = _compiled.mesh_edges(
+    count = kernels.mesh_edges(
         tri, n, np.zeros(n + 1, dtype=np.int64), np.empty(halves, dtype=np.int64), np.empty(halves, dtype=np.int64),
         lo, hi, first, second,
     )  # fmt: skip
