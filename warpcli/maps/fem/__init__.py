@@ -207,23 +207,25 @@ class FEMMap(ThetaMap):
         scatters them (a gather of each band's quarter million Jacobians, twice, was
         20 % of a 12 MP pull-back's numpy)."""
         q = as_points(points)
-        out = np.full(q.shape, np.nan)
-        tri = np.full(len(q), -1, dtype=np.int64)
         # The whole array's test first: the per-point one (``.all(axis=1)``, 2.5 ms per 130k
         # points, a reduction along an axis of 2) only where some point is not finite.
         all_finite = bool(np.isfinite(q).all())
         if coherent and all_finite:
             # One compiled walk through the image mesh from each point's
             # predecessor; the few walks that give up go to the bucket search.
+            # Every point is written: by the walk, or (where it gave up) below.
+            out = np.empty(q.shape)
             where = np.empty(len(q), dtype=np.int32)
             max_steps = len(self._triangles) + 64  # a safety net: the walk ends on its own
             _compiled.walk(
                 np.ascontiguousarray(q), self._triangles, self._image_coefficients, self._neighbours,
                 self.mesh.vertices, max_steps, out, where,
             )  # fmt: skip
-            tri[:] = where
+            tri = where.astype(np.int64)
             lost = np.flatnonzero(where < 0)
         else:
+            out = np.full(q.shape, np.nan)
+            tri = np.full(len(q), -1, dtype=np.int64)
             lost = np.arange(len(q)) if all_finite else np.flatnonzero(np.isfinite(q).all(axis=1))
         if lost.size:
             out[lost], tri[lost] = self._inverse_located(q[lost])
