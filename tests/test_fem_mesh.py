@@ -7,7 +7,15 @@ import pytest
 
 from helpers import comb, l_shape, spiral, star
 from warpcli.errors import PolygonError
-from warpcli.maps.fem.mesh import AUTO_MAX_TRIANGLES, MAX_TRIANGLES, auto_max_area, mesh_polygon, triangle_areas
+from warpcli.maps.fem.mesh import (
+    AUTO_MAX_TRIANGLES,
+    MAX_TRIANGLES,
+    auto_max_area,
+    centroids,
+    corners,
+    mesh_polygon,
+    triangle_areas,
+)
 from warpcli.polygon import Polygon
 
 SHAPES = {"star": star(), "L": l_shape(), "comb": comb(), "spiral": spiral()}
@@ -118,3 +126,21 @@ def test_a_polygon_near_its_image_is_meshed_as_without_a_region():
     a = mesh_polygon(poly, auto_max_area(poly, region), region=region)
     b = mesh_polygon(poly, auto_max_area(poly))
     assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.triangles, b.triangles)
+
+
+def test_corners_are_fancy_indexings_values_and_the_grading_centroids_are_means():
+    rng = np.random.default_rng(24)
+    specials = np.array([0.0, -0.0, 1.0, -2.5, np.inf, -np.inf, np.nan, 1e-310])
+    v = np.concatenate([rng.normal(size=(300, 2)) * 10.0 ** rng.integers(-3, 4, size=(300, 1)),
+                        np.array(np.meshgrid(specials, specials)).reshape(2, -1).T])  # fmt: skip
+    t = rng.integers(0, len(v), size=(5000, 3)).astype(np.int32)
+    t[:512] = np.array(np.meshgrid(*[np.arange(300, 308)] * 3)).reshape(3, -1).T  # every triple of the specials
+    got = corners(v, t)
+    for k in range(3):
+        assert got[k].tobytes() == v[t[:, k]].tobytes()
+    # mesh_polygon's size field: its centroids are the mean over each triangle's corners, bit for bit.
+    with np.errstate(invalid="ignore"):  # inf - inf among the specials
+        c = centroids(v, t)
+        want = v[t].mean(axis=1)
+    assert np.array_equal(np.isnan(c), np.isnan(want))
+    assert c[~np.isnan(c)].tobytes() == want[~np.isnan(want)].tobytes()

@@ -240,7 +240,7 @@ def orientations(vertices: NDArray[np.float64], triangles: NDArray[np.integer]) 
     >>> orientations(v, np.array([[0, 1, 2], [0, 2, 1], [0, 1, 3]])).tolist()
     [1.0, -1.0, 0.0]
     """
-    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    a, b, c = (np.take(vertices, triangles[:, k], axis=0) for k in range(3))  # fancy indexing's values, faster
     return orient_sign(a[:, 0], a[:, 1], b[:, 0], b[:, 1], c[:, 0], c[:, 1])
 
 

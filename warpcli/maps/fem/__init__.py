@@ -30,7 +30,7 @@ from ..straight import IdentityMap, straight_boundary
 from ..theta import TargetTheta, Theta
 from . import sparse, topology
 from .locate import TriangleLocator, affine_coefficients, triangle_neighbours
-from .mesh import TriMesh, auto_max_area, mesh_polygon
+from .mesh import TriMesh, auto_max_area, corners, mesh_polygon
 from .solve import DirichletSolver, flipped_triangles, solve_dirichlet
 
 log = logging.getLogger("warpcli")
@@ -369,10 +369,10 @@ def _with_none_row(jacobians: NDArray[np.float64]) -> NDArray[np.float64]:
 def _edge_columns(points: NDArray, t: NDArray[np.integer]) -> NDArray:
     """(M, 2, 2): per triangle, its edges from corner 0 to corners 1 and 2 as columns, in the
     type their difference has; written in place (``np.stack`` of the two copied them)."""
-    first = points[t[:, 0]]
+    first, second, third = corners(points, t)
     out = np.empty((len(t), 2, 2), dtype=np.subtract(first[:0], first[:0]).dtype)
-    np.subtract(points[t[:, 1]], first, out=out[:, :, 0])
-    np.subtract(points[t[:, 2]], first, out=out[:, :, 1])
+    np.subtract(second, first, out=out[:, :, 0])
+    np.subtract(third, first, out=out[:, :, 1])
     return out
 
 

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..._extensions import scipy_extension
-from .mesh import triangle_areas
+from .mesh import corners, triangle_areas
 from .topology import Edges, kernels, mesh_edges
 
 
@@ -71,7 +71,7 @@ class CSR(NamedTuple):
 def _corner_weights(vertices: NDArray[np.float64], triangles: NDArray[np.integer]) -> list[NDArray[np.float64]]:
     """``-(cot a) / 2`` for the angle a at each corner k of every triangle: a list of three (M,) arrays."""
     tri = np.asarray(triangles)
-    v = [vertices[tri[:, k]] for k in range(3)]
+    v = corners(vertices, tri)
     double_area = np.abs(2.0 * triangle_areas(vertices, tri))
     out = []
     for k in range(3):
