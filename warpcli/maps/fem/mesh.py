@@ -307,12 +307,12 @@ def _region_graded(tr, tri_in: dict, polygon: Polygon, max_area: float, reflex, 
     lo = np.array(region[:2])
     hi = np.array(region[2:])
     for _ in range(_REGION_PASSES):
-        corners = out["vertices"][out["triangles"]]
+        box = out["vertices"][out["triangles"]]  # (M, 3, 2): each triangle's corners
         # Distance from the region to each triangle's bounding box (0 where they overlap).
-        gap = np.maximum(np.maximum(lo - corners.max(axis=1), corners.min(axis=1) - hi), 0.0)
+        gap = np.maximum(np.maximum(lo - box.max(axis=1), box.min(axis=1) - hi), 0.0)
         edge = h + _REGION_SLOPE * np.hypot(gap[:, 0], gap[:, 1])
         if len(reflex):
-            near = np.maximum(_GRADE_SLOPE * _nearest_distance(corners.mean(axis=1), reflex), _GRADE_MIN)
+            near = np.maximum(_GRADE_SLOPE * _nearest_distance(centroids(out["vertices"], out["triangles"]), reflex), _GRADE_MIN)
             edge = np.minimum(edge, near)
         target = math.sqrt(3.0) / 4.0 * edge * edge
         area = np.abs(triangle_areas(out["vertices"], out["triangles"]))
