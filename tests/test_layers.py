@@ -68,7 +68,7 @@ LAYERS = [
     ("apps", {"edit": ("edit",)}),
     # The public API: lazy exports of all of the above.
     ("api", {"api": ("__init__",)}),
-    ("cli", {"cli": ("cli", "__main__")}),
+    ("cli", {"cli": ("cli", "__main__", "_entry")}),
 ]  # fmt: skip
 
 #: Components of different layers that must still not reach each other: (from, to, why).

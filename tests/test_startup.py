@@ -324,22 +324,46 @@ def test_a_warp_imports_its_own_command_module_only_and_every_command_is_still_t
 _GC_PROBE = """
 import gc, json, sys
 before = gc.get_threshold()
-import warpcli, warpcli.cli, warpcli.pipeline
+collections = []
+gc.callbacks.append(lambda phase, info: phase == "start" and collections.append(info["generation"]))
+import warpcli._entry
+entry_imported = gc.get_threshold()
+import warpcli.cli, warpcli.pipeline
 imported = gc.get_threshold()
-r = sys.modules["warpcli.cli.run"]
+r = sys.modules["warpcli.cli.run"]  # (warpcli.cli.run is the command function: the package's names are commands)
+collections.clear()
 
-def probe():
-    print(json.dumps([before, imported, gc.get_threshold(), gc.isenabled()]))
+def probe():  # what run() calls once it has set the process up: a command that only reports
+    print(json.dumps([before, entry_imported, imported, gc.get_threshold(), gc.isenabled(), collections]))
     return 0
 
-r.main = probe  # what run() calls once it has set the process up
-r.run()
+r.main = probe
+warpcli._entry.run()
 """
 
 
 def test_the_command_collects_garbage_less_often_and_a_library_import_does_not_change_it():
     done = subprocess.run([sys.executable, "-c", _GC_PROBE], capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stderr
-    before, imported, running, enabled = json.loads(done.stdout.strip().splitlines()[-1])
-    assert imported == before  # importing warpcli changes nothing
+    before, entry_imported, imported, running, enabled, _ = json.loads(done.stdout.strip().splitlines()[-1])
+    assert entry_imported == imported == before  # importing warpcli (its entry point too) changes nothing
     assert running[0] >= 20_000 and running[1:] == imported[1:] and enabled
+
+
+def test_the_entry_point_raises_the_threshold_before_the_command_is_imported():
+    """`warpcli._entry.run` (the console script, ``python -m warpcli``) raises it before importing
+    click and the command's modules: ``warp --version`` then runs without a collection (at
+    Python's 700 its imports made 18)."""
+    probe = (
+        "import atexit, gc, sys\n"
+        "seen = []\n"
+        "gc.callbacks.append(lambda phase, info: phase == 'start' and seen.append(info['generation']))\n"
+        "atexit.register(lambda: print('collections', len(seen), 'click' in sys.modules, flush=True))\n"
+        "import warpcli._entry\n"
+        "seen.clear()\n"  # (the package's own import, typing's, made some)
+        "sys.argv = ['warp', '--version']\n"
+        "warpcli._entry.run()\n"  # ends the process, its exit handlers run
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "collections 0 True"

@@ -1,6 +1,6 @@
 """``python -m warpcli``: the ``warp`` command."""
 
 if __name__ == "__main__":
-    from warpcli.cli import run
+    from warpcli._entry import run
 
     run()
