@@ -12,11 +12,11 @@ from warpcli.maps.fem.mesh import (
     MAX_TRIANGLES,
     auto_max_area,
     centroids,
-    corners,
     mesh_polygon,
     triangle_areas,
 )
 from warpcli.polygon import Polygon
+from warpcli.simplicial import corners
 
 SHAPES = {"star": star(), "L": l_shape(), "comb": comb(), "spiral": spiral()}
 
@@ -138,6 +138,8 @@ def test_corners_are_fancy_indexings_values_and_the_grading_centroids_are_means(
     got = corners(v, t)
     for k in range(3):
         assert got[k].tobytes() == v[t[:, k]].tobytes()
+    tets = rng.integers(0, len(v), size=(100, 4))  # any simplex: one array per corner
+    assert [c.tobytes() for c in corners(v, tets)] == [v[tets[:, k]].tobytes() for k in range(4)]
     # mesh_polygon's size field: its centroids are the mean over each triangle's corners, bit for bit.
     with np.errstate(invalid="ignore"):  # inf - inf among the specials
         c = centroids(v, t)

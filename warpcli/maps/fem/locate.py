@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..._arrays import median
-from ...simplicial import barycentric_combine
+from ...simplicial import barycentric_combine, corners
 
 #: A point counts as inside a triangle when all its barycentric coordinates
 #: are at least -BARY_TOL: points on shared edges are found, and points on the
@@ -42,7 +42,7 @@ class TriangleLocator:
         self.vertices = v
         self.triangles = t
         self._coef = affine_coefficients(v, t)
-        a, b, c = (np.take(v, t[:, k], axis=0) for k in range(3))
+        a, b, c = corners(v, t)
         tmin = np.minimum(np.minimum(a, b), c)
         tmax = np.maximum(np.maximum(a, b), c)
         lo = v.min(axis=0)
@@ -184,7 +184,7 @@ def affine_coefficients(v: NDArray[np.float64], t: NDArray[np.int64]) -> NDArray
     (dx, dy) = p - a; degenerate triangles get NaN coefficients, so no point
     is ever inside them.
     """
-    a, b, c = (np.take(v, t[:, k], axis=0) for k in range(3))  # `numpy.take`: fancy indexing's values, faster
+    a, b, c = corners(v, t)
     det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = np.where(det != 0, 1.0 / det, np.nan)

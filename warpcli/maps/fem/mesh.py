@@ -12,6 +12,7 @@ from ..._arrays import sorted_unique
 from ..._cached import cached_property
 from ...errors import InputError, MeshingError, PolygonError
 from ...polygon import Polygon
+from ...simplicial import corners
 from .topology import mesh_edges
 
 #: Refuse to build a mesh of more than this many triangles when the user sets
@@ -123,15 +124,6 @@ class TriMesh:
             For triangles naming a vertex the mesh does not have.
         """
         return mesh_edges(self.triangles, self.n_vertices)
-
-
-def corners(vertices: NDArray, triangles: NDArray[np.integer]) -> tuple[NDArray, NDArray, NDArray]:
-    """Each triangle's corners 0, 1 and 2, as three (M, 2) arrays.
-
-    Gathered by `numpy.take` along the rows: the same values as ``vertices[triangles[:, k]]``
-    in a sixth of the time (0.05 against 0.32 ms for 37k triangles, three times in each of the
-    FEM system's and lookup tables' passes over a mesh)."""
-    return tuple(np.take(vertices, triangles[:, k], axis=0) for k in range(3))  # type: ignore[return-value]
 
 
 def centroids(vertices: NDArray[np.float64], triangles: NDArray[np.integer]) -> NDArray[np.float64]:

@@ -32,7 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..._extensions import scipy_extension
-from .mesh import corners, triangle_areas
+from ...simplicial import corners
+from .mesh import triangle_areas
 from .topology import Edges, kernels, mesh_edges
 
 
