@@ -235,20 +235,7 @@ def mesh_polygon(
             f"{max_area:g} px^2 would need about {estimate:.3g} triangles, more than the limit of "
             f"{MAX_TRIANGLES:,}; use a larger maximum triangle area"
         )
-    n = polygon.n
-    pts, markers = _boundary_points(polygon, max_area, grade, boundary == "quadratic")
-    m = len(pts)
-    seg = np.stack([np.arange(m), (np.arange(m) + 1) % m], axis=1)
-    # Marker of a boundary point: 2 + i for polygon vertex i, 2 + n + i for a
-    # point inside edge i (Triangle gives points it adds on a segment that
-    # segment's marker). 0 marks interior nodes, 1 is Triangle's default.
-    seg_markers = np.where(markers < 2 + n, markers + n, markers)
-    tri_in = {
-        "vertices": pts,
-        "vertex_markers": markers.reshape(-1, 1),
-        "segments": seg,
-        "segment_markers": seg_markers.reshape(-1, 1),
-    }
+    tri_in = triangle_input(polygon, max_area, grade, boundary == "quadratic")
     try:
         reflex = polygon.points[polygon.reflex_vertices()] if grade else np.empty((0, 2))
         if graded:
@@ -266,6 +253,32 @@ def mesh_polygon(
             out = tr.triangulate(out, f"rpq{MIN_ANGLE:g}aQ")
     except Exception as err:  # triangle raises bare RuntimeErrors; say which polygon.
         raise MeshingError(f"{polygon.name}: triangle failed to mesh the polygon: {err}") from err
+    return mesh_from_triangle(polygon, out)
+
+
+def triangle_input(polygon: Polygon, max_area: float, grade: bool = True, quadratic: bool = False) -> dict:
+    """What `triangle.triangulate` is given for ``polygon``: its boundary points and segments, marked.
+
+    Marker of a boundary point: 2 + i for polygon vertex i, 2 + n + i for a
+    point inside edge i (Triangle gives points it adds on a segment that
+    segment's marker). 0 marks interior nodes, 1 is Triangle's default.
+    """
+    n = polygon.n
+    pts, markers = _boundary_points(polygon, max_area, grade, quadratic)
+    m = len(pts)
+    seg = np.stack([np.arange(m), (np.arange(m) + 1) % m], axis=1)
+    seg_markers = np.where(markers < 2 + n, markers + n, markers)
+    return {
+        "vertices": pts,
+        "vertex_markers": markers.reshape(-1, 1),
+        "segments": seg,
+        "segment_markers": seg_markers.reshape(-1, 1),
+    }
+
+
+def mesh_from_triangle(polygon: Polygon, out: dict) -> TriMesh:
+    """The `TriMesh` of what `triangle.triangulate` made of `triangle_input`'s ``polygon``."""
+    n = polygon.n
     verts = np.ascontiguousarray(out["vertices"], dtype=np.float64)
     tris = np.ascontiguousarray(out["triangles"], dtype=np.int32)
     vmark = out["vertex_markers"].ravel()
