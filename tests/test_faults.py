@@ -383,6 +383,50 @@ def test_sigterm_while_c_output_is_captured_still_says_terminated(where):
     assert (proc.returncode, proc.stderr) == (143, "warp: terminated\n")
 
 
+_LINE_WHILE_CAPTURED = """
+import logging, os, sys, threading
+from warpcli.capture import c_stderr, stderr_apart
+from warpcli.volume.tetmesh import _quiet_fds
+stderr_apart()
+logging.basicConfig(format="%(message)s")  # a handler made after the set-up, as the command's
+inside, done = threading.Event(), threading.Event()
+
+def worker():
+    with (c_stderr() if sys.argv[1] == "c_stderr" else _quiet_fds()):
+        os.write(2, b"C library noise\\n")
+        inside.set()
+        done.wait(30)
+
+t = threading.Thread(target=worker)
+t.start()
+inside.wait(30)
+print("warp: error: a.png: not an image", file=sys.stderr)
+logging.getLogger("warpcli").warning("warp: warning: b.png: a warning")
+done.set()
+t.join()
+"""
+
+
+@pytest.mark.parametrize("where", ["c_stderr", "tetgen"])
+def test_lines_written_while_another_thread_captures_c_output_reach_stderr(where):
+    """A batch's error for one input, written while a worker's OpenImageIO call (or TetGen) has file
+    descriptor 2 pointing into a capture: with the command's `stderr_apart` it reaches stderr, and the
+    library's noise still does not (without it, 40 % of such runs lost the line)."""
+    proc = subprocess.run([sys.executable, "-c", _LINE_WHILE_CAPTURED, where], cwd=REPO, capture_output=True,
+                          text=True, timeout=60)  # fmt: skip
+    assert (proc.returncode, proc.stderr) == (0, "warp: error: a.png: not an image\nwarp: warning: b.png: a warning\n")
+
+
+def test_the_command_writes_python_stderr_apart_from_descriptor_2():
+    script = (
+        "import importlib, sys\nr = importlib.import_module('warpcli.cli.run')\n"
+        "r.main = lambda: print(sys.stderr.fileno() not in (1, 2), sys.stderr.fileno() == r.stderr_fd()) or 0\n"
+        "r.run()\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert (proc.returncode, proc.stdout) == (0, "True True\n")
+
+
 def test_strips_stop_at_the_first_that_the_full_disk_refuses(full_disk, tmp_path, monkeypatch):
     """PNG's writer keeps returning success after a failed write: the run went on to the last of
     its strips (all of a 30 GB image) before saying so. Now it stops at the first failure."""

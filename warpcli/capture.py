@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import contextlib
+import io
 import os
 import re
 import sys
 import threading
 from collections.abc import Iterator
 
-__all__ = ["Captured", "c_stderr", "one_line", "stderr_fd", "terminal_saved"]
+__all__ = ["Captured", "c_stderr", "one_line", "stderr_apart", "stderr_fd", "terminal_saved"]
 
 
 class Captured:
@@ -41,6 +42,34 @@ def stderr_fd() -> int:
     run may have file descriptor 2 pointing into a capture at that moment.
     """
     return _TERMINAL[-1] if _TERMINAL else 2
+
+
+def stderr_apart() -> None:
+    """Give Python's ``sys.stderr`` a file descriptor of its own: a duplicate of 2 (the ``warp`` command's set-up).
+
+    `c_stderr` points file descriptor 2 into a capture while a C library reads
+    or writes an image, on whichever thread does so. A line Python wrote to
+    stderr meanwhile from another thread (a batch's error for one input while a
+    worker writes the next output) landed in that capture and was lost: 40 %
+    of the runs of a batch with one bad input said nothing about it. On its
+    own descriptor, Python's stderr reaches the terminal whatever 2 points to;
+    what C code prints on 2 is still captured. `stderr_fd` names the duplicate
+    too. A library user's process is not changed: only the command calls this.
+    Nothing happens if stderr is not file descriptor 2 (redirected in-process,
+    closed, or None).
+    """
+    old = sys.stderr
+    try:
+        if old is None or old.fileno() != 2:
+            return
+        old.flush()
+        fd = os.dup(2)
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        return
+    sys.stderr = io.TextIOWrapper(
+        io.FileIO(fd, "w"), encoding=old.encoding, errors=old.errors, line_buffering=True, write_through=True
+    )
+    _TERMINAL.insert(0, fd)
 
 
 @contextlib.contextmanager

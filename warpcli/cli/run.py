@@ -8,7 +8,7 @@ import threading
 
 import click
 
-from ..capture import stderr_fd
+from ..capture import stderr_apart, stderr_fd
 from ..errors import WarpError
 from ..outputs import end_when_consistent, remove_temporaries
 from .exits import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, exit_code
@@ -115,6 +115,7 @@ def run() -> None:
     """The command, with its process set up: what `warpcli._entry.run` (the console script and
     ``python -m warpcli``) calls once it has raised the collector's threshold."""
     one_blas_thread()
+    stderr_apart()  # a line for one input must reach the terminal while a worker's C library is quieted
     code = main()
     _exit_now(code)
     sys.exit(code)
