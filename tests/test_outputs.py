@@ -27,6 +27,43 @@ def test_pending_outputs_are_renamed_together(tmp_path):
     assert sorted(os.listdir(tmp_path)) == ["a.png", "b.json"]
 
 
+@pytest.mark.parametrize("char", ["x", "é", "日"])
+def test_pending_outputs_take_every_name_the_file_system_allows(tmp_path, char):
+    # Any name up to NAME_MAX bytes, in one-, two- and three-byte UTF-8: the pending file's
+    # longer name is shortened to fit, and the output gets the name asked for.
+    limit = os.pathconf(tmp_path, "PC_NAME_MAX")
+    step = len(char.encode())
+    names = {char * max(1, (n - 4) // step) + ".png" for n in range(5, limit + 1, 7)} | {char * ((limit - 4) // step) + ".png"}
+    with PendingOutputs() as out:
+        for name in names:
+            tmp = out.path(tmp_path / name)
+            assert len(os.fsencode(os.path.basename(tmp))) <= limit and PENDING_MARKER in tmp and tmp.endswith(".png")
+            open(tmp, "w").write(name)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names)
+    assert all((tmp_path / name).read_text() == name for name in names)
+
+
+def test_the_command_writes_outputs_with_the_longest_names_allowed(tmp_path):
+    # The image, its report and its map, each named up to the file system's limit (a pending
+    # file's longer name made a traceback after the work was done).
+    from warpcli.cli import main
+
+    limit = os.pathconf(tmp_path, "PC_NAME_MAX")
+    img = write_png(tmp_path / "in.png", np.zeros((40, 40, 3), np.uint8))
+    src, dst = write_polygon(tmp_path / "a.json", star(5, 20, 20, 8, 16)), write_polygon(tmp_path / "b.json", star(5, 20, 20, 9, 17))
+    outs = [tmp_path / ("o" * (limit - len(ext)) + ext) for ext in (".png", ".json", ".exr")]
+    assert main([img, "--src", src, "--dst", dst, str(outs[0]), "--report", str(outs[1]), "--save-map", str(outs[2])]) == 0
+    assert all(p.is_file() and p.stat().st_size for p in outs)
+    assert not [p for p in os.listdir(tmp_path) if PENDING_MARKER in p]
+
+
+def test_a_pending_output_that_cannot_be_created_is_one_error_naming_it(tmp_path):
+    with pytest.raises(ImageInputError, match=r"/nowhere/a.png: cannot write: No such file or directory$"):
+        with PendingOutputs() as out:
+            out.path(tmp_path / "nowhere" / "a.png")
+    assert os.listdir(tmp_path) == []
+
+
 def test_a_failure_leaves_nothing_and_names_the_final_path(tmp_path):
     with pytest.raises(ImageIOError) as info:
         with PendingOutputs() as out:

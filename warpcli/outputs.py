@@ -215,11 +215,16 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[str]:
     _sync_directory(directory)
 
 
-def _temp_affixes(path: str, directory: str) -> tuple[str, str]:
-    """mkstemp's prefix and suffix for `TEMP_NAME_PATTERN`, the stem shortened if
-    the name would be too long for the file system."""
+#: Name of a pending output (`PendingOutputs`), as `TEMP_NAME_PATTERN`.
+PENDING_NAME_PATTERN = ".{stem}" + PENDING_MARKER + "XXXXXXXX{ext}"
+
+
+def _temp_affixes(path: str, directory: str, pattern: str = TEMP_NAME_PATTERN) -> tuple[str, str]:
+    """mkstemp's prefix and suffix for ``pattern`` (`TEMP_NAME_PATTERN`, `PENDING_NAME_PATTERN`),
+    the stem shortened if the name would be too long for the file system: an output's own
+    name may be as long as the file system allows."""
     stem, ext = os.path.splitext(os.path.basename(path))
-    head, tail = TEMP_NAME_PATTERN.split("XXXXXXXX")
+    head, tail = pattern.split("XXXXXXXX")
     try:
         name_max = os.pathconf(directory, "PC_NAME_MAX")
     except (OSError, ValueError):
@@ -581,12 +586,21 @@ class PendingOutputs:
         -------
         str
             The path to write it to now.
+
+        Raises
+        ------
+        ImageInputError
+            If it cannot be created where ``final`` goes (no such directory, no permission).
+        ImageIOError
+            If creating it fails otherwise.
         """
         name = os.path.abspath(os.fspath(final))
-        directory, base = os.path.split(name)
-        stem, ext = os.path.splitext(base)
-        fd, tmp = _new_temporary(f".{stem}{PENDING_MARKER}", ext, directory)
-        os.close(fd)
+        directory = os.path.dirname(name)
+        try:
+            fd, tmp = _new_temporary(*_temp_affixes(name, directory, PENDING_NAME_PATTERN), directory)
+            os.close(fd)
+        except OSError as err:
+            raise _write_error(os.fspath(final), err) from err
         _finals[tmp] = os.fspath(final)
         self._pending.append((tmp, name, os.fspath(final)))
         return tmp
