@@ -117,6 +117,73 @@ def test_a_polygon_far_larger_than_its_image_is_meshed_at_the_image(size):
     assert np.abs(triangle_areas(m.vertices, m.triangles))[over].max() <= area * (1 + 1e-9)
 
 
+def _far_needles(count: int, seed: int):
+    """Needles and thin strips from a 40 x 30 image out to 1e3-1e9 px, in random directions and widths."""
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        reach = 10.0 ** rng.uniform(3, 9)
+        angle = rng.uniform(0, 2 * np.pi)
+        width = 10.0 ** rng.uniform(1, 3.5)
+        d, n = np.array([np.cos(angle), np.sin(angle)]), np.array([-np.sin(angle), np.cos(angle)])
+        base = np.array([20.0, 15.0])
+        tip = np.clip(base + reach * d, -9e8, 9e8)
+        if rng.random() < 0.5:  # a needle: a triangle with its tip far away
+            pts = [base - width * n, tip, base + width * n]
+        else:  # a strip of constant width
+            pts = [base - width * n, tip - width * n, tip + width * n, base + width * n]
+        try:
+            yield Polygon(np.array(pts)), reach, width
+        except PolygonError:  # thinner than the validator allows for its size: not a mesher's case
+            continue
+
+
+def test_far_thin_parts_are_meshed_or_refused_within_a_bounded_work(monkeypatch):
+    # A part far beyond the image that is thin for its length needs triangles all along it (their
+    # angles are bounded): a needle to x = 9e8 took 5 million triangles, 40 s and 2 GB for a 200 px
+    # image. The mesher now stops at the budget's vertices, whatever the coordinates, and refuses.
+    import triangle
+
+    import warpcli.maps.fem.mesh as mesh_module
+
+    monkeypatch.setattr(mesh_module, "AUTO_MAX_TRIANGLES", 20_000)  # the floor of the budget, small for the test
+    made = []
+    real = triangle.triangulate
+
+    def counted(data, switches):
+        out = real(data, switches)
+        made.append(len(out["vertices"]))
+        return out
+
+    monkeypatch.setattr(triangle, "triangulate", counted)
+    region = (0.0, 0.0, 40.0, 30.0)
+    outcomes = {"meshed": 0, "refused": 0}
+    for poly, reach, width in _far_needles(24, seed=5):
+        area = auto_max_area(poly, region)
+        most = max(20_000, round(mesh_module.GRADED_BUDGET * 2 * (40 + 40) * (30 + 40) / area))
+        made.clear()
+        try:
+            m = mesh_polygon(poly, area, region=region)
+        except PolygonError as err:
+            assert "reaches far beyond the image" in str(err) and "too thin for its length" in str(err)
+            outcomes["refused"] += 1
+        else:
+            assert m.n_triangles <= most
+            outcomes["meshed"] += 1
+        assert max(made) <= most, (reach, width)  # the work, refused or not
+    assert outcomes["meshed"] and outcomes["refused"], outcomes  # both sides of the budget were generated
+
+
+def test_far_reaching_wide_polygons_are_never_refused():
+    # Squares and stars to the coordinates' limit round a tiny image: triangles growing with the
+    # distance keep them far under the budget's floor (445,000-464,000 measured at 1e9).
+    region = (0.0, 0.0, 10.0, 10.0)
+    square = [Polygon([[-size, -size], [size, -size], [size, size], [-size, size]]) for size in (1e3, 9.9e8)]
+    stars = [Polygon(star(6, 5.0, 5.0, 0.4 * size, size)) for size in (1e4, 1e7)]
+    for poly in square + stars:
+        m = mesh_polygon(poly, auto_max_area(poly, region), region=region)
+        assert m.n_triangles < AUTO_MAX_TRIANGLES / 2
+
+
 def test_a_polygon_near_its_image_is_meshed_as_without_a_region():
     from warpcli.maps.fem.mesh import graded_from
 

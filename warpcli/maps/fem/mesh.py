@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -18,6 +19,14 @@ from .topology import mesh_edges
 #: Refuse to build a mesh of more than this many triangles when the user sets
 #: the density: its direct solve would take many minutes and several GB.
 MAX_TRIANGLES = 4_000_000
+
+#: A polygon reaching far beyond the image (`graded_from`) is meshed with at most
+#: this many times the triangles its part near the image needs (and at least
+#: ``AUTO_MAX_TRIANGLES``): its far parts get triangles growing with the distance,
+#: so a square of 1e7 px round a 200 px image takes 5.9 times, and only a part
+#: far away that is thin for its length (a needle to x = 9e8, 2,200 px wide: 5
+#: million triangles, 40 s and 2 GB) needs more. That is refused instead.
+GRADED_BUDGET = 8
 
 #: The automatic density never asks for more triangles than this per mesh; a
 #: polygon far larger than any image gets a coarser mesh instead (its harmonic
@@ -236,12 +245,26 @@ def mesh_polygon(
             f"{MAX_TRIANGLES:,}; use a larger maximum triangle area"
         )
     tri_in = triangle_input(polygon, max_area, grade, boundary == "quadratic")
+    if graded:
+        most = min(MAX_TRIANGLES, max(AUTO_MAX_TRIANGLES, round(GRADED_BUDGET * estimate)))
+        too_many = (
+            f"{polygon.name}: this polygon reaches far beyond the image (to {_far_corner(polygon.bounds, region)}) "
+            f"through a part too thin for its length: meshing it would need more than {most:,} triangles; "
+            "bring its far vertices closer, or widen that part"
+        )
+    else:
+        most = MAX_TRIANGLES
+        too_many = (
+            f"{polygon.name}: meshing this polygon would need more than {most:,} triangles: a part of it is too "
+            "thin for its length; widen that part or shorten it"
+        )
+    triangulate = functools.partial(_bounded_triangulate, tr, most=most, message=too_many)
     try:
         reflex = polygon.points[polygon.reflex_vertices()] if grade else np.empty((0, 2))
         if graded:
-            out = _region_graded(tr, tri_in, polygon, max_area, reflex, region)  # type: ignore[arg-type]
+            out = _region_graded(triangulate, tri_in, polygon, max_area, reflex, region)  # type: ignore[arg-type]
         else:
-            out = tr.triangulate(tri_in, f"pq{MIN_ANGLE:g}a{max_area:.17g}Q")
+            out = triangulate(tri_in, f"pq{MIN_ANGLE:g}a{max_area:.17g}Q")
         if len(reflex) and not graded:
             # Size field: edge length growing linearly with the distance to the
             # nearest reflex vertex, from _GRADE_MIN up to the nominal length.
@@ -250,10 +273,38 @@ def mesh_polygon(
             h = math.sqrt(4.0 * max_area / math.sqrt(3.0))
             edge = np.clip(_GRADE_SLOPE * dist, _GRADE_MIN, h)
             out["triangle_max_area"] = (math.sqrt(3.0) / 4.0 * edge * edge).reshape(-1, 1)
-            out = tr.triangulate(out, f"rpq{MIN_ANGLE:g}aQ")
+            out = triangulate(out, f"rpq{MIN_ANGLE:g}aQ")
+    except PolygonError:
+        raise
     except Exception as err:  # triangle raises bare RuntimeErrors; say which polygon.
         raise MeshingError(f"{polygon.name}: triangle failed to mesh the polygon: {err}") from err
     return mesh_from_triangle(polygon, out)
+
+
+def _bounded_triangulate(tr, data: dict, switches: str, *, most: int, message: str) -> dict:
+    """`triangle.triangulate`, refused with ``message`` (a `PolygonError`) if the mesh has more than ``most`` triangles.
+
+    The work is bounded before it is done: Triangle's ``S`` switch stops it
+    once the mesh has ``most`` vertices. A triangulation of V vertices, B of
+    them on the boundary, has 2V - B - 2 triangles: about 2V for a mesh of
+    an area, about V for one of a thin part (its boundary split all along),
+    so the vertices bound the triangles to 2 ``most``, and a polygon that
+    needs more than ``most`` (a part too thin for its length) is refused.
+    """
+    room = most - len(data["vertices"])
+    out = tr.triangulate(data, f"{switches}S{max(room, 0)}") if room > 0 else None
+    if out is None or len(out["vertices"]) >= most or len(out["triangles"]) > most:
+        raise PolygonError(message)
+    return out
+
+
+def _far_corner(bounds, region) -> str:
+    """The corner of the polygon's bounding box farthest from the region, for a message."""
+    xmin, ymin, xmax, ymax = bounds
+    rx0, ry0, rx1, ry1 = region
+    x = xmin if rx0 - xmin > xmax - rx1 else xmax
+    y = ymin if ry0 - ymin > ymax - ry1 else ymax
+    return f"x = {x:.4g}, y = {y:.4g}"
 
 
 def triangle_input(polygon: Polygon, max_area: float, grade: bool = True, quadratic: bool = False) -> dict:
@@ -299,7 +350,7 @@ def mesh_from_triangle(polygon: Polygon, out: dict) -> TriMesh:
     return TriMesh(verts, tris, boundary, edge, t)
 
 
-def _region_graded(tr, tri_in: dict, polygon: Polygon, max_area: float, reflex, region) -> dict:
+def _region_graded(triangulate, tri_in: dict, polygon: Polygon, max_area: float, reflex, region) -> dict:
     """A mesh with ``max_area`` at the region, growing away from it (and graded at reflex vertices).
 
     Starts from a coarse mesh and refines in passes; each pass asks of every
@@ -308,7 +359,7 @@ def _region_graded(tr, tri_in: dict, polygon: Polygon, max_area: float, reflex, 
     """
     h = math.sqrt(4.0 * max_area / math.sqrt(3.0))
     coarse = max(max_area, abs(polygon.signed_area) / 2000.0)
-    out = tr.triangulate(tri_in, f"pq{MIN_ANGLE:g}a{coarse:.17g}Q")
+    out = triangulate(tri_in, f"pq{MIN_ANGLE:g}a{coarse:.17g}Q")
     lo = np.array(region[:2])
     hi = np.array(region[2:])
     for _ in range(_REGION_PASSES):
@@ -325,7 +376,7 @@ def _region_graded(tr, tri_in: dict, polygon: Polygon, max_area: float, reflex, 
         if not big.any():
             break
         out["triangle_max_area"] = np.where(big, np.maximum(target, area / _REGION_SPLIT), -1.0).reshape(-1, 1)
-        out = tr.triangulate(out, f"rpq{MIN_ANGLE:g}aQ")
+        out = triangulate(out, f"rpq{MIN_ANGLE:g}aQ")
     return out
 
 
