@@ -75,7 +75,10 @@ def write_png(path, pixels) -> str:
     if px.ndim == 2:
         px = px[:, :, None]
     h, w, c = px.shape
-    types = {np.dtype(np.uint8): "uint8", np.dtype(np.uint16): "uint16", np.dtype(np.float32): "float", np.dtype(np.float16): "half"}
+    types = {
+        np.dtype(np.uint8): "uint8", np.dtype(np.uint16): "uint16", np.dtype(np.float32): "float", np.dtype(np.float16): "half",
+        np.dtype(np.uint32): "uint",  # OpenImageIO's name: "uint32" is none of its names
+    }  # fmt: skip
     out = oiio.ImageOutput.create(str(path))
     assert out is not None, oiio.geterror()
     assert out.open(str(path), oiio.ImageSpec(w, h, c, types[px.dtype]))

@@ -22,7 +22,13 @@ from warpcli.raster.imageio import (
     written_attributes,
 )
 
-TYPES = {np.dtype(np.uint8): "uint8", np.dtype(np.uint16): "uint16", np.dtype(np.float16): "half", np.dtype(np.float32): "float"}
+#: OpenImageIO's own names (`TypeDesc`), typed here from its documentation: 32-bit integers are
+#: "uint" and "int" ("uint32" is no name of OpenImageIO's: TypeDesc("uint32") is UNKNOWN).
+TYPES = {
+    np.dtype(np.uint8): "uint8", np.dtype(np.int8): "int8", np.dtype(np.uint16): "uint16", np.dtype(np.int16): "int16",
+    np.dtype(np.uint32): "uint", np.dtype(np.int32): "int", np.dtype(np.float16): "half", np.dtype(np.float32): "float",
+    np.dtype(np.float64): "double",
+}  # fmt: skip
 
 
 def write(path, px, names=None, attrs=()):
@@ -63,6 +69,9 @@ CASES = [
     ("png", np.uint16, 1), ("png", np.uint16, 3), ("png", np.uint16, 4),
     ("tif", np.uint8, 3), ("tif", np.uint8, 5), ("tif", np.uint16, 3), ("tif", np.float32, 1), ("tif", np.float32, 4),
     ("exr", np.float16, 3), ("exr", np.float16, 4), ("exr", np.float32, 1), ("exr", np.float32, 3), ("exr", np.float32, 6),
+    # every integer width and sign TIFF stores, and OpenEXR's 32-bit unsigned channels (ids, labels)
+    ("tif", np.int8, 1), ("tif", np.int16, 2), ("tif", np.uint32, 1), ("tif", np.int32, 3), ("tif", np.float64, 1),
+    ("exr", np.uint32, 1), ("exr", np.uint32, 4),
 ]  # fmt: skip
 
 
@@ -80,6 +89,47 @@ def test_identity_warp_round_trips_every_format_exactly(tmp_path, ext, dtype, ch
     assert spec_out.channelnames == spec_in.channelnames
     assert spec_out.alpha_channel == spec_in.alpha_channel
     np.testing.assert_array_equal(back, back_in)
+
+
+@pytest.mark.parametrize("ext", ["tif", "exr"])
+@pytest.mark.parametrize("tiled", [False, True])
+def test_32_bit_ids_keep_their_type_and_every_value(tmp_path, ext, tiled):
+    # Ids beyond float32's exact integers (2^24), through the whole image and through strips:
+    # an identity warp with nearest gives every id back, in a 32-bit file.
+    h, w = 40, 56
+    px = (np.arange(h * w, dtype=np.uint64).reshape(h, w, 1) * 2_654_435_761 % 2**32).astype(np.uint32)
+    inp = write(tmp_path / f"in.{ext}", px)
+    full = write_polygon(tmp_path / "full.json", [[0, 0], [w, 0], [w, h], [0, h]])
+    out = tmp_path / f"out.{ext}"
+    args = [inp, str(out), "--src", full, "--dst", full, "--interp", "nearest"] + (["--tiled"] if tiled else [])
+    assert main(args) == 0
+    spec_out, back = spec_of(out)
+    assert str(spec_out.format) == "uint"
+    np.testing.assert_array_equal(back, px)
+
+
+def test_a_tiled_tiff_of_doubles_is_refused_not_misread(tmp_path):
+    # OpenImageIO 3.2 decodes a tiled TIFF's 64-bit samples as packed bits: garbage, and no error.
+    px = pattern(40, 56, 1, np.float64)
+    full = write_polygon(tmp_path / "full.json", [[0, 0], [56, 0], [56, 40], [0, 40]])
+    for tiled in (False, True):
+        spec = oiio.ImageSpec(56, 40, 1, "double")
+        if tiled:
+            spec.tile_width = spec.tile_height = 16
+        path = str(tmp_path / f"in{int(tiled)}.tif")
+        out = oiio.ImageOutput.create(path)
+        assert out.open(path, spec) and out.write_image(px)
+        out.close()
+        for strips in ([], ["--tiled"]):
+            target = tmp_path / f"out{int(tiled)}{len(strips)}.tif"
+            code = main([path, str(target), "--src", full, "--dst", full, "--interp", "nearest", *strips])
+            if tiled:
+                assert code == 2 and not target.exists()
+            else:
+                assert code == 0
+                np.testing.assert_array_equal(spec_of(target)[1], px)
+    with pytest.raises(ImageInputError, match=r"in1.tif: a tiled TIFF of 64-bit floats, which OpenImageIO .* misreads"):
+        read_image(str(tmp_path / "in1.tif"))
 
 
 def test_jpeg_keeps_8_bits_and_the_picture(tmp_path):

@@ -31,6 +31,8 @@ def _image(kind: str, rng, h: int = 130, w: int = 150):
     if kind == "rgba16":  # straight alpha, blended premultiplied
         px = rng.integers(0, 65536, (h, w, 4)).astype(np.uint16)
         return px, 3
+    if kind == "ids32":  # 32-bit ids, beyond float32's exact integers
+        return rng.integers(0, 2**32, (h, w, 1), dtype=np.uint64).astype(np.uint32), None
     return rng.normal(0.5, 0.3, (h, w, 1)).astype(np.float32), None
 
 
@@ -59,7 +61,7 @@ def _both(tmp, src, dst, px, ext, **options):
     n=st.integers(5, 8),
     data=st.data(),
     interp=st.sampled_from(["linear", "nearest"]),
-    kind=st.sampled_from(["rgb8", "rgba16", "float"]),
+    kind=st.sampled_from(["rgb8", "rgba16", "float", "ids32"]),
     ext=st.sampled_from(["png", "tif", "exr"]),
     scale=st.sampled_from([1.0, 0.45, 1.15]),
     size=st.sampled_from([None, (97, 141)]),
@@ -72,7 +74,7 @@ def test_strips_give_the_in_memory_output_bit_for_bit(small_strips, tmp_path_fac
     src = data.draw(simple_polygons(n))
     dst = data.draw(simple_polygons(n))
     dst = 64.0 + (dst - 64.0) * scale
-    if kind == "float" and ext == "png":
+    if kind in ("float", "ids32") and ext == "png":
         ext = "tif"
     px, _ = _image(kind, np.random.default_rng(n))
     whole, strips = _both(str(tmp_path_factory.mktemp("t")), src, dst, px, ext, interp=interp, size=size)

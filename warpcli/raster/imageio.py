@@ -29,8 +29,8 @@ OIIO_TYPES = {
     np.dtype(np.int8): "int8",
     np.dtype(np.uint16): "uint16",
     np.dtype(np.int16): "int16",
-    np.dtype(np.uint32): "uint32",
-    np.dtype(np.int32): "int32",
+    np.dtype(np.uint32): "uint",
+    np.dtype(np.int32): "int",
     np.dtype(np.float16): "half",
     np.dtype(np.float32): "float",
     np.dtype(np.float64): "double",
@@ -250,6 +250,16 @@ def _open_input(name: str):
         inp = oiio.ImageInput.open(name, config)
     if inp is None:
         raise ImageInputError(f"{name}: cannot read image: {one_line(oiio.geterror(), said.text)}")
+    spec = inp.spec()
+    if inp.format_name() == "tiff" and spec.tile_width > 0 and spec.format == oiio.TypeDesc("double"):
+        # OpenImageIO 3.2's TIFF reader takes a tile's 64-bit samples for packed bits
+        # (TIFFInput::bit_convert): values of 1e276 where 0.4 was written, with no error.
+        with c_stderr():
+            inp.close()
+        raise ImageInputError(
+            f"{name}: a tiled TIFF of 64-bit floats, which OpenImageIO {oiio.__version__} misreads; "
+            "save it in strips (untiled) or as 32-bit float"
+        )
     return inp, config
 
 

@@ -3,7 +3,9 @@
 `PartReader` reads any rectangle of an image through OpenImageIO's
 ImageCache: tiles (or, for files stored in scanlines, strips of 256 rows)
 decoded on demand and kept up to a memory budget, so reading a part costs
-memory in proportion to the part, not to the image. `StripWriter` writes an
+memory in proportion to the part, not to the image. The cache holds 32-bit
+integers and doubles as float32: those are read from blocks of their own
+(`_ExactBlocks`), kept to the same budget. `StripWriter` writes an
 image strip after strip, tiled where the format stores tiles (TIFF, OpenEXR),
 in scanlines otherwise, under a temporary name renamed into place when the
 last strip is written and the file reads back whole (`warpcli.outputs.atomic_path`).
@@ -16,6 +18,8 @@ from __future__ import annotations
 
 import errno
 import os
+import threading
+from collections import OrderedDict
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,18 +32,29 @@ from .pixels import premultiplied
 
 #: Rows of a strip, and the side of a tile in tiled outputs.
 TILE = 256
-#: Memory OpenImageIO's cache may keep of decoded input tiles, in megabytes.
+#: Memory OpenImageIO's cache (or `_ExactBlocks`) may keep of decoded input tiles, in megabytes.
 CACHE_MB = 512.0
+#: Pixel types OpenImageIO's ImageCache holds as they are. It holds the others (32-bit
+#: integers, doubles) as float32: ids near 2^32 came back off by up to 129.
+CACHED_TYPES = frozenset(np.dtype(t) for t in (np.uint8, np.int8, np.uint16, np.int16, np.float16, np.float32))
 
 
 class PartReader:
     """Rectangles of one image file, decoded on demand through a private ImageCache.
+
+    Pixel types the cache does not hold exactly (`CACHED_TYPES`) are read from
+    blocks decoded by an ImageInput instead (`_ExactBlocks`).
 
     Parameters
     ----------
     path : path-like
     header : ImageHeader
         Its `warpcli.raster.imageio.read_header`.
+
+    Raises
+    ------
+    ImageInputError
+        If the file can no longer be opened (read exactly).
     """
 
     def __init__(self, path: str | os.PathLike[str], header: ImageHeader) -> None:
@@ -48,6 +63,10 @@ class PartReader:
         self.name = os.fspath(path)
         self.header = header
         self._oiio = oiio
+        self._cache = self._blocks = None
+        if header.dtype not in CACHED_TYPES:
+            self._blocks = _ExactBlocks(self.name, header)
+            return
         self._cache = oiio.ImageCache(False)  # private: its memory is freed with it
         self._cache.attribute("max_memory_MB", CACHE_MB)
         self._cache.attribute("autotile", TILE)  # scanline files in strips, not whole
@@ -62,6 +81,8 @@ class PartReader:
         ImageInputError
             If the file cannot be decoded there (cut short, damaged).
         """
+        if self._blocks is not None:
+            return self._blocks.read(x0, y0, x1, y1)
         with c_stderr() as said:
             px = self._cache.get_pixels(self.name, 0, 0, x0, x1, y0, y1, 0, 1, self._type)
         problem = self._cache.geterror()
@@ -73,15 +94,121 @@ class PartReader:
         return px.reshape(y1 - y0, x1 - x0, self.header.channels)
 
     def close(self) -> None:
-        self._cache.invalidate(self.name)
-        self._cache = None
+        if self._cache is not None:
+            self._cache.invalidate(self.name)
+            self._cache = None
+        if self._blocks is not None:
+            self._blocks.close()
+            self._blocks = None
 
     def __enter__(self) -> PartReader:
         return self
 
     def __exit__(self, *exc) -> None:
-        if self._cache is not None:
-            self.close()
+        self.close()
+
+
+class _ExactBlocks:
+    """Rectangles of an image file in its own pixel type, from blocks an ImageInput decodes whole.
+
+    A file in scanlines is read in bands of `TILE` full rows (``read_scanlines``
+    gives whole rows; fewer rows where four bands would pass the budget); a tiled
+    file in blocks of whole tiles of about `TILE` x `TILE` pixels (``read_tiles``:
+    ``read_scanlines`` refuses tiled files). Blocks are kept, the least recently used
+    dropped beyond `CACHE_MB`, so that the chunks of one strip, which reach the same
+    rows, decode them once, and memory stays bounded however large the image.
+    """
+
+    def __init__(self, name: str, header: ImageHeader) -> None:
+        import OpenImageIO as oiio
+
+        self.name, self.header = name, header
+        self._oiio = oiio
+        config = oiio.ImageSpec()
+        config.attribute("oiio:UnassociatedAlpha", 1)  # as `read_image` and the ImageCache read it
+        with c_stderr() as said:
+            inp = oiio.ImageInput.open(name, config)
+        if inp is None:
+            raise ImageInputError(f"{name}: cannot read image: {one_line(oiio.geterror(), said.text)}")
+        self._inp = inp
+        spec = inp.spec()
+        self._origin = (spec.x, spec.y, spec.z)  # the data window's, which read_image starts at
+        self._type = oiio.TypeDesc(OIIO_TYPES[header.dtype])
+        self._budget = int(CACHE_MB * 2**20)
+        self._tiled = spec.tile_width > 0
+        self._whole_chunks, self._chunk = False, 1
+        if self._tiled:
+            tw, th = spec.tile_width, spec.tile_height
+            self._rows, self._cols = th * -(-TILE // th), tw * -(-TILE // tw)
+        else:
+            row = header.width * header.channels * header.dtype.itemsize
+            rows = max(1, min(TILE, self._budget // (4 * row)))
+            chunk = max(1, spec.get_int_attribute("oiio:RowsPerChunk", 1))  # a TIFF's strip, an EXR's block
+            # Bands of whole chunks, each decoded once. And OpenImageIO's TIFF reader reads
+            # 64-bit samples right only in whole strips of more than a row: elsewhere it
+            # takes them for packed bits (TIFFInput::bit_convert), whatever the budget.
+            self._whole_chunks = inp.format_name() == "tiff" and header.dtype.itemsize == 8
+            if self._whole_chunks or 4 * chunk * row <= self._budget:
+                rows = chunk * -(-rows // chunk)
+            self._rows, self._cols, self._chunk = rows, header.width, chunk
+        self._kept_blocks: OrderedDict[tuple[int, int], NDArray] = OrderedDict()
+        self._kept = 0  # bytes
+        self._lock = threading.Lock()  # the ImageCache it stands for may be read from any thread
+
+    def read(self, x0: int, y0: int, x1: int, y1: int) -> NDArray:
+        out = np.empty((y1 - y0, x1 - x0, self.header.channels), dtype=self.header.dtype)
+        rows, cols = self._rows, self._cols
+        with self._lock:
+            for by in range(y0 // rows, (y1 - 1) // rows + 1):
+                for bx in range(x0 // cols, (x1 - 1) // cols + 1):
+                    block = self._block((by, bx))
+                    top, left = by * rows, bx * cols
+                    a, b = max(y0, top), min(y1, top + block.shape[0])
+                    c, d = max(x0, left), min(x1, left + block.shape[1])
+                    out[a - y0 : b - y0, c - x0 : d - x0] = block[a - top : b - top, c - left : d - left]
+        return out
+
+    def _block(self, key: tuple[int, int]) -> NDArray:
+        """Block ``key`` (band, column block), decoded unless kept; blocks beyond the budget dropped,
+        least recently used first (copied from already: a read crossing more blocks than the budget
+        holds decodes each once)."""
+        kept = self._kept_blocks
+        if key in kept:
+            kept.move_to_end(key)
+            return kept[key]
+        block = self._decode(key)
+        kept[key] = block
+        self._kept += block.nbytes
+        while self._kept > self._budget and len(kept) > 1:
+            self._kept -= kept.popitem(last=False)[1].nbytes
+        return block
+
+    def _decode(self, key: tuple[int, int]) -> NDArray:
+        by, bx = key
+        h, w, nc = self.header.height, self.header.width, self.header.channels
+        top, bottom = by * self._rows, min(h, (by + 1) * self._rows)
+        left, right = bx * self._cols, min(w, (bx + 1) * self._cols)
+        x, y, z = self._origin
+        # A last band of one row is read with the strip before it (see `_whole_chunks`).
+        first = top - self._chunk if self._whole_chunks and bottom - top == 1 and top > 0 else top
+        with c_stderr() as said:
+            if self._tiled:
+                px = self._inp.read_tiles(0, 0, x + left, x + right, y + top, y + bottom, z, z + 1, 0, nc, self._type)
+            else:
+                px = self._inp.read_scanlines(0, 0, y + first, y + bottom, z, 0, nc, self._type)
+        problem = self._inp.geterror()
+        if px is None or problem:
+            why = one_line(problem, self._oiio.geterror(), said.text)
+            raise ImageInputError(f"{self.name}: cannot read image: {why}")
+        px = np.asarray(px).reshape(bottom - first, right - left, nc)
+        return px if first == top else px[top - first :].copy()
+
+    def close(self) -> None:
+        with c_stderr():
+            self._inp.close()
+        self._inp.geterror()  # nothing left pending to be printed later
+        self._kept_blocks.clear()
+        self._kept = 0
 
 
 #: Formats whose files cannot be written strip by strip, by name for messages: libjpeg
@@ -175,9 +302,18 @@ class StripWriter:
             # not write (a sparse file of the full size): room for them is checked first.
             least = width * height * header.channels
             check_room(filename, shown_name, least, f"a {self.format.upper()} of {width} x {height} takes at least {least} bytes")
-        self.tiled = bool(out.supports("tiles"))
+        # Not a TIFF of doubles: OpenImageIO misreads tiled ones (`warpcli.raster.imageio`
+        # refuses them as input), so they are written in strips of rows.
+        self.tiled = bool(out.supports("tiles")) and not (self.format == "tiff" and header.dtype.itemsize == 8)
         if self.tiled:
             spec.tile_width = spec.tile_height = TILE
+        if self.format == "tiff":
+            # With 3 or more threads, OpenImageIO's TIFF writer compresses a strip's tiles
+            # in parallel (8 and 16 bits, zip): with a zlib call of its own, giving other
+            # bytes than libtiff's, and partial tiles padded with memory as it was found,
+            # so that the file changed with the thread count and from run to run. Off,
+            # every thread count writes the bytes 1 and 2 threads wrote.
+            spec.attribute("tiff:multithread", 0)
         self._spec = spec
         self._next = 0
         with c_stderr() as said:

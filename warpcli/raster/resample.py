@@ -204,8 +204,12 @@ def resample(
 
 
 def _work_dtype(dtype: np.dtype) -> type:
-    """The type samples are computed in: float64 for float64 images, float32 otherwise."""
-    return np.float64 if dtype == np.float64 else np.float32
+    """The type samples are computed in: float64 for float64 images and for integers wider than
+    16 bits (float32 holds integers exactly only up to 2^24: a 32-bit id would move by up to
+    128 even under ``nearest``), float32 otherwise."""
+    dtype = np.dtype(dtype)
+    wide_integer = dtype.kind in "iu" and dtype.itemsize > 2
+    return np.float64 if dtype == np.float64 or wide_integer else np.float32
 
 
 def _premultiplied_by(interp: str, alpha_channel: int | None, associated_alpha: bool) -> int | None:
