@@ -108,6 +108,67 @@ def test_32_bit_ids_keep_their_type_and_every_value(tmp_path, ext, tiled):
     np.testing.assert_array_equal(back, px)
 
 
+@pytest.mark.parametrize("kind", ["Plain Texture", "Shadow", "LatLong Environment"])
+@pytest.mark.parametrize("tex_ext", ["exr", "tif"])
+@pytest.mark.parametrize("out_ext", ["exr", "tif", "png"])
+def test_a_texture_warps_to_a_plain_image_every_format_reads_back(tmp_path, kind, tex_ext, out_ext):
+    # A mip-mapped, tiled texture (maketx, oiiotool -otex) carries "textureformat", "wrapmodes" and
+    # "fovcot": carried onto a scanline OpenEXR, "textureformat" made a file OpenImageIO could not read.
+    buf = oiio.ImageBuf(oiio.ImageSpec(64, 32, 1 if kind == "Shadow" else 3, "half"))
+    oiio.ImageBufAlgo.checker(buf, 8, 8, 1, (0.1, 0.2, 0.3), (0.9, 0.8, 0.7))
+    config = oiio.ImageSpec()
+    config.attribute("wrapmodes", "periodic,clamp")
+    how = {"Plain Texture": oiio.MakeTxTexture, "Shadow": oiio.MakeTxShadow, "LatLong Environment": oiio.MakeTxEnvLatl}[kind]
+    tex = str(tmp_path / f"tex.{tex_ext}")
+    assert oiio.ImageBufAlgo.make_texture(how, buf, tex, config), oiio.geterror()
+    spec_in, px_in = spec_of(tex)
+    assert spec_in.get_string_attribute("textureformat") == kind
+    full = write_polygon(tmp_path / "full.json", [[0, 0], [64, 0], [64, 32], [0, 32]])
+    out = tmp_path / f"out.{out_ext}"
+    assert main([tex, str(out), "--src", full, "--dst", full, "--interp", "nearest"]) == 0
+    spec_out, px_out = spec_of(out)  # every pixel decodes
+    assert not any(spec_out.getattribute(name) for name in ("textureformat", "wrapmodes", "fovcot"))
+    if out_ext != "png":
+        np.testing.assert_array_equal(px_out, px_in)
+
+
+def _multi(path, kind):
+    """A file of two subimages (an OpenEXR of two parts, a TIFF of two pages), or a deep OpenEXR."""
+    if kind == "deep":
+        spec = oiio.ImageSpec(16, 8, 2, "float")
+        spec.channelnames, spec.deep = ("R", "Z"), True
+        buf = oiio.ImageBuf(spec)
+        for y in range(8):
+            for x in range(16):
+                buf.set_deep_samples(x, y, 0, 1)
+                buf.set_deep_value(x, y, 0, 0, 0, 0.5)
+                buf.set_deep_value(x, y, 0, 1, 0, 1.0)
+        assert buf.write(str(path)), buf.geterror()
+        return str(path)
+    specs = [oiio.ImageSpec(16, 8, 3, "half"), oiio.ImageSpec(16, 8, 1, "half")]
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), specs), out.geterror()
+    out.write_image(np.zeros((8, 16, 3), np.float16))
+    out.open(str(path), specs[1], "AppendSubimage")
+    out.write_image(np.ones((8, 16, 1), np.float16))
+    out.close()
+    return str(path)
+
+
+@pytest.mark.parametrize("kind, ext", [("parts", "exr"), ("parts", "tif"), ("deep", "exr"), ("one", "exr"), ("one", "tif")])
+@pytest.mark.parametrize("tiled", [False, True])
+def test_what_a_warp_leaves_out_of_a_file_is_said_once(tmp_path, capfd, kind, ext, tiled):
+    # Parts and pages after the first, and deep samples, do not reach the output: a warning says so,
+    # once, whether the image is read whole or in strips; a file of one flat image gets none.
+    inp = _multi(tmp_path / f"in.{ext}", kind) if kind != "one" else write(tmp_path / f"in.{ext}", pattern(8, 16, 3, np.float16))
+    full = write_polygon(tmp_path / "full.json", [[0, 0], [16, 0], [16, 8], [0, 8]])
+    assert main([inp, str(tmp_path / "out.exr"), "--src", full, "--dst", full] + (["--tiled"] if tiled else [])) == 0
+    said = [line for line in capfd.readouterr().err.splitlines() if inp in line]
+    expected = {"parts": "only its first subimage", "deep": "deep samples are flattened"}.get(kind)
+    assert len(said) == (1 if expected else 0), said
+    assert expected is None or expected in said[0]
+
+
 def test_a_tiled_tiff_of_doubles_is_refused_not_misread(tmp_path):
     # OpenImageIO 3.2 decodes a tiled TIFF's 64-bit samples as packed bits: garbage, and no error.
     px = pattern(40, 56, 1, np.float64)

@@ -38,10 +38,12 @@ OIIO_TYPES = {
 
 # Attributes that describe the file rather than the picture, that OpenImageIO
 # manages itself, or that no longer hold for a warped image (a thumbnail of the
-# input; the orientation, which is applied on reading): not carried over.
+# input; the orientation, which is applied on reading; a texture's layout, which
+# the warped image, one level and not tiled, does not have: "textureformat" on a
+# scanline OpenEXR made a file OpenImageIO could not read back): not carried over.
 _DROP_PREFIXES = (
     "oiio:", "png:", "jpeg:", "tiff:", "openexr:", "Exif:PixelXDimension", "Exif:PixelYDimension",
-    "thumbnail", "Orientation",
+    "thumbnail", "Orientation", "textureformat", "wrapmodes", "fovcot",
 )  # fmt: skip
 _KEEP = ("oiio:ColorSpace",)
 
@@ -103,7 +105,7 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
     path : path-like
         Any format OpenImageIO reads. The EXIF orientation is applied, so the
         pixels are the image as displayed. The first subimage is read, at its
-        full resolution.
+        full resolution (with a warning if there are more, or deep data).
 
     Returns
     -------
@@ -135,6 +137,7 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
             if _TRUNCATED.search(problem):
                 raise ImageInputError(f"{name}: cannot read image: {one_line(problem, said.text)}")
             _log.debug("%s: %s", name, one_line(problem, said.text))
+        _say_what_is_left(inp, spec, name)
     finally:
         with c_stderr():
             inp.close()
@@ -263,6 +266,26 @@ def _open_input(name: str):
     return inp, config
 
 
+#: The files `_say_what_is_left` has warned about in this process.
+_WARNED_LEFT: set[str] = set()
+
+
+def _say_what_is_left(inp, spec, name: str) -> None:
+    """Warn, once per file, that only its first subimage is warped (a multi-part OpenEXR, a
+    multi-page TIFF) and that deep data is flattened: nothing of a file is dropped unsaid."""
+    with c_stderr():
+        more = inp.seek_subimage(1, 0)
+    inp.geterror()
+    left = []
+    if more:
+        left.append("only its first subimage (part, page) is warped, the others are not written")
+    if spec.deep:
+        left.append("its deep samples are flattened into one value per pixel")
+    if left and name not in _WARNED_LEFT:
+        _WARNED_LEFT.add(name)
+        _log.warning("%s: %s", name, "; ".join(left))
+
+
 # A complaint that comes with pixels but means the file was cut short.
 _TRUNCATED = re.compile(r"premature end|truncat|unexpected end", re.I)
 
@@ -340,6 +363,7 @@ def read_header(path: str | os.PathLike[str]) -> ImageHeader:
         inp, _ = _open_input(name)
     try:
         spec = inp.spec()
+        _say_what_is_left(inp, spec, name)
     finally:
         with c_stderr():
             inp.close()
