@@ -257,6 +257,42 @@ def test_cli_labels_of_another_size_leave_nothing_behind(tmp_path):
     assert code == 2 and "--outside input" in err and sorted(os.listdir(t)) == before
 
 
+#: Which label types each format holds exactly, from the formats' documentation: PNG stores 8 and
+#: 16-bit unsigned integers, BMP 8 bits, TIFF every type; OpenEXR stores 32-bit unsigned integers
+#: and floats, and OpenImageIO writes 8 and 16-bit integers there as fractions of their maximum.
+HOLDS = {
+    "png": {"uint8", "uint16"}, "tif": {"uint8", "uint16", "uint32", "float32"},
+    "exr": {"uint32", "float32"}, "bmp": {"uint8"}, "jpg": set(),
+}  # fmt: skip
+LABEL_VALUES = {"uint8": [7, 200], "uint16": [7, 1000], "uint32": [7, 3_000_000_000], "float32": [0.5, -3.0]}
+
+
+@pytest.mark.parametrize("dtype", sorted(LABEL_VALUES))
+@pytest.mark.parametrize("ext", sorted(HOLDS))
+def test_cli_labels_are_written_exactly_or_refused_naming_the_file(tmp_path, dtype, ext):
+    # 16-bit labels 256 and 300 written to BMP both became 1, JPEG made new labels at every edge:
+    # a format is refused (lossy ones before any work) unless it gives every label back.
+    from warpcli import RasterImage
+
+    src, dst, _ = _files(tmp_path)
+    t = str(tmp_path)
+    seg = np.zeros((96, 96, 1), dtype)
+    seg[20:60, 30:70], seg[40:50, 40:50] = LABEL_VALUES[dtype]
+    write_image(f"{t}/seg.tif", RasterImage(seg))
+    before = sorted(os.listdir(t))
+    code, err = run_cli([f"{t}/in.png", "--src", f"{t}/src.json", "--dst", f"{t}/dst.json", f"{t}/out.png",
+                         "--labels", f"{t}/seg.tif", f"{t}/seg_out.{ext}"])  # fmt: skip
+    if dtype in HOLDS[ext]:
+        assert code == 0, err
+        got = read_image(f"{t}/seg_out.{ext}").pixels
+        expect = warp_labels(seg[..., 0], warp_image(np.zeros((96, 96, 1), np.uint8), src, dst))
+        np.testing.assert_array_equal(got[..., 0].astype(np.float64), expect.astype(np.float64))
+    else:
+        assert code == 2 and err.count("\n") == 1 and err.startswith(f"warp: error: {t}/seg_out.{ext}: "), err
+        assert ("lossless format" if ext == "jpg" else "cannot hold these labels") in err
+        assert sorted(os.listdir(t)) == before  # nor the image: the outputs go together
+
+
 def test_cli_labels_belong_to_a_single_whole_image_warp(tmp_path):
     _files(tmp_path)
     t = str(tmp_path)

@@ -597,6 +597,8 @@ def warp_file(
     if labels and opts.outside == "input":
         given = "--within" if opts.within is not None else "--outside input"
         raise InputError(f"{os.fspath(labels[0][0])}: labels are warped onto the background, not with {given}")
+    for _, label_out in labels:
+        check_labels_format(label_out)
     inputs = (*inputs, *(label_in for label_in, _ in labels))
     extra = [p for p in (grid_path, heatmap_path, save_map, save_forward_map) if p is not None]
     extra += [label_out for _, label_out in labels]
@@ -709,7 +711,7 @@ def warp_file(
         if rows is not None:
             rows.finish()  # every band made (a writer that stopped early stopped reading them)
         for (_, label_out), label_image in zip(labels, label_images):
-            write_like(pending.path(label_out), label_image, warp_labels(label_image.pixels, result), None, opts.compression)
+            _write_labels(pending.path(label_out), label_out, label_image, warp_labels(label_image.pixels, result), opts)
         result.timings["read"] = t_read
         result.timings["write"] = clock() - t0
         if grid_path is not None or heatmap_path is not None:
@@ -777,6 +779,48 @@ def _within_summary(result: WarpResult) -> dict:
         "cuts": len(pair.cuts),
         "seams": within_seams(result.pixels.astype(np.float64), jac, pair),
     }
+
+
+#: Formats that keep no value exactly (lossy compression), by OpenImageIO's name, for messages:
+#: labels written there would blend at every edge between them, and take values none had.
+LOSSY_FORMATS = {"jpeg": "JPEG", "webp": "WebP", "jpeg2000": "JPEG 2000", "heif": "HEIF", "jpegxl": "JPEG XL"}
+
+
+def check_labels_format(path: str | os.PathLike[str]) -> None:
+    """Refuse, before any work, a label output in a lossy format (`LOSSY_FORMATS`).
+
+    Raises
+    ------
+    InputError
+        Naming the file and its format.
+    """
+    fmt = output_format(os.fspath(path))
+    if fmt in LOSSY_FORMATS:
+        raise InputError(
+            f"{os.fspath(path)}: {LOSSY_FORMATS[fmt]} compresses with loss, so labels would blend at their edges; "
+            "write them to a lossless format (TIFF holds labels of every type)"
+        )
+
+
+def _write_labels(path: str, shown: str | os.PathLike[str], image: RasterImage, labels: NDArray, opts: WarpOptions) -> None:
+    """Write warped labels to ``path`` like ``image``, then read them back: every value must be
+    the one given, or the format cannot hold them (BMP has 8 bits, a PNG no sign, OpenEXR turns
+    16-bit integers into fractions) and the run fails, naming ``shown``, the user's name."""
+    write_like(path, image, labels, None, opts.compression)
+    back = read_image(path).pixels
+    given = labels if labels.ndim == 3 else labels[:, :, None]
+    if back.shape != given.shape:
+        wrong, example = True, f" (its {back.shape[2]} channels for {given.shape[2]})"
+    else:
+        a, b = given.astype(np.float64).ravel(), back.astype(np.float64).ravel()
+        differ = np.flatnonzero((a != b) & ~(np.isnan(a) & np.isnan(b)))
+        wrong = differ.size > 0
+        example = f" ({a[differ[0]]:g} became {b[differ[0]]:g})" if wrong else ""
+    if wrong:
+        raise ImageInputError(
+            f"{os.fspath(shown)}: {output_format(path) or 'this format'} cannot hold these labels ({given.dtype}) "
+            f"exactly{example}; TIFF holds labels of every type"
+        )
 
 
 def _read_labels(path: str | os.PathLike[str], image: RasterImage) -> RasterImage:
