@@ -173,6 +173,29 @@ def test_a_file_size_limit_is_an_error_naming_the_file_and_leaves_nothing(tmp_pa
     assert listing(out) == []
 
 
+def test_a_batch_with_bad_input_and_a_failed_write_exits_with_the_failure(tmp_path):
+    # Exit 2 means "some input was bad, and nothing worse happened" (docs/usage.md): a batch where
+    # one input is not an image and another's output passes the file size limit must exit 1.
+    import resource
+
+    rng = np.random.default_rng(3)
+    write_png(tmp_path / "noise.png", rng.integers(0, 256, (200, 200, 3)).astype(np.uint8))  # ~120 kB
+    (tmp_path / "junk.png").write_bytes(b"not a png")
+    square = write_polygon(tmp_path / "a.json", [[20, 20], [180, 20], [180, 180], [20, 180]])
+    moved = write_polygon(tmp_path / "b.json", [[30, 10], [190, 30], [170, 190], [10, 170]])
+    (tmp_path / "o").mkdir()
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (40_000, 40_000))
+
+    args = [str(tmp_path / "junk.png"), str(tmp_path / "noise.png"), "--src", square, "--dst", moved, "--out-dir", str(tmp_path / "o")]
+    done = subprocess.run([sys.executable, "-m", "warpcli", *args], capture_output=True, text=True, cwd=REPO,
+                          timeout=120, preexec_fn=limit)  # fmt: skip
+    assert done.returncode == 1, done.stderr
+    assert "junk.png: cannot read image" in done.stderr and "File too large" in done.stderr
+    assert listing(tmp_path / "o") == []
+
+
 def test_a_read_only_directory_is_refused_on_one_line(read_only, tmp_path):
     out = read_only / "out.png"
     image = RasterImage(noise(8, 8, 3, np.uint8))

@@ -12,7 +12,7 @@ import click
 
 from .. import __version__
 from ..options import HEATMAP_MEASURES, STMAP_T
-from .exits import EXIT_CODES, exit_code
+from .exits import EXIT_CODES, EXIT_FAILURE, exit_code
 from .group import DefaultCommand
 from .options import CONTEXT, collected, jobs_option, map_options, polygon_options, resample_options, verbosity
 from .progress import Progress
@@ -349,8 +349,10 @@ def report_item(item) -> None:
 
 
 def exit_for(items, what: str) -> None:
-    """Batch exit status: the worst failure's, after every item was tried."""
+    """Batch exit status: the worst failure's, after every item was tried: 1 (a failure while
+    processing) if any item had one, else 2 (bad input only)."""
     failed = [item for item in items if item.error is not None]
     if failed:
         logging.getLogger("warpcli").warning("%d of %d %s failed", len(failed), len(items), what)
-        raise click.exceptions.Exit(max(exit_code(item.error) for item in failed))
+        codes = {exit_code(item.error) for item in failed}
+        raise click.exceptions.Exit(EXIT_FAILURE if EXIT_FAILURE in codes else max(codes))
