@@ -14,6 +14,10 @@
   points.
 - The sample pairs are accepted; an MFS fold it finds on the boundary is a
   fold (det J <= 0 there by the map's own Jacobian).
+- Bounded work: generated BEM maps of polygons 1e5-3e6 px across prove as
+  a 2,000 px one does, with a small multiple of its evaluations and bounds;
+  a closed form whose error bound never lets a piece be proved fails within
+  `MAX_PIECES`, its pieces never split beyond that.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from nasty import SHAPES, dense_check, dense_samples
 from warpcli import MapOptions, Polygon, build_map
 from warpcli.boundary import nearest_edge
 from warpcli.grid import inside_polygon
+from warpcli.maps import boundary_certificate
 from warpcli.maps.boundary_certificate import _pairs_within, certify_boundary, inner_offset
 from warpcli.maps.meshless import BAND_STEPS, BEM, MFS
 from warpcli.maps.theta import Theta
@@ -301,3 +306,87 @@ def test_pairs_within_finds_exactly_the_pairs_a_dense_search_finds(kind, seed):
     dense = np.abs(w[None, :] - w[:, None]) <= radius[:, None]
     assert got == set(zip(*(x.tolist() for x in np.nonzero(dense))))
     assert len(got) == len(i)  # no pair twice
+
+
+class Counted:
+    """A closed form whose evaluations and bounds are counted (in points), failing the test past ``limit``."""
+
+    def __init__(self, solution, limit: float = math.inf) -> None:
+        self.solution, self.limit, self.points = solution, limit, 0
+
+    def __getattr__(self, name):
+        return getattr(self.solution, name)
+
+    def _count(self, points) -> None:
+        self.points += len(points)
+        assert self.points <= self.limit, f"more than {self.limit:.0f} points evaluated or bounded"
+
+    def value_jacobian_hessian(self, points):
+        self._count(points)
+        return self.solution.value_jacobian_hessian(points)
+
+    def derivative_bounds(self, points, reach):
+        self._count(points)
+        return self.solution.derivative_bounds(points, reach)
+
+
+def far_polygon(rng: np.random.Generator, kind: str) -> np.ndarray:
+    """A polygon of unit size that BEM proves at its default nodes: an ellipse's inscribed polygon, a mild star,
+    a rotated rectangle."""
+    if kind == "ellipse":
+        t = np.sort(rng.uniform(0, 2 * np.pi, int(rng.integers(5, 12))))
+        v = np.stack([np.cos(t), rng.uniform(0.3, 1.0) * np.sin(t)], axis=1)
+    elif kind == "star":
+        k = int(rng.integers(5, 10))
+        t = 2 * np.pi * (np.arange(k) + rng.uniform(-0.2, 0.2, k)) / k
+        v = rng.uniform(0.6, 1.0, k)[:, None] * np.stack([np.cos(t), np.sin(t)], axis=1)
+    else:
+        a, th = rng.uniform(1.0, 4.0), rng.uniform(0, np.pi)
+        rot = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
+        v = np.array([[-a, -1.0], [a, -1.0], [a, 1.0], [-a, 1.0]]) @ rot
+    return v / np.ptp(v, axis=0).max()
+
+
+def _bem_certificate_work(v: np.ndarray, limit: float = math.inf):
+    """The BEM map of polygon v (onto its regular Theta), its boundary certificate and the points it evaluated or bounded."""
+    poly = Polygon(v, name="far")
+    opts = MapOptions(method="bem", check=False)
+    phi = BEM.build(poly, regular_theta(poly, poly, opts), opts)
+    phi.solution = counted = Counted(phi.solution, limit)
+    return phi.boundary_certificate, counted.points
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_bem_certificate_work_does_not_grow_with_the_polygons_scale(seed):
+    """A polygon 1e5-3e6 px across (a target far larger than the image) is proved as at 2,000 px, with at most a
+    small multiple of the evaluations and bounds. Gamma 0.01 px inside a 2e5 px square (5e-8 of its size) put
+    BEM's evaluation error bound at 0.3 |A|: the pieces split without end (tens of millions, gigabytes)."""
+    rng = np.random.default_rng(seed)
+    v = far_polygon(rng, ["ellipse", "star", "rect"][seed % 3])
+    near, work = _bem_certificate_work(2000.0 * v + 100.0)
+    assert near.ok, near
+    far, far_work = _bem_certificate_work(10 ** rng.uniform(5.0, 6.5) * v + 100.0, limit=4 * work)
+    assert far.ok and far.band, far
+    assert far_work <= 4 * work
+
+
+def test_pieces_never_split_beyond_the_budget(monkeypatch):
+    """A closed form whose evaluation error bound (eta = 0.6 |A|) is too large for any piece to be proved: the
+    certificate fails within `MAX_PIECES` evaluations, and its splitting by the bounds alone (`_graded`) stays
+    within a few times that (it doubled every piece 30 times, 2^30 each)."""
+    monkeypatch.setattr(boundary_certificate, "MAX_PIECES", 20_000)
+
+    class Blurred(Harmonic):
+        def derivative_bounds(self, points, reach):
+            out = super().derivative_bounds(points, reach)
+            p = np.asarray(points, dtype=float)
+            out[:, 0] = 0.6 * np.abs(self.g.deriv()(p[:, 0] + 1j * p[:, 1]))
+            return out
+
+    rng = np.random.default_rng(7)
+    for kind in ("ellipse", "star", "rect"):
+        v = 60.0 * far_polygon(rng, kind)  # inside Theta (BIG), where phi = z + conj(z) / 10 keeps it
+        phi = Counted(Blurred([1.0, 0], [0.1, 0]), limit=5 * boundary_certificate.MAX_PIECES)
+        cert = certify_boundary(phi, v, BIG, float(np.sign(Polygon(v, name=kind).signed_area)))
+        assert cert.failed and not cert.folds, cert
+        assert cert.checked <= boundary_certificate.MAX_PIECES

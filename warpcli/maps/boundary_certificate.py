@@ -537,6 +537,7 @@ def certify_boundary(solution, vertices, theta, sign: float, offset: float = 0.0
             edge, t0, t1 = _graded(
                 solution, gamma, ge, length, floor, edge[split], t0[split], t1[split],
                 (np.abs(p0) - np.abs(q0))[split], (p1 + q1)[split], np.abs(d0)[split], (a1 + b1)[split],
+                MAX_PIECES - checked,
             )  # fmt: skip
         if failed:
             break
@@ -589,7 +590,7 @@ def _halves(edge, t0, t1):
     return np.repeat(edge, 2), np.stack([t0, mid], axis=1).ravel(), np.stack([mid, t1], axis=1).ravel()
 
 
-def _graded(solution, gamma, ge, length, floor, edge, t0, t1, margin, slope, tangent, bend):
+def _graded(solution, gamma, ge, length, floor, edge, t0, t1, margin, slope, tangent, bend, budget):
     """The pieces (edge, t0, t1) that were not proved, split where the remainder bounds alone say they must be.
 
     Evaluating the closed form costs BEM a pass of its treecode (~0.1 s for
@@ -599,6 +600,15 @@ def _graded(solution, gamma, ge, length, floor, edge, t0, t1, margin, slope, tan
     half that margin would not be enough (a prediction: what is proved is
     decided on evaluation). So a piece next to a node is cut down to the
     node's scale in one evaluation round instead of ten.
+
+    At most ``budget`` pieces come out (the evaluations `MAX_PIECES` still
+    allows; the caller has checked that halving every piece fits): a round
+    that would split beyond it is not made, and the caller fails what it
+    cannot then prove. Without the cap, pieces whose bound does not shrink
+    with their length (BEM's evaluation error eta, when Gamma is so close to
+    the boundary that it outweighs the margin) doubled every round, 2^30 of
+    each (a 2e5 px square at 0.01 px: 15 million pieces and gigabytes after
+    14 rounds, before a single evaluation).
     """
     edge, t0, t1 = _parts(edge, t0, t1, np.full(len(edge), 2))
     owner = np.repeat(np.arange(len(margin)), 2)
@@ -616,6 +626,11 @@ def _graded(solution, gamma, ge, length, floor, edge, t0, t1, margin, slope, tan
         done_1.append(t1[ok])
         more = np.flatnonzero(~ok)
         if not more.size:
+            break
+        if sum(map(len, done_e)) + 2 * more.size > budget:  # evaluate these as they are
+            done_e.append(edge[more])
+            done_0.append(t0[more])
+            done_1.append(t1[more])
             break
         edge, t0, t1 = _parts(edge[more], t0[more], t1[more], np.full(more.size, 2))
         owner = np.repeat(owner[more], 2)

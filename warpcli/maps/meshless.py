@@ -73,6 +73,13 @@ BOUNDARY_CERTIFIED = frozenset({"bem", "mfs"})
 #: Gamma's distances inside the polygon, in units of `band_floor` (0.01 px at 1 MP): the first that
 #: proves the map with its band is taken (`SmoothMap.boundary_certificate`).
 BAND_STEPS = (1.0, 4.0, 16.0, 64.0, 256.0)
+#: BEM's first distance is at least this fraction of the polygon's size (`band_floor`'s 0.01 px is less
+#: above 1e4 px). Its evaluation error bound at Gamma (`warpcli.maps._bem_kernels.bem_bounds`: 1e-13 of
+#: the terms' sizes over their squared distance) grows like 1/delta^2 in the fit's normalised frame,
+#: while the margin of phi(Gamma) inside Theta shrinks like delta: pieces no longer than ~delta |A| / eta,
+#: their number growing like (size / delta)^3. 0.01 px inside a 2e5 px square (5e-8 of its size): eta
+#: ~0.3 |A|, tens of millions of pieces; at 1e-6 of any size, 7,250 pieces (0.4 s), the same at every scale.
+BEM_BAND_RELATIVE = 1e-6
 
 log = logging.getLogger("warpcli")
 _compiled = Kernels("warpcli.maps._smooth_kernels")
@@ -593,10 +600,12 @@ class SmoothMap(ThetaMap):
 
     @cached_property
     def _band_widths(self) -> tuple[float, ...]:
-        """Gamma's distances inside the polygon tried in turn (`BAND_STEPS` times `band_floor`): a
-        closed form whose values 0.01 px inside still leave Theta (MFS's fit, BEM next to a node) is
-        proved farther in, with the collar between."""
+        """Gamma's distances inside the polygon tried in turn (`BAND_STEPS` times `band_floor`, for BEM at
+        least `BEM_BAND_RELATIVE` of the size): a closed form whose values 0.01 px inside still leave Theta
+        (MFS's fit, BEM next to a node) is proved farther in, with the collar between."""
         inner = band_floor(self._size)
+        if self.name == "bem":  # its certificate's work, relative to the size, not to pixels
+            inner = max(inner, BEM_BAND_RELATIVE * self._size)
         return tuple(inner * k for k in BAND_STEPS)
 
     def certify_boundary_at(self, offset: float) -> BoundaryCertificate:
