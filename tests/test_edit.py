@@ -6,6 +6,7 @@ import http.client
 import importlib
 import json
 import os
+import pathlib
 import socket
 import sys
 import threading
@@ -18,8 +19,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from warpcli.edit.preview import PreviewMapper, encode_png, preview_areas, preview_image
-from warpcli.edit.server import MAX_BODY
+from warpcli.edit.server import MAX_BODY, EditServer
 from warpcli.edit.session import EditPaths, EditSession, command_args, mirror_warning, rotated_start
+from warpcli.errors import WarpError
 from warpcli.maps.compose import BijectiveMap
 from warpcli.options import MapOptions, WarpOptions
 from warpcli.polygon import Polygon
@@ -114,6 +116,14 @@ REFUSALS = [
     ("https Origin", "GET", "/api/state?token={token}", {"Origin": "https://127.0.0.1:{port}"}, None),
     ("cross-site fetch", "GET", "/api/state?token={token}", {"Sec-Fetch-Site": "cross-site"}, None),
     ("same-site fetch", "GET", "/api/state?token={token}", {"Sec-Fetch-Site": "same-site"}, None),
+    ("cross-site navigation to a call", "GET", "/api/state?token={token}", {"Sec-Fetch-Site": "cross-site",
+     "Sec-Fetch-Mode": "navigate", "Sec-Fetch-Dest": "document"}, None),
+    ("cross-site page in a frame", "GET", "/?token={token}", {"Sec-Fetch-Site": "cross-site", "Sec-Fetch-Mode": "navigate",
+     "Sec-Fetch-Dest": "iframe"}, None),
+    ("cross-site page fetched", "GET", "/?token={token}", {"Sec-Fetch-Site": "cross-site", "Sec-Fetch-Mode": "cors",
+     "Sec-Fetch-Dest": "empty"}, None),
+    ("cross-site navigation without the token", "GET", "/", {"Sec-Fetch-Site": "cross-site", "Sec-Fetch-Mode": "navigate",
+     "Sec-Fetch-Dest": "document"}, None),
     ("traversal", "GET", "/static/../secret.txt?token={token}", {}, None),
     ("traversal", "GET", "/../secret.txt?token={token}", {}, None),
     ("traversal", "GET", "/static/%2e%2e/%2e%2e/secret.txt?token={token}", {}, None),
@@ -733,3 +743,457 @@ def test_within_command_line_parses_back(monkeypatch):
         assert "--outside" not in args and args[-2:] == ["--within", within]
         assert main(args[1:]) == 0
         assert seen[-1][3] == opts
+
+
+# --- a save or an export checks everything before it writes anything ---------------------------------------
+
+
+def _contents(directory) -> dict:
+    """Every file in ``directory`` (following links) with its bytes, and its size and modification time."""
+    return {p.name: p.read_bytes() for p in sorted(pathlib.Path(directory).iterdir()) if p.is_file()}, snapshot_dir(str(directory))
+
+
+BAD_SAVES = [
+    # (what, the document's changes): each alone is refused, with the last save's files in place
+    ("gif output", {"output_name": "nope.gif"}),
+    ("output with a directory", {"output_name": "../out.png"}),
+    ("hidden output", {"output_name": ".out.png"}),
+    ("output not a name", {"output_name": 5}),
+    ("output too long", {"output_name": "x" * 300 + ".png"}),
+    ("output over the image", {"output_name": "picture.png"}),  # export only: a save writes no output
+    ("txt source", {"src_name": "a.txt"}),
+    ("target with a directory", {"dst_name": "sub/b.json"}),
+    ("one file for both", {"src_name": "same.json", "dst_name": "same.json"}),
+    ("unknown method", {"options": {"method": "nope"}}),
+    ("unknown option", {"options": {"colour": "red"}}),
+    ("bad margin", {"options": {"within": "0"}}),
+    ("bad target", {"dst": [[0, "a"]] * 4}),
+    ("too few vertices", {"dst": SQUARE[:3]}),
+]
+
+
+#: (route, what, change): every bad save for both routes, but an output over the image for an
+#: export only (a save writes no output, so that name is no harm to it).
+_BAD_CALLS = [(path, what, change) for path in ("/api/save", "/api/export") for what, change in BAD_SAVES
+              if not (what == "output over the image" and path == "/api/save")]  # fmt: skip
+
+
+@pytest.mark.parametrize("path, what, change", _BAD_CALLS, ids=[f"{p[5:]}-{w}" for p, w, _ in _BAD_CALLS])
+def test_a_bad_name_or_value_writes_nothing(server, tmp_path, path, what, change):
+    """Every name and value is checked first: a save or an export refused for any of them leaves every file as it was
+    (the output's name was checked after the polygons were written)."""
+    assert json.loads(json_post(server, "/api/save", {"src": SQUARE, "dst": MOVED})[1])["ok"]
+    (tmp_path / "sub").mkdir()
+    before = _contents(tmp_path)
+    status, body = json_post(server, path, dict({"src": MOVED, "dst": SQUARE}, **change))
+    result = json.loads(body)
+    assert status == 200 and not result["ok"] and result["error"] and "\n" not in result["error"]
+    assert _contents(tmp_path) == before
+
+
+def test_a_failed_write_replaces_neither_polygon_file(server, tmp_path, monkeypatch):
+    """The two files are renamed into place together: the second failing (a full disk) leaves the first as it was."""
+    from warpcli.edit import session as session_module
+    from warpcli.errors import ImageIOError
+
+    assert json.loads(json_post(server, "/api/save", {"src": SQUARE, "dst": MOVED})[1])["ok"]
+    before = _contents(tmp_path)
+    real = session_module.write_checked
+
+    def full_disk(path, data, shown=None):
+        if str(shown).endswith("dst.json"):
+            raise ImageIOError(f"{shown}: cannot write: No space left on device")
+        real(path, data, shown)
+
+    monkeypatch.setattr(session_module, "write_checked", full_disk)
+    result = json.loads(json_post(server, "/api/save", {"src": MOVED, "dst": SQUARE})[1])
+    assert not result["ok"] and "No space left" in result["error"]
+    assert _contents(tmp_path) == before
+
+
+# --- a save never replaces an input of the session -------------------------------------------------------
+
+
+def _protected_session(tmp_path, src="a.json"):
+    """A session with every kind of input: the image, --within FILE, --theta FILE, and two polygon files it read."""
+    image = tmp_path / "picture.png"
+    write_smooth_image(str(image), 64, 48)
+    (tmp_path / "outline.json").write_text(json.dumps([[2, 2], [62, 2], [62, 46], [2, 46]]))
+    (tmp_path / "theta.json").write_text(json.dumps(regular(4).tolist()))
+    (tmp_path / "a.json").write_text(json.dumps(SQUARE))
+    (tmp_path / "b.json").write_text(json.dumps(MOVED))
+    options = WarpOptions(map=MapOptions(theta=str(tmp_path / "theta.json")), within=str(tmp_path / "outline.json"))
+    return EditSession(EditPaths.defaults(str(image), src=str(tmp_path / src), dst=str(tmp_path / "b.json")), options)
+
+
+PROTECTED = [
+    (target, how, side)
+    for target in ("picture.png", "outline.json", "theta.json")
+    for how in ("name", "symlink", "hardlink")
+    for side in ("src_name", "dst_name")
+    if not (target == "picture.png" and how == "name")  # a .json name cannot be the image's own
+] + [("b.json", "name", "src_name"), ("a.json", "name", "dst_name"), ("b.json", "symlink", "src_name"),
+     ("a.json", "hardlink", "dst_name")]  # fmt: skip
+
+
+@pytest.mark.parametrize("target, how, side", PROTECTED, ids=["-".join(p) for p in PROTECTED])
+def test_save_never_replaces_an_input_of_the_session(tmp_path, target, how, side):
+    """Not the image, the --within file, the --theta file, nor the other polygon's file as the session read it, by name
+    or through a symbolic or hard link: refused, and nothing written (a save replaced the --within file)."""
+    session = _protected_session(tmp_path)
+    name = target
+    if how != "name":
+        name = f"{how}-{target.split('.')[0]}.json"
+        (os.symlink if how == "symlink" else os.link)(tmp_path / target, tmp_path / name)
+    other = {"src_name": "dst_name", "dst_name": "src_name"}[side]
+    before = _contents(tmp_path)
+    for call in (session.save, session.export):
+        with pytest.raises(WarpError) as err:
+            call({"src": SQUARE, "dst": MOVED, side: name, other: "new.json"})
+        assert "overwrite" in str(err.value) and "\n" not in str(err.value)
+        assert _contents(tmp_path) == before
+
+
+def test_save_replaces_its_own_files_and_new_ones(tmp_path):
+    session = _protected_session(tmp_path)
+    assert session.save({"src": MOVED, "dst": SQUARE})["saved"] == [str(tmp_path / "a.json"), str(tmp_path / "b.json")]
+    assert session.save({"src": MOVED, "dst": SQUARE, "src_name": "c.json", "dst_name": "d.json"})["saved"][1].endswith("d.json")
+
+
+def test_a_polygon_file_that_is_an_input_is_not_saved_over(tmp_path):
+    """``warp edit IMG --src outline.json --within outline.json``: even the command line's polygon path is refused."""
+    session = _protected_session(tmp_path, src="outline.json")
+    before = _contents(tmp_path)
+    with pytest.raises(WarpError, match="overwrite the input"):
+        session.save({"src": SQUARE, "dst": MOVED})
+    assert _contents(tmp_path) == before
+
+
+def test_save_over_the_within_file_is_refused_through_the_server(tmp_path):
+    session = _protected_session(tmp_path)
+    before = _contents(tmp_path)
+    server = EditServer(session)
+    server.start()
+    try:
+        for side in ("src_name", "dst_name"):
+            status, body = json_post(server, "/api/save", {"src": SQUARE, "dst": MOVED, side: "outline.json"})
+            result = json.loads(body)
+            assert status == 200 and not result["ok"] and "overwrite the input" in result["error"]
+    finally:
+        server.shutdown()
+    assert _contents(tmp_path) == before
+
+
+# --- an unexpected error is a 500 with a JSON error, one line on stderr, and the server goes on ---------------
+
+
+class _Exploding:
+    """A session whose every attribute raises ``error``."""
+
+    def __init__(self, error: BaseException) -> None:
+        self.error = error
+
+    def __getattr__(self, name):
+        raise self.error
+
+
+ROUTES = [("GET", "/"), ("GET", "/static/editor.js"), ("GET", "/static/editor.css"), ("GET", "/image.png"),
+          ("GET", "/api/state"), ("HEAD", "/api/state"), ("POST", "/api/preview"), ("POST", "/api/load"),
+          ("POST", "/api/save"), ("POST", "/api/export")]  # fmt: skip
+ERRORS = [MemoryError(), RuntimeError("a bug\non two lines"), KeyError("x"), RecursionError("deep")]
+
+
+@pytest.fixture()
+def warpcli_log():
+    """The records of the ``warpcli`` logger (whatever an earlier test's CLI run made of its handlers)."""
+    import logging
+
+    records: list[logging.LogRecord] = []
+
+    class Keep(logging.Handler):
+        def emit(self, record):
+            records.append(record)
+
+    logger = logging.getLogger("warpcli")
+    handler, level = Keep(logging.DEBUG), logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.DEBUG)
+    yield records
+    logger.removeHandler(handler)
+    logger.setLevel(level)
+
+
+@pytest.mark.parametrize("error", ERRORS, ids=[type(e).__name__ for e in ERRORS])
+@pytest.mark.parametrize("method, path", ROUTES, ids=[f"{m} {p}" for m, p in ROUTES])
+def test_an_unexpected_error_is_answered_500_and_the_server_goes_on(server, monkeypatch, warpcli_log, method, path, error):
+    import logging
+
+    session = server.session
+
+    def boom(*args):
+        raise error
+
+    monkeypatch.setattr(server, "asset", boom)
+    server.session = _Exploding(error)
+    if method == "POST":
+        status, body = json_post(server, path, {"src": SQUARE, "dst": MOVED, "name": "a.json", "text": "[]"})
+    else:
+        status, body = request(server, method, f"{path}?token={server.token}")
+    assert status == 500
+    if method != "HEAD":
+        message = json.loads(body)["error"]
+        assert message.startswith("internal error (") and type(error).__name__ in message and "\n" not in message
+    errors = [r for r in warpcli_log if r.levelno >= logging.ERROR]
+    assert len(errors) == 1 and errors[0].exc_info is None
+    line = errors[0].getMessage()
+    assert "\n" not in line and type(error).__name__ in line and server.token not in line
+    # The server goes on serving, the session's lock free again.
+    server.session = session
+    monkeypatch.undo()
+    assert request(server, "GET", f"/api/state?token={server.token}")[0] == 200
+    status, body = json_post(server, "/api/preview", {"src": SQUARE, "dst": MOVED})
+    assert status == 200 and _decoded(body)[0]["ok"]
+
+
+# --- connections: timed out, bounded, and no busy loop out of file descriptors -------------------------------
+
+
+def _closed_within(sock, seconds: float) -> bool:
+    """Whether the server closes ``sock`` within ``seconds`` (whatever it answered first)."""
+    import time
+
+    end = time.monotonic() + seconds
+    try:
+        while time.monotonic() < end:
+            sock.settimeout(max(0.01, end - time.monotonic()))
+            if not sock.recv(65536):
+                return True
+    except (ConnectionError, TimeoutError):
+        return isinstance(sys.exc_info()[1], ConnectionError)
+    return False
+
+
+SLOW_REQUESTS = ["nothing", "half a request line", "headers never ended", "a byte at a time", "half a body",
+                 "idle after a request"]  # fmt: skip
+
+
+@pytest.mark.parametrize("how", SLOW_REQUESTS)
+def test_a_request_that_does_not_arrive_in_time_is_closed(server, monkeypatch, how):
+    """Each connection has REQUEST_TIMEOUT seconds for its request to arrive whole, however it trickles in (a thread
+    was held for ever by a connection that sent nothing); the server goes on serving."""
+    import time
+
+    from warpcli.edit import server as server_module
+
+    monkeypatch.setattr(server_module, "REQUEST_TIMEOUT", 0.5)
+    head = (f"POST /api/save HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\nX-Warp-Token: {server.token}\r\n"
+            "Content-Type: application/json\r\nContent-Length: 100\r\n\r\n").encode()  # fmt: skip
+    t0 = time.monotonic()
+    with socket.create_connection(("127.0.0.1", server.port), timeout=10) as sock:
+        if how == "half a request line":
+            sock.sendall(b"GET /api/st")
+        elif how == "headers never ended":
+            sock.sendall(head[:60])
+        elif how == "half a body":
+            sock.sendall(head + b'{"src": ')
+        elif how == "idle after a request":
+            sock.sendall(f"GET /api/state?token={server.token} HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\n\r\n".encode())
+        elif how == "a byte at a time":
+            try:
+                for byte in head:  # 4 bytes a second: 40 s for the headers
+                    sock.sendall(bytes([byte]))
+                    time.sleep(0.25)
+                    if time.monotonic() - t0 > 3:
+                        break
+            except OSError:  # closed meanwhile
+                pass
+        assert _closed_within(sock, 5)
+    assert time.monotonic() - t0 < 4
+    assert request(server, "GET", f"/api/state?token={server.token}")[0] == 200
+
+
+def _state_answered(server) -> bool:
+    try:
+        return request(server, "GET", f"/api/state?token={server.token}")[0] == 200
+    except (ConnectionError, http.client.HTTPException):
+        return False
+
+
+def test_connections_beyond_the_limit_make_room_or_are_closed(tmp_path, monkeypatch):
+    """At most MAX_CONNECTIONS threads: beyond them the connection idle longest is closed to make room for the new one
+    (idle connections cannot lock the page out), and with every thread in a call the new connection is closed at once."""
+    import time
+
+    from warpcli.edit import server as server_module
+
+    monkeypatch.setattr(server_module, "MAX_CONNECTIONS", 3)
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 16, 12)
+    with served(image) as server:
+        assert server.httpd.request_queue_size >= 64  # was 5: a burst of the page's requests was refused
+        idle = []
+        for _ in range(3):  # REQUEST_TIMEOUT is 30 s: any close here is for the limit
+            idle.append(socket.create_connection(("127.0.0.1", server.port), timeout=10))
+            time.sleep(0.05)  # oldest first
+        assert _state_answered(server)  # at once
+        assert _closed_within(idle[0], 3)  # the oldest idle one made room
+        assert not _closed_within(idle[1], 0.3) and not _closed_within(idle[2], 0.3)
+        for sock in idle:
+            sock.close()
+        # Every thread in a call (saves waiting for the session): nothing to make room with.
+        server.calls.acquire()
+        savers = [threading.Thread(target=json_post, args=(server, "/api/save", {"src": SQUARE, "dst": MOVED}))
+                  for _ in range(3)]  # fmt: skip
+        for t in savers:
+            t.start()
+        time.sleep(0.5)
+        with socket.create_connection(("127.0.0.1", server.port), timeout=10) as extra:
+            t0 = time.monotonic()
+            assert _closed_within(extra, 5) and time.monotonic() - t0 < 3
+        server.calls.release()
+        for t in savers:
+            t.join(30)
+        assert _state_answered(server)
+
+
+def test_out_of_file_descriptors_pauses_accepting_instead_of_spinning(tmp_path, monkeypatch, warpcli_log):
+    """accept() failing with EMFILE leaves the connection queued: the loop pauses ACCEPT_BACKOFF between tries (it
+    tried thousands of times a second), warns once, and serves the connection once descriptors are free."""
+    import errno
+    import time
+
+    from warpcli.edit.server import ACCEPT_BACKOFF
+
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 16, 12)
+    tries = []
+    real_accept = socket.socket.accept
+
+    def out_of_files(self):
+        tries.append(time.monotonic())
+        raise OSError(errno.EMFILE, "Too many open files")
+
+    with served(image) as server:
+        monkeypatch.setattr(socket.socket, "accept", out_of_files)
+        with socket.create_connection(("127.0.0.1", server.port), timeout=10) as sock:
+            time.sleep(1.0)
+            assert 2 <= len(tries) <= 1.0 / ACCEPT_BACKOFF + 3
+            monkeypatch.setattr(socket.socket, "accept", real_accept)
+            sock.sendall(f"GET /api/state?token={server.token} HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\n\r\n".encode())
+            assert sock.recv(64).startswith(b"HTTP/1.1 200")
+    warnings = [r.getMessage() for r in warpcli_log if "file descriptors" in r.getMessage()]
+    assert len(warnings) == 1
+
+
+# --- one preview at a time: another is refused at once, its body unparsed; a save waits its turn ----------------
+
+
+def test_a_preview_while_another_runs_is_answered_busy_at_once(server, tmp_path, monkeypatch):
+    """Bodies were parsed (24 times their size) while waiting behind a long preview, and a small preview waited 20 s."""
+    import time
+
+    started, release = threading.Event(), threading.Event()
+    real = server.session.preview_map
+
+    def long_preview(doc):
+        started.set()
+        assert release.wait(30)
+        return real(doc)
+
+    monkeypatch.setattr(server.session, "preview_map", long_preview)
+    results = {}
+
+    def post(key, path, doc):
+        results[key] = json_post(server, path, doc)
+
+    holder = threading.Thread(target=post, args=("holder", "/api/preview", {"src": SQUARE, "dst": MOVED}))
+    holder.start()
+    assert started.wait(30)
+    parsed = []
+    real_loads = json.loads
+    monkeypatch.setattr(json, "loads", lambda text, *a, **k: (parsed.append(len(text)), real_loads(text, *a, **k))[1])
+    big = {"x": [{}] * ((MAX_BODY - 200) // 4), "src": SQUARE, "dst": MOVED}
+    assert MAX_BODY // 2 < len(json.dumps(big)) <= MAX_BODY
+    t0 = time.monotonic()
+    flood = [threading.Thread(target=post, args=(i, "/api/preview", big)) for i in range(12)]
+    for t in flood:
+        t.start()
+    for t in flood:
+        t.join(30)
+    assert time.monotonic() - t0 < 10
+    for i in range(12):
+        status, body = results[i]
+        assert status == 503 and json.loads(body)["error"].startswith("busy")
+    assert not [n for n in parsed if n > 1000]  # none of the big bodies was parsed
+    saver = threading.Thread(target=post, args=("save", "/api/save", {"src": SQUARE, "dst": MOVED}))
+    saver.start()
+    saver.join(0.3)
+    assert saver.is_alive()  # a save waits for the preview
+    release.set()
+    holder.join(30)
+    saver.join(30)
+    assert results["holder"][0] == 200 and _decoded(results["holder"][1])[0]["ok"]
+    assert results["save"][0] == 200 and json.loads(results["save"][1])["ok"]
+    status, body = json_post(server, "/api/preview", {"src": SQUARE, "dst": MOVED})
+    assert status == 200 and _decoded(body)[0]["ok"]
+
+
+def test_the_page_asks_again_when_the_server_is_busy():
+    """The page's preview loop: a 503 keeps the state wanted and asks again after BUSY_RETRY_MS (and stays not idle)."""
+    from importlib import resources
+
+    js = resources.files("warpcli.edit").joinpath("static", "editor.js").read_text()
+    assert "err.status === 503" in js and "setTimeout(next, BUSY_RETRY_MS)" in js
+
+
+# --- the browser is opened on a private file, never with the token on its command line ----------------------
+
+
+@pytest.mark.parametrize("stop", ["ctrl-c", "returns"])
+def test_the_browser_opens_a_private_redirect_file(tmp_path, monkeypatch, stop):
+    import stat
+    import webbrowser
+
+    from warpcli import edit
+
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 16, 12)
+    seen = {}
+
+    def fake_open(url, *args, **kwargs):
+        seen["url"] = url
+        path = url.removeprefix("file://")
+        seen["path"] = path
+        seen["file_mode"] = stat.S_IMODE(os.stat(path).st_mode)
+        seen["dir_mode"] = stat.S_IMODE(os.stat(os.path.dirname(path)).st_mode)
+        with open(path, encoding="utf-8") as fh:
+            seen["text"] = fh.read()
+        return True
+
+    def serve_forever(self):
+        seen["token"], seen["address"] = self.token, self.url
+        if stop == "ctrl-c":
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(webbrowser, "open", fake_open)
+    monkeypatch.setattr(edit.EditServer, "serve_forever", serve_forever)
+    announced = []
+    if stop == "ctrl-c":
+        with pytest.raises(KeyboardInterrupt):
+            edit.serve(image, announce=announced.append)
+    else:
+        edit.serve(image, announce=announced.append)
+    assert announced == [seen["address"]]  # the user's terminal still gets the address
+    assert seen["url"].startswith("file:///") and seen["token"] not in seen["url"]
+    assert seen["file_mode"] == 0o600 and seen["dir_mode"] == 0o700
+    assert f'content="0;url={seen["address"]}"' in seen["text"] and f'href="{seen["address"]}"' in seen["text"]
+    assert not os.path.exists(os.path.dirname(seen["path"]))  # removed when the server stopped
+
+
+def test_the_redirect_file_opens_the_page(server):
+    """The browser's navigation from the redirect file (a file: page) is cross-site: the page itself is let through
+    (a top-level navigation to / with the token, as Chromium sends it), nothing else."""
+    headers = {"Sec-Fetch-Site": "cross-site", "Sec-Fetch-Mode": "navigate", "Sec-Fetch-Dest": "document",
+               "Upgrade-Insecure-Requests": "1"}  # fmt: skip
+    status, body = request(server, "GET", f"/?token={server.token}", headers=headers)
+    assert status == 200 and b"editor.js?token=" in body

@@ -10,7 +10,13 @@ So ``preview <- session <- server``.
 
 from __future__ import annotations
 
+import html
+import json
+import logging
 import os
+import pathlib
+import shutil
+import tempfile
 from collections.abc import Callable
 
 from ..errors import InputError
@@ -18,7 +24,17 @@ from ..options import WarpOptions
 from .server import EditServer
 from .session import EditPaths, EditSession
 
-__all__ = ["EditPaths", "EditServer", "EditSession", "serve"]
+__all__ = ["EditPaths", "EditServer", "EditSession", "redirect_page", "serve"]
+
+log = logging.getLogger("warpcli")
+
+#: The page the browser is sent to: it goes on to the editor's address (with the token) at once.
+_REDIRECT = """<!DOCTYPE html>
+<html><head><meta charset="utf-8"><title>warp edit</title>
+<meta http-equiv="refresh" content="0;url={attr}">
+<script>window.location.replace({script});</script>
+</head><body><p><a href="{attr}">Open warp edit</a></p></body></html>
+"""
 
 
 def serve(
@@ -47,7 +63,8 @@ def serve(
     port : int
         0: any free port.
     browser : bool
-        Open the page with `webbrowser`.
+        Open the page with `webbrowser`, through a private file (`redirect_page`): the token stays off
+        the browser's command line.
     announce : callable or None
         Called with the page's address (with its token) once the server listens.
 
@@ -66,11 +83,53 @@ def serve(
         raise InputError(f"127.0.0.1:{port}: cannot listen there: {err.strerror or err}") from err
     if announce is not None:
         announce(server.url)
-    if browser:
-        import webbrowser
-
-        webbrowser.open(server.url)
+    page = None
     try:
+        if browser:
+            import webbrowser
+
+            # Not the address itself: the browser is started with it on its command line, which
+            # every local user can read in the process list. A file only the user can read sends it on.
+            try:
+                page = redirect_page(server.url)
+            except OSError as err:
+                log.warning("edit: cannot write the page that opens the editor (%s): open the printed address", err)
+            else:
+                webbrowser.open(pathlib.Path(page).as_uri())
         server.serve_forever()
     finally:
         server.shutdown()
+        if page is not None:
+            shutil.rmtree(os.path.dirname(page), ignore_errors=True)
+
+
+def redirect_page(url: str) -> str:
+    """Write a page that sends the browser on to ``url``, in a new private directory; return its path.
+
+    The way Jupyter opens its pages: a browser started with an address has
+    it on its command line (``xdg-open URL``, ``firefox URL``), where every
+    local user can read it, token and all. The browser is started with this
+    file instead, in a directory only the user can enter (0700), readable by
+    the user alone (0600). `serve` removes the directory when it stops.
+
+    Parameters
+    ----------
+    url : str
+        The editor's address, with its token.
+
+    Returns
+    -------
+    str
+        The page's absolute path.
+    """
+    directory = tempfile.mkdtemp(prefix="warp-edit-")  # 0700, a name no other user can take
+    path = os.path.join(directory, "open.html")
+    text = _REDIRECT.format(attr=html.escape(url, quote=True), script=json.dumps(url).replace("<", "\\u003c"))
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o600)
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+    except BaseException:
+        shutil.rmtree(directory, ignore_errors=True)
+        raise
+    return path

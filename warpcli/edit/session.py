@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import InputError, PolygonError, WarpError
 from ..maps.registry import METHODS, THETAS
 from ..options import BOUNDARIES, INTERPOLATIONS, OUTSIDE, MapOptions, WarpOptions
-from ..outputs import atomic_path, check_output_path, write_checked
+from ..outputs import PendingOutputs, RunInputs, check_output_path, write_checked
 from ..polygon import Polygon, check_pair
 from ..raster.imageio import check_image_output, read_image
 from .preview import PreviewImage, PreviewMapper, encode_png, preview_image, with_preview_density
@@ -164,6 +164,9 @@ class EditSession:
     def __init__(self, paths: EditPaths, options: WarpOptions | None = None) -> None:
         self.paths = paths
         self.options = options or WarpOptions()
+        # The files the session reads and a save or an export must never replace: the image and the
+        # command line's Theta and outline files (the page can choose those back, never others).
+        self.inputs = tuple(p for p in (paths.image, self.options.map.theta_file, self.options.within_file) if p is not None)
         image = read_image(paths.image)
         self.image_size = (image.width, image.height)
         self.preview: PreviewImage = preview_image(image)
@@ -396,48 +399,89 @@ class EditSession:
     # --- saving and exporting -------------------------------------------------------
 
     def save(self, doc: dict) -> dict:
-        """Write the two polygon files (atomically), after checking them as the CLI would read them.
+        """Write the two polygon files, after checking every name and value of ``doc``: on any error nothing is written.
+
+        Both files are written to pending names and renamed into place
+        together (`warpcli.outputs.PendingOutputs`): a failure (a full disk)
+        leaves both files as they were.
 
         Returns
         -------
         dict
             ``saved``: the two paths; ``warnings``; ``command``.
+
+        Raises
+        ------
+        InputError, PolygonError
+            A bad name, polygon or option; a name that is an input of the
+            session (the image, the command line's Theta or outline file) or
+            the other polygon's file as the session read it.
+        ImageIOError
+            If writing fails (before the renames: neither file is replaced).
         """
-        src_path = self.paths.chosen(doc.get("src_name"), self.paths.src, (".json",))
-        dst_path = self.paths.chosen(doc.get("dst_name"), self.paths.dst, (".json",))
-        if os.path.abspath(src_path) == os.path.abspath(dst_path):
-            raise InputError(f"{src_path}: the same file is given for both polygons")
-        src, dst = self.polygons(doc, src_path, dst_path)
-        options = self.options_from(doc.get("options"))  # bad options write nothing
-        for path in (src_path, dst_path):
-            check_output_path(path, inputs=(self.paths.image,))
-        for path, polygon in ((src_path, src), (dst_path, dst)):
-            text = json.dumps({"points": polygon.points.tolist()}, indent=1) + "\n"
-            with atomic_path(path) as tmp:
-                write_checked(tmp, text.encode(), path)
-        output = self.paths.chosen(doc.get("output_name"), self.paths.output, _image_extensions(self.paths))
-        return {"saved": [src_path, dst_path], "warnings": self.warnings(src, dst),
-                "command": self.command(options, src_path, dst_path, output)}  # fmt: skip
+        plan = self._plan(doc)
+        self._write(plan)
+        return {"saved": [plan.src_path, plan.dst_path], "warnings": self.warnings(plan.src, plan.dst), "command": plan.command}
 
     def export(self, doc: dict) -> dict:
         """Save the polygons, then warp the whole image through the ordinary pipeline (`warpcli.pipeline.warp_file`).
 
-        The output is what the returned command line writes, byte for byte:
-        the same call with the same options.
+        Everything is checked before the polygons are written, the output too
+        (the same checks as `save`'s, and the output's format and that it is
+        none of the session's inputs). The output is what the returned
+        command line writes, byte for byte: the same call with the same options.
         """
         from ..pipeline import warp_file
 
+        plan = self._plan(doc)
+        check_image_output(plan.output, inputs=RunInputs((*self.inputs, plan.src_path, plan.dst_path)))
+        self._write(plan)
+        warp_file(self.paths.image, plan.output, plan.src_path, plan.dst_path, plan.options)
+        return {"saved": [plan.src_path, plan.dst_path], "warnings": self.warnings(plan.src, plan.dst),
+                "output": plan.output, "command": plan.command}  # fmt: skip
+
+    def _plan(self, doc: dict) -> _SavePlan:
+        """Every name and value a save or an export takes from ``doc``, checked; nothing is written here."""
+        src_path = self.paths.chosen(doc.get("src_name"), self.paths.src, (".json",))
+        dst_path = self.paths.chosen(doc.get("dst_name"), self.paths.dst, (".json",))
         output = self.paths.chosen(doc.get("output_name"), self.paths.output, _image_extensions(self.paths))
-        check_image_output(output, inputs=(self.paths.image,))
-        saved = self.save(doc)
-        src_path, dst_path = saved["saved"]
+        if os.path.abspath(src_path) == os.path.abspath(dst_path) or RunInputs((src_path,)).find(dst_path) is not None:
+            raise InputError(f"{dst_path}: the same file is given for both polygons")
+        src, dst = self.polygons(doc, src_path, dst_path)
         options = self.options_from(doc.get("options"))
-        warp_file(self.paths.image, output, src_path, dst_path, options)
-        return dict(saved, output=output, command=self.command(options, src_path, dst_path, output))
+        command = self.command(options, src_path, dst_path, output)
+        for side, path, other in (("src", src_path, self.paths.dst), ("dst", dst_path, self.paths.src)):
+            # The other polygon's file, as the session read it, is the user's too: saving this
+            # polygon over it would lose it (each side may replace its own file).
+            if self.initial["dst" if side == "src" else "src"] is not None and RunInputs((other,)).find(path) is not None:
+                raise InputError(f"{path}: would overwrite {other}, the other polygon's file; give each polygon its own file")
+            check_output_path(path, inputs=RunInputs(self.inputs))
+        return _SavePlan(src_path, dst_path, output, src, dst, options, command)
+
+    @staticmethod
+    def _write(plan: _SavePlan) -> None:
+        """Write the two polygon files of a checked save, both or neither."""
+        with PendingOutputs() as pending:
+            for path, polygon in ((plan.src_path, plan.src), (plan.dst_path, plan.dst)):
+                text = json.dumps({"points": polygon.points.tolist()}, indent=1) + "\n"
+                write_checked(pending.path(path), text.encode(), path)
 
     def command(self, options: WarpOptions, src_path: str, dst_path: str, output: str) -> str:
         """The ``warp ...`` command line that makes what an export makes."""
         return " ".join(shlex.quote(a) for a in command_args(options, self.paths.image, src_path, dst_path, output))
+
+
+@dataclass(frozen=True)
+class _SavePlan:
+    """What a save writes and an export makes, every part checked (`EditSession._plan`)."""
+
+    src_path: str
+    dst_path: str
+    output: str
+    src: Polygon
+    dst: Polygon
+    options: WarpOptions
+    command: str
 
 
 def _image_extensions(paths: EditPaths) -> tuple[str, ...]:

@@ -20,7 +20,14 @@ async function call(path, body) {
     method: "POST", body: JSON.stringify(body),
     headers: { "X-Warp-Token": token, "Content-Type": "application/json" },
   });
-  if (!response.ok) throw new Error(`${path}: ${response.status} ${response.statusText}`);
+  if (!response.ok) {
+    // The server's errors are JSON ({"error": ...}): show its words, else the status line.
+    let detail = `${response.status} ${response.statusText}`;
+    try { const doc = await response.json(); if (doc && doc.error) detail = doc.error; } catch (e) { /* not JSON */ }
+    const err = new Error(`${path}: ${detail}`);
+    err.status = response.status;
+    throw err;
+  }
   return response;
 }
 
@@ -122,6 +129,9 @@ function restart() { remember(); editor.src = []; editor.dst = null; editor.clos
 
 // --- the preview: one request at a time, the newest state next ----------------------------
 
+// The server maps one preview at a time and answers 503 (busy) to another (a second tab's, or
+// one sent during a save or an export): the page asks again after this many ms, for its newest state.
+const BUSY_RETRY_MS = 150;
 let inFlight = false, wanted = null, pendingEvents = [];
 
 function changed(eventTime) {
@@ -136,6 +146,7 @@ async function sendPreview() {
   const body = JSON.stringify(wanted);
   const events = pendingEvents; pendingEvents = [];
   wanted = null; inFlight = true;
+  let busy = false;
   const t0 = performance.now();
   try {
     const response = await call("/api/preview", JSON.parse(body));
@@ -151,10 +162,14 @@ async function sendPreview() {
       waited: events.length ? t0 - Math.max(...events) : 0 });
     editor.frames += 1;
   } catch (err) {
-    showError(String(err.message || err));
+    if (err.status === 503) {  // busy: this state (unless a newer one is wanted) again, shortly
+      busy = true;
+      if (!wanted && editor.closed) wanted = JSON.parse(body);
+      pendingEvents = events.concat(pendingEvents);
+    } else showError(String(err.message || err));
   } finally {
-    inFlight = false;
-    if (wanted) sendPreview();
+    const next = () => { inFlight = false; if (wanted) sendPreview(); };
+    if (busy) setTimeout(next, BUSY_RETRY_MS); else next();
   }
 }
 
