@@ -331,3 +331,20 @@ def test_gltf_errors_name_the_file(tmp_path, change, message):
     path.write_text(json.dumps(doc))
     with pytest.raises(MeshError, match=message.replace("[", "\\[").replace("]", "\\]")):
         read_mesh(path)
+
+
+@pytest.mark.parametrize("index, ok", [("0.9", False), ("2.5", False), ("2.0", True)])
+def test_ply_float_face_indices_must_be_whole(tmp_path, index, ok):
+    # A face list declared float: 0.9 was read as vertex 0; a whole float is the vertex it names.
+    path = tmp_path / "m.ply"
+    head = (
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+        "property float u\nproperty float v\nelement face 2\nproperty list uchar float vertex_indices\nend_header\n"
+    )
+    rows = "0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n0 1 0 0 1\n" + f"3 0 1 {index}\n3 0 2 3\n"
+    path.write_text(head + rows)
+    if ok:
+        assert read_mesh(path).triangles_pos.tolist()[0] == [0, 1, 2]
+    else:
+        with pytest.raises(MeshError, match="face 0 has a vertex index that is not a whole number"):
+            read_mesh(path)

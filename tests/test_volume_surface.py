@@ -130,6 +130,67 @@ def test_different_connectivity_is_refused():
         check_pair(a, c)
 
 
+def _ascii_cages(v, f) -> dict[str, str]:
+    return {
+        "obj": "".join(f"v {x} {y} {z}\n" for x, y, z in v) + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in f),
+        "off": f"OFF\n{len(v)} {len(f)} 0\n" + "".join(f"{x} {y} {z}\n" for x, y, z in v)
+        + "".join(f"3 {a} {b} {c}\n" for a, b, c in f),
+        "ply": "ply\nformat ascii 1.0\n"
+        f"element vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\n"
+        f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n"
+        + "".join(f"{x} {y} {z}\n" for x, y, z in v) + "".join(f"3 {a} {b} {c}\n" for a, b, c in f),
+    }  # fmt: skip
+
+
+@pytest.mark.parametrize("ext", ["obj", "off", "ply"])
+def test_damaged_cage_files_are_read_or_refused_in_one_line(tmp_path, ext):
+    # Generated damage (tokens replaced by words, huge or fractional numbers, lines and newlines
+    # dropped, the file cut short): every file is either a surface or a SurfaceError naming it,
+    # never another exception (an index of 1e20 was an OverflowError, 'element vertex four' a
+    # ValueError, a PLY without a newline after its header an IndexError).
+    v, f = icosphere(1)
+    text = _ascii_cages(v.round(6).tolist(), f.tolist())[ext]
+    rng = np.random.default_rng(11)
+    junk = ["four", "99999999999999999999", "-99999999999999999999", "0.9", "1e30", "nan", "-", "", "list", "3 3 3"]
+    path = tmp_path / f"c.{ext}"
+    for case in range(150):
+        words = text.split(" ") if case % 3 else text.splitlines(keepends=True)
+        for _ in range(rng.integers(1, 4)):
+            k = int(rng.integers(len(words)))
+            words[k] = str(rng.choice(junk)) + ("\n" if words[k].endswith("\n") and case % 2 else "")
+        damaged = (" " if case % 3 else "").join(words)
+        if case % 7 == 0:
+            damaged = damaged[: int(rng.integers(len(damaged)))]
+        if case % 11 == 0:
+            damaged = damaged.replace("end_header\n", "end_header")
+        path.write_text(damaged)
+        try:
+            read_surface(path)
+        except SurfaceError as err:
+            assert str(err).startswith(str(path)) and "\n" not in str(err)
+
+
+def test_a_fractional_face_index_is_refused_and_a_whole_one_read(tmp_path):
+    # A PLY may declare its indices float: 0.9 is no vertex (it was read as vertex 0), 1.0 is vertex 1.
+    v, f = tetrahedron()
+    for index, ok in (("0.9", False), ("0.0", True)):
+        body = "".join(f"{x} {y} {z}\n" for x, y, z in np.asarray(v).tolist())
+        faces = [list(map(str, t)) for t in np.asarray(f).tolist()]
+        faces[0][faces[0].index("0")] = index
+        path = tmp_path / "t.ply"
+        path.write_text(
+            "ply\nformat ascii 1.0\n"
+            f"element vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\n"
+            f"element face {len(f)}\nproperty list uchar float vertex_indices\nend_header\n"
+            + body + "".join(f"3 {' '.join(t)}\n" for t in faces)
+        )
+        if ok:
+            assert read_surface(path).n_faces == len(f)
+        else:
+            with pytest.raises(SurfaceError, match="not a whole number"):
+                read_surface(path)
+
+
 def test_missing_file_and_unknown_format(tmp_path):
     with pytest.raises(SurfaceError, match="no such file"):
         read_surface(tmp_path / "none.obj")

@@ -365,6 +365,10 @@ def _mesh(elements, name: str, texture: str | None) -> UVMesh:
     if (counts < 3).any():
         row = int(np.argmax(counts < 3))
         raise MeshError(f"{name}: face {row} has {int(counts[row])} corners, fewer than 3")
+    if flat.dtype.kind == "f" and flat.size and not (flat == np.round(flat)).all():  # 0.9 is not vertex 0
+        bad = int(np.argmax(flat != np.round(flat)))
+        row = int(np.searchsorted(np.cumsum(counts), bad, side="right"))
+        raise MeshError(f"{name}: face {row} has a vertex index that is not a whole number: {float(flat[bad])!r}")
     flat = flat.astype(np.int64)
     if flat.size and (flat.min() < 0 or flat.max() >= n):
         bad = int(np.argmax((flat < 0) | (flat >= n)))

@@ -188,15 +188,19 @@ def from_faces(vertices: ArrayLike, faces, name: str = "surface") -> Surface:
             "scale the cage down"
         )
     if isinstance(faces, np.ndarray) and faces.ndim == 2:
-        groups = {faces.shape[1]: (np.arange(len(faces)), faces.astype(np.int64))}
+        groups = {faces.shape[1]: (np.arange(len(faces)), _indices(faces, np.arange(len(faces)), name))}
     else:
         by_size: dict[int, list[int]] = {}
         for k, face in enumerate(faces):
             by_size.setdefault(len(face), []).append(k)
-        groups = {
-            size: (np.array(ks, dtype=np.int64), np.array([faces[k] for k in ks], dtype=np.int64))
-            for size, ks in by_size.items()
-        }
+        groups = {}
+        for size, ks in by_size.items():
+            ids = np.array(ks, dtype=np.int64)
+            try:
+                given = np.array([faces[k] for k in ks])
+            except (OverflowError, ValueError, TypeError):
+                raise SurfaceError(f"{name}: a face's vertex indices are not whole numbers in range") from None
+            groups[size] = (ids, _indices(given, ids, name))
     if not groups:
         raise SurfaceError(f"{name}: has no faces")
     tris, owner = [], []
@@ -225,6 +229,22 @@ def from_faces(vertices: ArrayLike, faces, name: str = "surface") -> Surface:
     order = np.lexsort((np.repeat(np.arange(len(tris)), [len(x) for x in tris]), face_of))
     n_faces = sum(len(ids) for ids, _ in groups.values())
     return Surface(v, tri[order], face_of[order], name, n_faces)
+
+
+def _indices(given: np.ndarray, ids: np.ndarray, name: str) -> np.ndarray:
+    """Faces' vertex indices as int64: whole numbers only (a PLY may declare them float; 0.9 is not
+    vertex 0), within int64 (larger ones are out of range anyway)."""
+    if given.dtype.kind in "iu" and given.dtype.itemsize <= 8 and not (given.dtype.kind == "u" and given.dtype.itemsize == 8):
+        return given.astype(np.int64)
+    try:
+        values = given.astype(np.float64)
+    except (OverflowError, ValueError, TypeError):
+        raise SurfaceError(f"{name}: a face's vertex indices are not whole numbers in range") from None
+    whole = np.isfinite(values) & (values == np.round(values)) & (np.abs(values) < 2.0**53)
+    if not whole.all():
+        k = int(np.flatnonzero(~whole.all(axis=1))[0])
+        raise SurfaceError(f"{name}: face {int(ids[k])} has a vertex index that is not a whole number in range: {given[k].tolist()}")
+    return values.astype(np.int64)
 
 
 def _parse_obj(data: bytes, name: str):
@@ -295,22 +315,25 @@ def _parse_ply(data: bytes, name: str):
     if not data.startswith(b"ply") or end < 0:
         raise SurfaceError(f"{name}: not a PLY file (no ply header)")
     header = data[:end].decode("ascii", "replace").splitlines()
-    body = data[data.index(b"\n", end) + 1 :]
     fmt = None
     elements: list[list] = []  # [name, count, [(prop, type, list_count_type)]]
-    for line in header:
-        w = line.split()
-        if not w:
-            continue
-        if w[0] == "format":
-            fmt = w[1]
-        elif w[0] == "element":
-            elements.append([w[1], int(w[2]), []])
-        elif w[0] == "property" and elements:
-            if w[1] == "list":
-                elements[-1][2].append((w[4], w[3], w[2]))
-            else:
-                elements[-1][2].append((w[2], w[1], None))
+    try:
+        body = data[data.index(b"\n", end) + 1 :]
+        for line in header:
+            w = line.split()
+            if not w:
+                continue
+            if w[0] == "format":
+                fmt = w[1]
+            elif w[0] == "element":
+                elements.append([w[1], int(w[2]), []])
+            elif w[0] == "property" and elements:
+                if w[1] == "list":
+                    elements[-1][2].append((w[4], w[3], w[2]))
+                else:
+                    elements[-1][2].append((w[2], w[1], None))
+    except (ValueError, IndexError):
+        raise SurfaceError(f"{name}: malformed PLY header") from None
     try:
         if fmt == "ascii":
             return _ply_ascii(body, elements, name)
@@ -343,7 +366,8 @@ def _ply_ascii(body: bytes, elements, name: str):
             for prop, _typ, list_type in props:
                 if list_type is not None:
                     k = int(words[pos])
-                    row[prop] = [int(float(x)) for x in words[pos + 1 : pos + 1 + k]]
+                    # As written: `from_faces` refuses an index that is not whole (int(float("0.9")) was vertex 0).
+                    row[prop] = [_number(x) for x in words[pos + 1 : pos + 1 + k]]
                     pos += 1 + k
                 else:
                     row[prop] = float(words[pos])
@@ -351,6 +375,14 @@ def _ply_ascii(body: bytes, elements, name: str):
             rows.append(row)
         values[el] = rows
     return _ply_result(values, name)
+
+
+def _number(word: str) -> int | float:
+    """A PLY list value: an int if it is written as one (exactly, however large), else a float."""
+    try:
+        return int(word)
+    except ValueError:
+        return float(word)
 
 
 def _ply_binary(body: bytes, elements, order: str, name: str):
