@@ -158,3 +158,27 @@ def test_tutte_spherical_parameterization_is_bijective():
     assert _bijective(_relax(x, cage.triangles), cage.triangles)
     y = sphere_embedding((cage,))
     assert _bijective(y, cage.triangles)
+
+
+def test_a_cage_touching_itself_where_the_checks_cannot_tell_is_refused_not_a_crash(tmp_path, monkeypatch):
+    # A top vertex of a box pushed straight down through the bottom face, exactly through one of its
+    # vertices or edges: the surface checks' floating-point tests see no strict crossing, and TetGen
+    # aborted the process (SIGABRT) leaving tetgen-tmpfile_* in the working directory. Every case is
+    # now an error, from the checks or from TetGen's child, and nothing is left behind.
+    from warpcli.errors import WarpError
+
+    monkeypatch.chdir(tmp_path)
+    v, f = box(3, (4.0, 4.0, 4.0), (28.0, 28.0, 28.0))
+    top = [k for k in range(len(v)) if v[k, 2] == 28.0 and 4.0 < v[k, 0] < 28.0 and 4.0 < v[k, 1] < 28.0]
+    refused = 0
+    for k in top[:2]:
+        for x, y in ((12.0, 12.0), (12.0, 16.0), (16.0, 12.0), (20.0, 16.0)):
+            u = v.copy()
+            u[k] = [x, y, 2.0]
+            try:
+                mesh_polyhedron(surface_from_arrays(u, f, "pushed"), 4.0)
+            except WarpError as err:
+                assert "pushed" in str(err) and "\n" not in str(err)
+                refused += 1
+    assert refused == 2 * 4
+    assert list(tmp_path.iterdir()) == []

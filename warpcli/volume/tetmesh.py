@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import sys
 import tempfile
 import threading
 from dataclasses import dataclass
@@ -15,7 +16,7 @@ from numpy.typing import NDArray
 from ..capture import terminal_saved
 from ..errors import InputError, MeshingError
 from ..polygon.predicates import orient3d_sign
-from .surface import Surface, reflex_edges
+from .surface import Surface, SurfaceError, reflex_edges
 
 #: Refuse to build a mesh of more than this many tetrahedra.
 MAX_TETS = 6_000_000
@@ -343,13 +344,51 @@ def _quiet_fds():
 
 
 def _tetgen(v: NDArray[np.float64], tri: NDArray[np.int64], max_volume: float, name: str):
+    """TetGen's mesh of the closed surface (v, tri): in a forked child where the system can fork.
+
+    TetGen ends the process (abort) on some inputs the surface checks let
+    through (a cage vertex pushed exactly through an edge of a face: a
+    crossing that only touches, which the checks' floating-point tests take
+    for no crossing), and writes files of its own ("tetgen-tmpfile_*") into
+    the working directory as it does. In a child that works in a private
+    directory, removed after, such a crash is a `SurfaceError` (bad input,
+    exit 2) naming the surface; nothing is left behind.
+    """
     try:
-        import tetgen
+        import tetgen  # noqa: F401  (said here, in the parent: the child's failure would be a crash)
     except ImportError as err:
         raise MeshingError(
             "meshing a polyhedron needs the tetgen package (pip install 'warpcli[volume]'); "
             f"it could not be imported: {err}"
         ) from None
+    from .. import _fork
+
+    if not (hasattr(os, "fork") and sys.platform.startswith("linux") and os.environ.get(_fork.FORK_ENV, "1") != "0"):
+        return _tetgen_here(v, tri, max_volume, name)
+    import shutil
+
+    private = tempfile.mkdtemp(prefix="warpcli-tetgen-")
+    try:
+        try:
+            return _fork.Forked(_tetgen_in, private, v, tri, max_volume, name).result()
+        except _fork.ChildDied as err:
+            raise SurfaceError(
+                f"{name}: TetGen crashed meshing the polyhedron ({err}); the surface probably touches or crosses "
+                "itself where the checks could not tell (a vertex exactly on another face's edge)"
+            ) from None
+    finally:
+        shutil.rmtree(private, ignore_errors=True)
+
+
+def _tetgen_in(directory: str, v, tri, max_volume: float, name: str):
+    """`_tetgen_here` with ``directory`` as the working directory (in a forked child)."""
+    os.chdir(directory)
+    return _tetgen_here(v, tri, max_volume, name)
+
+
+def _tetgen_here(v: NDArray[np.float64], tri: NDArray[np.int64], max_volume: float, name: str):
+    import tetgen
+
     switches = f"pq{RADIUS_EDGE:g}/{MIN_DIHEDRAL:g}a{max_volume:.10g}o/{MAX_DIHEDRAL:g}YQ"
     with _TETGEN_LOCK:
         with _quiet_fds() as said:
