@@ -261,6 +261,49 @@ def test_mixed_conditions_are_certified_and_keep_edges_on_edges(quad, method):
         assert np.all(np.diff(along) > 0)  # in order: no fold along the edge
 
 
+def test_sliding_tables_are_strictly_increasing_whatever_the_trace():
+    # A fitted trace runs backwards by rounding, or over pixels where the fit is poor: the tables
+    # were made non-decreasing, and a flat stretch sent a run of an edge to one point of Theta
+    # (12-16 px of an MFS map's edge, accepted). Generated traces, noisy, with backward runs and
+    # overshoots past both ends: every table is pinned, strictly increasing in t and s, made of
+    # samples of the trace, and `slide` sends distinct points of an edge to distinct ones.
+    from warpcli.boundary import slide
+    from warpcli.maps.base import sliding_tables
+
+    rng = np.random.default_rng(21)
+    theta = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    for _ in range(60):
+        edge = np.repeat(np.arange(4), 40)
+        t = np.concatenate([np.sort(rng.random(40)) for _ in range(4)])
+        s = t + rng.normal(0, 10.0 ** rng.uniform(-16, -2), t.size)
+        lo, hi = sorted(rng.integers(0, 40, 2))
+        s[lo:hi] -= rng.uniform(0, 0.2) * np.linspace(0, 1, hi - lo)  # a run backwards
+        s[: rng.integers(0, 3)] -= 0.05  # before Theta's first vertex
+        a, d = theta[edge], np.roll(theta, -1, axis=0)[edge] - theta[edge]
+        images = a + s[:, None] * d + rng.normal(0, 1e-3, (t.size, 1)) * d[:, ::-1]
+        tables = sliding_tables(theta, edge, t, images)
+        for i, (tt, ss) in enumerate(tables):
+            assert tt[0] == ss[0] == 0.0 and tt[-1] == ss[-1] == 1.0
+            assert np.all(np.diff(tt) > 0) and np.all(np.diff(ss) > 0)
+            assert np.isin(tt[1:-1], t[edge == i]).all()
+        u = np.linspace(0.0, 1.0, 2001)
+        for i in range(4):
+            there = slide(tables, np.full(u.size, i), u, forward=True)
+            assert np.all(np.diff(there) > 0)
+            back = slide(tables, np.full(u.size, i), there, forward=False)
+            np.testing.assert_allclose(back, u, atol=1e-12)
+
+
+def test_a_mixed_smooth_map_sends_no_run_of_an_edge_to_one_point():
+    # The outside review's pair: MFS's fitted trace runs back over target edge 1 near vertex 1.
+    src = Polygon(np.array([[100, 100], [500, 100], [300, 290], [100, 500]], float))
+    dst = Polygon(np.array([[100, 300], [500, 100], [300, 500], [100, 500]], float) + 0.5)
+    f = BijectiveMap.between(src, dst, MapOptions(method="mfs", conditions="mixed"))
+    u = np.linspace(0.0, 0.1, 201)  # the first 22 px of edge 1, 0.1 px apart
+    back = f.inverse_boundary(np.ones(u.size, int), u)
+    assert np.all(np.hypot(*np.diff(back, axis=0).T) > 0)  # every point its own source point
+
+
 def test_optimized_theta_serves_the_smooth_methods():
     """Optimized on coarse FEM maps, applied by MFS at full accuracy: MFS's own measured
     energy (from its analytic Jacobians) falls too."""

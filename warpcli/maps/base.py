@@ -203,9 +203,14 @@ def sliding_tables(theta: NDArray[np.float64], edge: ArrayLike, t: ArrayLike, im
     Natural (Neumann) conditions leave the parameter along each edge to the
     solution: given boundary samples (polygon edge i, parameter t) and their
     images in Theta, each edge gets a table from t to the parameter s of the
-    image's projection onto Theta's edge i, clipped to [0, 1], made
-    non-decreasing (the exact map is monotone along edges; rounding and
-    approximation may not be) and pinned at both vertices.
+    image's projection onto Theta's edge i, pinned at both vertices, and
+    strictly increasing: the exact map is monotone along edges, but rounding
+    and approximation may not be, and a sample whose s is not above every
+    earlier one's (or not inside (0, 1)) is left out. (They were clipped and
+    made non-decreasing: a fit's trace running back over a few pixels became
+    a flat stretch, a run of up to 16 px of an edge sent to one point, and
+    the warp no longer one-to-one along it.) Between the samples kept, the
+    table is linear, so every edge goes onto Theta's one-to-one.
 
     Parameters
     ----------
@@ -231,11 +236,13 @@ def sliding_tables(theta: NDArray[np.float64], edge: ArrayLike, t: ArrayLike, im
     for i in range(n):  # loop over edges
         on = (edge == i) & (t > 0.0) & (t < 1.0)
         a, d = theta[i], theta[(i + 1) % n] - theta[i]
-        s = np.clip((images[on] - a) @ d / (d @ d), 0.0, 1.0)
         order = np.argsort(t[on], kind="stable")
-        tt = np.concatenate([[0.0], t[on][order], [1.0]])
-        ss = np.concatenate([[0.0], np.maximum.accumulate(s[order]) if s.size else s, [1.0]])
-        tables.append((tt, ss))
+        tk, sk = t[on][order], ((images[on] - a) @ d / (d @ d))[order]
+        # Kept: above every earlier s (and 0) and below 1, at a t above every earlier one's.
+        floor_s = np.maximum.accumulate(np.concatenate([[0.0], sk[:-1]])) if sk.size else sk
+        floor_t = np.concatenate([[0.0], tk[:-1]]) if tk.size else tk
+        keep = (sk > floor_s) & (sk < 1.0) & (tk > floor_t)
+        tables.append((np.concatenate([[0.0], tk[keep], [1.0]]), np.concatenate([[0.0], sk[keep], [1.0]])))
     return tables
 
 
