@@ -173,3 +173,23 @@ def test_strips_write_the_same_bytes_whatever_openimageio_threads(tmp_path, monk
         with open(path, "rb") as fh:
             hashes.setdefault(hashlib.sha256(fh.read()).hexdigest(), []).append(n)
     assert len(hashes) == 1, f"bytes by thread count: {list(hashes.values())}"
+
+
+@pytest.mark.parametrize("dtype", [np.uint32, np.float64, np.uint8])
+def test_parts_are_read_beyond_openimageios_image_size_limit(tmp_path, dtype):
+    # Strips exist for images larger than OpenImageIO's limit on a whole decoded image; the exact
+    # blocks opened their file within it, so an 800 x 600 uint32 TIFF under a 1 MB limit was refused.
+    import OpenImageIO as oiio
+
+    px = _random_image(dtype, np.random.default_rng(4), 600, 800, 1)
+    path = _write(tmp_path / "big.tif", px)
+    header = read_header(path)
+    saved = oiio.get_int_attribute("limits:imagesize_MB", 0)
+    oiio.attribute("limits:imagesize_MB", 1)
+    try:
+        with PartReader(path, header) as reader:
+            got = reader.read(0, 0, 800, 600)
+    finally:
+        oiio.attribute("limits:imagesize_MB", saved)
+    assert got.dtype == px.dtype
+    np.testing.assert_array_equal(got, px)

@@ -121,7 +121,7 @@ def read_image(path: str | os.PathLike[str]) -> RasterImage:
     import OpenImageIO as oiio
 
     name = os.fspath(path)
-    inp, config = _open_input(name)
+    inp, config = open_input(name)
     try:
         spec = inp.spec()
         oriented = spec.get_int_attribute("Orientation", 1) != 1
@@ -232,8 +232,10 @@ def _check_spec_fits(spec, name: str, copies: int = 1) -> None:
     )  # fmt: skip
 
 
-def _open_input(name: str):
-    """An OpenImageIO ImageInput on the regular file ``name``, and the configuration it was opened with.
+def open_input(name: str):
+    """An OpenImageIO ImageInput on the regular file ``name``, and the configuration it was opened with
+    (straight colour where the file stores it so). For a reader that decodes only parts (a header,
+    `warpcli.raster.parts`), open it within `size_limit_lifted`.
 
     Raises
     ------
@@ -360,7 +362,7 @@ def read_header(path: str | os.PathLike[str]) -> ImageHeader:
     """
     name = os.fspath(path)
     with size_limit_lifted():  # no pixel is decoded
-        inp, _ = _open_input(name)
+        inp, _ = open_input(name)
     try:
         spec = inp.spec()
         _say_what_is_left(inp, spec, name)

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from ..capture import c_stderr, one_line
 from ..errors import ImageInputError, ImageIOError
 from ..outputs import check_room, file_size_limit, write_failure_message
-from .imageio import OIIO_TYPES, ImageHeader, output_spec, size_limit_lifted, verify_written
+from .imageio import OIIO_TYPES, ImageHeader, open_input, output_spec, size_limit_lifted, verify_written
 from .pixels import premultiplied
 
 #: Rows of a strip, and the side of a tile in tiled outputs.
@@ -124,12 +124,12 @@ class _ExactBlocks:
 
         self.name, self.header = name, header
         self._oiio = oiio
-        config = oiio.ImageSpec()
-        config.attribute("oiio:UnassociatedAlpha", 1)  # as `read_image` and the ImageCache read it
-        with c_stderr() as said:
-            inp = oiio.ImageInput.open(name, config)
-        if inp is None:
-            raise ImageInputError(f"{name}: cannot read image: {one_line(oiio.geterror(), said.text)}")
+        # Opened as `read_image` opens a file (straight colour, as the ImageCache reads it too),
+        # without OpenImageIO's image-size limit: only parts are decoded, and strips exist for
+        # images larger than it (opened within the limit, an 800 x 600 uint32 TIFF under a 1 MB
+        # limit was refused).
+        with size_limit_lifted():
+            inp, _ = open_input(name)
         self._inp = inp
         spec = inp.spec()
         self._origin = (spec.x, spec.y, spec.z)  # the data window's, which read_image starts at
