@@ -47,12 +47,18 @@ class ChildDied(Exception):
     """The child ended without a result (killed by a signal, or crashed in C code)."""
 
 
+def possible() -> bool:
+    """Whether a child may be forked here at all: on Linux, and not turned off (``WARPCLI_FORK=0``).
+    Enough for work kept apart from the process (a C library that may crash it)."""
+    return sys.platform.startswith("linux") and hasattr(os, "fork") and os.environ.get(FORK_ENV, "1") != "0"
+
+
 def available() -> bool:
-    """Whether work may go to a forked child here: on Linux, not turned off, and with a
-    core budget of more than one (`warpcli.cores`; a child works beside its parent)."""
+    """Whether work may go to a forked child to run beside its parent: `possible`, with a
+    core budget of more than one (`warpcli.cores`)."""
     from .cores import budget
 
-    return sys.platform.startswith("linux") and hasattr(os, "fork") and os.environ.get(FORK_ENV, "1") != "0" and budget() > 1
+    return possible() and budget() > 1
 
 
 class Forked:

@@ -234,7 +234,7 @@ def from_faces(vertices: ArrayLike, faces, name: str = "surface") -> Surface:
 def _indices(given: np.ndarray, ids: np.ndarray, name: str) -> np.ndarray:
     """Faces' vertex indices as int64: whole numbers only (a PLY may declare them float; 0.9 is not
     vertex 0), within int64 (larger ones are out of range anyway)."""
-    if given.dtype.kind in "iu" and given.dtype.itemsize <= 8 and not (given.dtype.kind == "u" and given.dtype.itemsize == 8):
+    if given.dtype.kind in "iu" and np.can_cast(given.dtype, np.int64):
         return given.astype(np.int64)
     try:
         values = given.astype(np.float64)

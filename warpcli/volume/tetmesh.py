@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import sys
 import tempfile
 import threading
 from dataclasses import dataclass
@@ -363,7 +362,7 @@ def _tetgen(v: NDArray[np.float64], tri: NDArray[np.int64], max_volume: float, n
         ) from None
     from .. import _fork
 
-    if not (hasattr(os, "fork") and sys.platform.startswith("linux") and os.environ.get(_fork.FORK_ENV, "1") != "0"):
+    if not _fork.possible():
         return _tetgen_here(v, tri, max_volume, name)
     import shutil
 

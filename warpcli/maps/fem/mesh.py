@@ -292,8 +292,10 @@ def _bounded_triangulate(tr, data: dict, switches: str, *, most: int, message: s
     needs more than ``most`` (a part too thin for its length) is refused.
     """
     room = most - len(data["vertices"])
-    out = tr.triangulate(data, f"{switches}S{max(room, 0)}") if room > 0 else None
-    if out is None or len(out["vertices"]) >= most or len(out["triangles"]) > most:
+    if room <= 0:
+        raise PolygonError(message)
+    out = tr.triangulate(data, f"{switches}S{room}")
+    if len(out["vertices"]) >= most or len(out["triangles"]) > most:
         raise PolygonError(message)
     return out
 
