@@ -445,7 +445,7 @@ class EditSession:
         src_path = self.paths.chosen(doc.get("src_name"), self.paths.src, (".json",))
         dst_path = self.paths.chosen(doc.get("dst_name"), self.paths.dst, (".json",))
         output = self.paths.chosen(doc.get("output_name"), self.paths.output, _image_extensions(self.paths))
-        if os.path.abspath(src_path) == os.path.abspath(dst_path) or RunInputs((src_path,)).find(dst_path) is not None:
+        if RunInputs((src_path,)).find(dst_path) is not None:  # the same path, or the same file by a link
             raise InputError(f"{dst_path}: the same file is given for both polygons")
         src, dst = self.polygons(doc, src_path, dst_path)
         options = self.options_from(doc.get("options"))
