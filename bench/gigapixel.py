@@ -114,7 +114,7 @@ def main() -> None:
                 rows.append((label, mode, w * h, statistics.median(times), max(peaks)))
             os.unlink(image)
     base = rows[0][3] / rows[0][2]
-    print(f"warp of an 8-bit RGB tiled TIFF, 12-vertex ellipse -> star covering most of it; medians, peak RSS max")
+    print("warp of an 8-bit RGB tiled TIFF, 12-vertex ellipse -> star covering most of it; medians, peak RSS max")
     print(f"{'image':<22} {'mode':<10} {'MP':>8} {'wall s':>9} {'peak RSS MB':>12} {'ns/pixel':>9} {'/ 12 MP':>8}")
     for label, mode, n, t, m in rows:
         print(f"{label:<22} {mode:<10} {n / 1e6:>8.1f} {t:>9.2f} {m:>12.0f} {t / n * 1e9:>9.1f} {t / n / base:>8.2f}")

@@ -783,8 +783,8 @@ def main(argv=None) -> int:
             "Ratios are of medians; > 1 means warp is slower. wall-sum = whole-command median minus the in-process "
             "stage sum (interpreter start-up, imports, polygon checks). CLI=inproc: the command's output equals "
             "warp_file()'s, pixel for pixel.",
-            f"pairs: star12 = 6-point stars r 0.25/0.48 -> 0.18/0.47 of min(W,H), rotated 0.3 rad; wavy48 = "
-            f"r(a) = R(0.75 + 0.2 sin 5a) -> R(0.72 + 0.23 sin(7a + 0.6)), 48 vertices, R = min(W,H)/2.",
+            "pairs: star12 = 6-point stars r 0.25/0.48 -> 0.18/0.47 of min(W,H), rotated 0.3 rad; wavy48 = "
+            "r(a) = R(0.75 + 0.2 sin 5a) -> R(0.72 + 0.23 sin(7a + 0.6)), 48 vertices, R = min(W,H)/2.",
             f"total benchmark time {elapsed:.0f} s.",
         ]
         text = tables(rows, args, md=False)
