@@ -86,12 +86,12 @@ def volume_rows(repeat: int) -> list[str]:
         for side, phi in (("source", vmap.phi0), ("target", vmap.phi1)):
             if not hasattr(phi, "mesh"):
                 continue  # a cage that is its own Theta: the identity, nothing to check
-            values, tets, fixed = phi.values, phi.mesh.tets, phi._fixed()
+            values, tets = phi.values, phi.mesh.tets
             vol = tet_volumes(values, tets)
             corners = [values[tets[:, k]] for k in range(4)]
             sign = orient3d_sign(*corners)
             old = median_ms(lambda: tet_volumes(values, tets) <= 0, repeat)
-            new = median_ms(lambda: inverted(values, tets, fixed), repeat)
+            new = median_ms(lambda: inverted(values, tets), repeat)
             signs = median_ms(lambda: tet_signs(values, tets), repeat)
             # The filter alone: how many went to exact arithmetic (those whose sign the bound leaves open).
             from warpcli.polygon import predicates

@@ -18,7 +18,7 @@ from . import _kernels
 from .surface import Surface
 from .tetmesh import TetMesh
 from .theta import Theta
-from .untangle import inverted, pinned_flat
+from .untangle import inverted
 
 #: The pull-back works through the output grid in slabs of whole slices of
 #: about this many voxels, so its temporary arrays stay small (about 100
@@ -132,24 +132,13 @@ class TetMap(VolumeThetaMap):
         return TetLocator(self.values, self.mesh.tets, SNAP, self.image_coefficients)
 
     def flipped(self) -> NDArray[np.bool_]:
-        """Tetrahedra whose image is inverted, or flat though a free node could lift it.
+        """Tetrahedra whose image is inverted or flat (`warpcli.volume.untangle.inverted`).
 
-        A tetrahedron whose boundary nodes alone make its image flat (all
-        four on one flat face of Theta where the cage bends, or three on one
-        edge of Theta) collapses a sliver onto a triangle, which does not
-        fold the warp, and is counted apart (`flattened`); see
-        `warpcli.volume.untangle.pinned_flat`.
+        A flat one counts whatever makes it flat: a sliver collapsed onto a
+        triangle is a map that is not one-to-one. The mesh is built so that
+        no boundary nodes alone make one (`warpcli.volume.spans`).
         """
-        return inverted(self.values, self.mesh.tets, self._fixed())
-
-    def flattened(self) -> int:
-        """Slivers flat by their boundary nodes (see `flipped`)."""
-        return int(pinned_flat(self.values, self.mesh.tets, self._fixed()).sum())
-
-    def _fixed(self) -> NDArray[np.bool_]:
-        on = np.zeros(self.mesh.n_vertices, dtype=bool)
-        on[self.mesh.boundary] = True
-        return on
+        return inverted(self.values, self.mesh.tets)
 
     def moved(self) -> NDArray[np.int64]:
         """Nodes whose values differ from the harmonic map's (none unless untangled)."""
@@ -162,8 +151,7 @@ class TetMap(VolumeThetaMap):
 
     def describe(self) -> dict:
         return {
-            "vertices": self.mesh.n_vertices, "tetrahedra": self.mesh.n_tets,
-            "flattened_slivers": self.flattened(), **self.info,
+            "vertices": self.mesh.n_vertices, "tetrahedra": self.mesh.n_tets, **self.info,
         }  # fmt: skip
 
     def evaluate(self, points: ArrayLike, *, jacobian: bool = False) -> Mapped:

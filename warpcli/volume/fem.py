@@ -69,7 +69,7 @@ def laplacian(vertices: NDArray[np.float64], tets: NDArray[np.integer]) -> sp.cs
 
 
 def solve_dirichlet(
-    mesh: TetMesh, boundary_values: NDArray[np.float64], solver: str = "auto"
+    mesh: TetMesh, boundary_values: NDArray[np.float64], solver: str = "auto", start: NDArray[np.float64] | None = None
 ) -> tuple[NDArray[np.float64], dict]:
     """The discrete harmonic map: values at every node, given at the boundary nodes.
 
@@ -137,7 +137,7 @@ def solve_dirichlet(
         raise ValueError(f"unknown solver {solver!r}; use one of {SOLVERS}")
     # Start from the mean of the boundary values (a harmonic map stays inside Theta's hull).
     for c in range(3):
-        x0 = np.full(len(free), float(boundary_values[:, c].mean()))
+        x0 = np.full(len(free), float(boundary_values[:, c].mean())) if start is None else start[free, c].copy()
         x, its = _pcg(k_ff, rhs[:, c], x0, precondition, SOLVE_TOL)
         if its < 0:
             raise MeshingError(f"the {solver} solve did not converge in {-its} iterations")

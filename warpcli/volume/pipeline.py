@@ -14,10 +14,15 @@ from ..outputs import PendingOutputs, write_checked
 from . import _kernels
 from .compose import IdentityMap, TetMap, VolumeMap, VolumeThetaMap
 from .fem import solve_dirichlet
+from .spans import repair_edges, split_flat_spans, split_simplices
 from .surface import Surface, check_pair, read_surface
 from .tetmesh import auto_edge, mesh_polyhedron
 from .theta import Theta, theta_for
 from .volio import Volume, check_volume_output, encode_volume, read_volume
+
+#: Rounds of splitting the edges of tetrahedra untangling leaves inverted,
+#: then solving and untangling again (see `build_tet_map`).
+REPAIR_ROUNDS = 3
 
 #: Interpolations by name.
 INTERPOLATIONS = ("linear", "nearest")
@@ -115,22 +120,34 @@ def build_tet_map(
     """The harmonic map of one cage onto Theta: mesh, P1 Laplacian, Dirichlet solve, then untangled
     (`warpcli.volume.untangle.untangle`) unless ``untangle`` is False.
 
+    Before the solve, the interior edges and faces whose image would lie in
+    Theta's boundary are split (`warpcli.volume.spans.split_flat_spans`).
+    Where untangling leaves tetrahedra inverted or flat, an edge of each is
+    split (`warpcli.volume.spans.repair_edges`) and the map solved and
+    untangled again, up to `REPAIR_ROUNDS` times.
+
     ``info["untangle"]`` says how many tetrahedra were inverted before and
-    after, and how many nodes moved; the map keeps the harmonic values
-    (`TetMap.harmonic`) when any moved.
+    after (in the last round), and how many nodes moved; the map keeps the
+    harmonic values (`TetMap.harmonic`) when any moved.
     """
+    from .untangle import inverted
+
     timings = {} if timings is None else timings
     h = auto_edge(cage, voxel) if edge is None else float(edge)
     t0 = time.perf_counter()
-    mesh = mesh_polyhedron(cage, h, grade=grade)
-    t1 = time.perf_counter()
-    values, info = solve_dirichlet(mesh, mesh.boundary_values(theta.vertices, cage.triangles), solver)
-    t2 = time.perf_counter()
-    timings["mesh"] = timings.get("mesh", 0.0) + t1 - t0
-    timings["solve"] = timings.get("solve", 0.0) + t2 - t1
-    harmonic = None
-    info = {"edge": h, **info}
-    if untangle:
+    mesh, split = split_flat_spans(mesh_polyhedron(cage, h, grade=grade), theta.vertices, cage.triangles)
+    timings["mesh"] = timings.get("mesh", 0.0) + time.perf_counter() - t0
+    repaired = 0
+    start = None
+    for round_ in range(REPAIR_ROUNDS + 1):
+        t1 = time.perf_counter()
+        values, info = solve_dirichlet(mesh, mesh.boundary_values(theta.vertices, cage.triangles), solver, start)
+        t2 = time.perf_counter()
+        timings["solve"] = timings.get("solve", 0.0) + t2 - t1
+        harmonic = None
+        info = {"edge": h, **split, **info}
+        if not untangle:
+            break
         from .untangle import untangle as untangle_map
 
         fixed = np.zeros(mesh.n_vertices, dtype=bool)
@@ -140,6 +157,20 @@ def build_tet_map(
         if len(done.moved):
             harmonic, values = values, done.values
         timings["untangle"] = timings.get("untangle", 0.0) + time.perf_counter() - t2
+        if done.inverted_after == 0 or round_ == REPAIR_ROUNDS:
+            break
+        edges = repair_edges(mesh, inverted(values, mesh.tets))
+        if not len(edges):
+            break
+        t3 = time.perf_counter()
+        # The next solve starts from this one's, the new nodes at their edges' midpoints.
+        solved = values if harmonic is None else harmonic
+        start = np.concatenate([solved, solved[edges].mean(axis=1)])
+        mesh = split_simplices(mesh, list(edges))
+        repaired += len(edges)
+        timings["mesh"] = timings.get("mesh", 0.0) + time.perf_counter() - t3
+    if untangle:
+        info["untangle"]["repaired_edges"] = repaired
     return TetMap(cage, theta, mesh=mesh, values=values, info=info, harmonic=harmonic)
 
 

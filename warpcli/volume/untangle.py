@@ -25,7 +25,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..polygon.predicates import orient3d_sign
-from .tetmesh import tet_volumes
 
 #: A moved node keeps at least this fraction of the largest distance to the
 #: faces of its star that the star allows (the Chebyshev radius of its kernel):
@@ -48,9 +47,9 @@ MAX_PROGRAMS = 10_000
 #: Rings of neighbours the moved set may grow by where a kernel is empty.
 MAX_RINGS = 4
 
-#: A tetrahedron whose four nodes are all on the boundary cannot be helped by
-#: moving nodes; its image is flat (all four on one face of Theta) when its
-#: signed volume is below this times the cube of its longest edge: rounding.
+#: A face of a star whose area is below this times the square of the star's
+#: size is flat (three nodes on one line of Theta): it puts no bound on where
+#: the star's node may go.
 FLAT = 1e-9
 
 #: Oriented faces opposite each corner of a tetrahedron (a, b, c, d): the
@@ -91,48 +90,18 @@ class Untangled:
         }  # fmt: skip
 
 
-def image_volumes(values: NDArray[np.float64], tets: NDArray[np.integer]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Signed volumes of the images of tetrahedra, and the cubes of their longest image edges."""
-    p = values[tets]
-    longest = np.zeros(len(tets))
-    for i, j in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)):
-        longest = np.maximum(longest, ((p[:, i] - p[:, j]) ** 2).sum(axis=1))
-    return tet_volumes(values, tets), longest**1.5
-
-
-def pinned_flat(values: NDArray[np.float64], tets: NDArray[np.integer], fixed: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """Tetrahedra whose image is flat up to rounding wherever their free nodes go.
-
-    Their fixed nodes alone make them flat: all four nodes on one face of
-    Theta where the cage bends, or three of them on one edge of Theta (a
-    bent edge of the cage). Each collapses a sliver of the solid onto a
-    triangle, which does not fold the warp, and no untangling can change it.
-    """
-    vol, cube = image_volumes(values, tets)
-    out = np.abs(vol) <= FLAT * cube
-    square = cube ** (2.0 / 3.0)
-    for k in range(4):
-        f = values[tets[:, _OPPOSITE[k]]]
-        area = np.linalg.norm(np.cross(f[:, 1] - f[:, 0], f[:, 2] - f[:, 0]), axis=1)
-        out &= fixed[tets[:, k]] | (area <= FLAT * square)
-    return out
-
-
-def inverted(values: NDArray[np.float64], tets: NDArray[np.integer], fixed: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """Tetrahedra whose image is inverted or flat, less those `pinned_flat` by their fixed nodes.
+def inverted(values: NDArray[np.float64], tets: NDArray[np.integer]) -> NDArray[np.bool_]:
+    """Tetrahedra whose image is inverted or flat: every one that does not keep its orientation.
 
     Orientation is decided exactly (`warpcli.polygon.predicates.orient3d_sign`):
     a float volume can have the wrong sign on a near-flat tetrahedron, and a
-    certificate that can miss an inversion is no certificate. A corner that
-    is not finite counts as inverted.
+    certificate that can miss an inversion is no certificate. A flat image
+    counts, whatever makes it flat (its fixed nodes alone, on one face or
+    edge of Theta, included): it sends a solid sliver onto a triangle, so the
+    map is not one-to-one there. A corner that is not finite counts as
+    inverted.
     """
-    positive = tet_signs(values, tets) > 0
-    candidates = np.flatnonzero(~positive)
-    out = np.zeros(len(tets), dtype=bool)
-    if candidates.size:  # the tolerance of pinned_flat is only asked about where the sign fails
-        sub = tets[candidates]
-        out[candidates] = ~pinned_flat(values, sub, fixed)
-    return out
+    return ~(tet_signs(values, tets) > 0)
 
 
 def tet_signs(values: NDArray[np.float64], tets: NDArray[np.integer]) -> NDArray[np.float64]:
@@ -183,7 +152,7 @@ def untangle(
     x = np.array(values, dtype=np.float64)
     tets = np.asarray(tets, dtype=np.int64)
     fixed = np.asarray(fixed, dtype=bool)
-    bad = np.flatnonzero(inverted(x, tets, fixed))
+    bad = np.flatnonzero(inverted(x, tets))
     before = len(bad)
     start, incident = _incidence(tets, len(x))
     moved: set[int] = set()
@@ -204,7 +173,7 @@ def untangle(
             if new is not None:
                 x[v] = new
                 moved.add(v)
-        now = np.flatnonzero(inverted(x, tets, fixed))
+        now = np.flatnonzero(inverted(x, tets))
         if len(now) < len(bad):
             ring = stalled = 0
         else:
