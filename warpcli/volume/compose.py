@@ -330,6 +330,12 @@ class VoxelGrid:
     def to_world(self, index: NDArray[np.float64]) -> NDArray[np.float64]:
         return index @ self.affine[:3, :3].T + self.affine[:3, 3]
 
+    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The world box (lowest and highest corners) of the voxels, each a unit cube of index space about its centre."""
+        corners = np.array(np.meshgrid(*[[-0.5, n - 0.5] for n in self.shape], indexing="ij")).reshape(3, -1).T
+        world = self.to_world(corners)
+        return world.min(axis=0), world.max(axis=0)
+
     def centres(self, flat: NDArray[np.int64]) -> NDArray[np.float64]:
         """World coordinates of the voxel centres with these flat indices."""
         nx, ny, _ = self.shape

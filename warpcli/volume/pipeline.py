@@ -16,7 +16,7 @@ from .compose import IdentityMap, TetMap, VolumeMap, VolumeThetaMap
 from .fem import solve_dirichlet
 from .spans import repair_edges, split_flat_spans, split_simplices
 from .surface import Surface, check_pair, read_surface
-from .tetmesh import auto_edge, mesh_polyhedron
+from .tetmesh import Region, auto_edge, graded_from, mesh_polyhedron
 from .theta import Theta, theta_for
 from .volio import Volume, check_volume_output, encode_volume, read_volume
 
@@ -48,6 +48,7 @@ def build_map(
     solver: str = "auto",
     grade: bool = True,
     untangle: bool = True,
+    region: Region | None = None,
 ) -> VolumeMap:
     """Build f between two checked cages: choose Theta, mesh, solve, untangle.
 
@@ -70,6 +71,10 @@ def build_map(
         Move the images of the nodes of inverted tetrahedra into the kernels
         of their stars (`warpcli.volume.untangle`); False keeps the discrete
         harmonic maps as they are.
+    region : (lo, hi) pair of (3,) arrays, or None
+        The box the map is used in (a volume's, `VoxelGrid.bounds`): a cage
+        reaching far beyond it is meshed graded from it
+        (`warpcli.volume.tetmesh.graded_from`).
 
     Returns
     -------
@@ -98,8 +103,9 @@ def build_map(
         else:
             maps.append(
                 build_tet_map(
-                    cage, th, edge=edge, voxel=voxel, solver=solver, grade=grade, untangle=untangle, timings=timings
-                )
+                    cage, th, edge=edge, voxel=voxel, solver=solver, grade=grade, untangle=untangle, timings=timings,
+                    region=region,
+                )  # fmt: skip
             )
     result = VolumeMap(maps[0], maps[1])
     result.timings.update(timings)
@@ -116,6 +122,7 @@ def build_tet_map(
     grade: bool = True,
     untangle: bool = True,
     timings: dict | None = None,
+    region: Region | None = None,
 ) -> TetMap:
     """The harmonic map of one cage onto Theta: mesh, P1 Laplacian, Dirichlet solve, then untangled
     (`warpcli.volume.untangle.untangle`) unless ``untangle`` is False.
@@ -133,9 +140,10 @@ def build_tet_map(
     from .untangle import inverted
 
     timings = {} if timings is None else timings
-    h = auto_edge(cage, voxel) if edge is None else float(edge)
+    h = auto_edge(cage, voxel, region) if edge is None else float(edge)
     t0 = time.perf_counter()
-    mesh, split = split_flat_spans(mesh_polyhedron(cage, h, grade=grade), theta.vertices, cage.triangles)
+    mesh = mesh_polyhedron(cage, h, grade=grade, region=region)
+    mesh, split = split_flat_spans(mesh, theta.vertices, cage.triangles)
     timings["mesh"] = timings.get("mesh", 0.0) + time.perf_counter() - t0
     repaired = 0
     start = None
@@ -145,7 +153,7 @@ def build_tet_map(
         t2 = time.perf_counter()
         timings["solve"] = timings.get("solve", 0.0) + t2 - t1
         harmonic = None
-        info = {"edge": h, **split, **info}
+        info = {"edge": h, "graded_from_region": graded_from(cage, region), **split, **info}
         if not untangle:
             break
         from .untangle import untangle as untangle_map
@@ -314,7 +322,7 @@ def warp_volume_file(
     volume = read_volume(input)
     voxel = float(np.cbrt(abs(np.linalg.det(volume.grid.affine[:3, :3]))))
     t0 = time.perf_counter()
-    vmap = build_map(a, b, theta, edge=edge, voxel=voxel, solver=solver, untangle=untangle)
+    vmap = build_map(a, b, theta, edge=edge, voxel=voxel, solver=solver, untangle=untangle, region=volume.grid.bounds())
     vmap.timings["build"] = time.perf_counter() - t0
     if check:
         vmap.check_bijective()
