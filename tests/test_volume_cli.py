@@ -130,3 +130,28 @@ def test_the_docs_example_is_one_to_one(tmp_path):
     det = det[np.isfinite(det)]
     assert len(det) > 30000 and det.min() > 0
     assert np.abs(vm.forward(pre) - p).max() < 1e-9
+
+
+@pytest.mark.parametrize(
+    ("dtype", "value", "ok"),
+    [("uint8", "nan", False), ("uint8", "300", False), ("uint8", "255", True), ("uint16", "-1", False),
+     ("int16", "-32768", True), ("uint8", "inf", False), ("float32", "nan", True), ("float32", "-inf", True),
+     ("float32", "1e30", True)],
+)  # fmt: skip
+def test_the_background_must_be_a_value_of_the_volumes_type(tmp_path, dtype, value, ok):
+    data = (np.arange(8**3).reshape(8, 8, 8) % 50).astype(dtype)
+    tifffile.imwrite(tmp_path / "in.tif", data, photometric="minisblack")
+    v, f = box(1, (1.0, 1.0, 1.0), (7.0, 7.0, 7.0))
+    write_obj(tmp_path / "a.obj", v, f)
+    write_obj(tmp_path / "b.obj", v * 0.8 + 1.0, f)
+    code, err = run_cli(["volume", tmp_path / "in.tif", tmp_path / "out.tif", "--src", tmp_path / "a.obj", "--dst", tmp_path / "b.obj", "--background", value])
+    if not ok:
+        assert code == 2 and err.count("\n") == 1 and "in.tif" in err and "--background" in err and dtype in err, err
+        assert not (tmp_path / "out.tif").exists()
+        return
+    assert code == 0, err
+    out = tifffile.imread(tmp_path / "out.tif")
+    assert out.dtype == np.dtype(dtype)
+    corner = out[0, 0, 0]  # outside the target
+    want = np.array(float(value)).astype(dtype)
+    assert (np.isnan(corner) and np.isnan(want)) or corner == want

@@ -203,7 +203,8 @@ def warp_volume(
     interpolation : {"linear", "nearest"}
         Trilinear or nearest-voxel resampling.
     background : float
-        The value outside the target (and where a pre-image falls outside the input volume).
+        The value outside the target (and where a pre-image falls outside
+        the input volume): a value of the volume's type (`check_background`).
 
     Returns
     -------
@@ -211,6 +212,7 @@ def warp_volume(
     """
     if interpolation not in INTERPOLATIONS:
         raise InputError(f"unknown interpolation {interpolation!r}; use one of {', '.join(INTERPOLATIONS)}")
+    check_background(background, volume.data.dtype)
     t0 = time.perf_counter()
     data = volume.data
     dtype = data.dtype
@@ -235,6 +237,22 @@ def warp_volume(
     timings = dict(vmap.timings)
     timings["warp"] = time.perf_counter() - t0
     return VolumeWarpResult(Volume(out, grid, volume.format, volume.header), vmap, timings, inside)
+
+
+def check_background(background: float, dtype: np.dtype, name: str = "the volume") -> None:
+    """Refuse a background value the volume's type cannot hold: NaN or infinite for an integer
+    type, or outside its range (a floating type takes any value, NaN included, as NIfTI masks use).
+
+    Raises
+    ------
+    InputError
+    """
+    value = float(background)
+    dtype = np.dtype(dtype)
+    if dtype.kind in "iub":
+        lo, hi = (0, 1) if dtype.kind == "b" else (np.iinfo(dtype).min, np.iinfo(dtype).max)
+        if not (lo <= value <= hi):  # NaN fails too
+            raise InputError(f"{name}: --background {background!r} is not a value of its type {dtype.name} ({lo}..{hi})")
 
 
 def _cast(values: np.ndarray, dtype: np.dtype) -> np.ndarray:
@@ -320,6 +338,7 @@ def warp_volume_file(
     b = read_surface(dst)
     check_pair(a, b)
     volume = read_volume(input)
+    check_background(background, volume.data.dtype, os.fspath(input))
     voxel = float(np.cbrt(abs(np.linalg.det(volume.grid.affine[:3, :3]))))
     t0 = time.perf_counter()
     vmap = build_map(a, b, theta, edge=edge, voxel=voxel, solver=solver, untangle=untangle, region=volume.grid.bounds())
