@@ -209,3 +209,29 @@ def test_convexity_and_concave_edges():
     assert not is_convex(blob)
     assert is_convex(surface_from_arrays(*tetrahedron()))
     assert triangulated([[0, 1, 2, 3]]).tolist() == [[0, 1, 2], [0, 2, 3]]
+
+
+def test_a_vertex_moved_onto_another_is_a_touch_refused_in_one_line():
+    # The float crossing test cannot see a touch; TetGen merged the two points and the run
+    # failed late with "TetGen moved the boundary nodes" (exit 1). Vertices not joined by an edge;
+    # a move onto a vertex in line with a triangle's edge makes that triangle degenerate instead.
+    from warpcli.volume.surface import SurfaceError, surface_from_arrays
+
+    rng = np.random.default_rng(0)
+    v, f = box(3)
+    tri = triangulated(f)
+    joined = {tuple(sorted(e)) for t in tri.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    said = []
+    while len(said) < 12:
+        a, b = sorted(int(x) for x in rng.choice(len(v), 2, replace=False))
+        if (a, b) in joined:
+            continue
+        u = v.copy()
+        u[a] = u[b]
+        with pytest.raises(SurfaceError) as err:
+            surface_from_arrays(u, tri, "touch.obj")
+        text = str(err.value)
+        assert text.startswith("touch.obj: ") and "\n" not in text
+        assert f"vertices {a} and {b} are at the same point" in text or "is degenerate" in text, text
+        said.append("same point" in text)
+    assert sum(said) >= 6

@@ -436,8 +436,8 @@ def check_surface(surface: Surface, *, intersections: bool = True) -> None:
         or more than two (not manifold), two faces running the same way along
         an edge (inconsistent orientation), a vertex where two sheets touch,
         several parts, a genus other than 0 (Euler characteristic), a
-        degenerate face, inward orientation (negative volume), or two faces
-        that cross.
+        degenerate face, inward orientation (negative volume), two vertices
+        at one point (touching), or two faces that cross.
     """
     name = surface.name
     v, t = surface.vertices, surface.triangles
@@ -477,6 +477,7 @@ def check_surface(surface: Surface, *, intersections: bool = True) -> None:
             "reverse the vertex order of every face"
         )
     if intersections:
+        _check_coincident(surface)
         from ._kernels import first_intersection
 
         pair = first_intersection(v, t)
@@ -487,6 +488,21 @@ def check_surface(surface: Surface, *, intersections: bool = True) -> None:
                 f"{name}: faces {int(surface.face_of[i])} and {int(surface.face_of[j])} intersect near "
                 f"({where[0]:.6g}, {where[1]:.6g}, {where[2]:.6g}); the surface must not cross itself"
             )
+
+
+def _check_coincident(surface: Surface) -> None:
+    """Two vertices at one point: the surface touches itself there (a crossing that only touches,
+    which the float crossing test does not see, and on which TetGen merges the points)."""
+    v = surface.vertices
+    order = np.lexsort(v.T[::-1])
+    same = np.flatnonzero((v[order[1:]] == v[order[:-1]]).all(axis=1))
+    if len(same):
+        i, j = sorted((int(order[same[0]]), int(order[same[0] + 1])))
+        p = v[i]
+        raise SurfaceError(
+            f"{surface.name}: vertices {i} and {j} are at the same point ({p[0]:.6g}, {p[1]:.6g}, {p[2]:.6g}); "
+            "the surface must not touch itself"
+        )
 
 
 def _check_edges(surface: Surface) -> tuple[NDArray[np.int64], NDArray[np.int64]]:

@@ -228,8 +228,11 @@ def mesh_polyhedron(surface: Surface, edge: float, *, grade: bool = True, region
     if not (sign > 0).all():
         raise MeshingError(f"{surface.name}: TetGen made {int((~(sign > 0)).sum())} degenerate tetrahedra")
     nb = len(v)
-    if not np.allclose(nodes[:nb], v, rtol=0, atol=0):
-        raise MeshingError(f"{surface.name}: TetGen moved the boundary nodes")
+    if len(nodes) < nb or not np.array_equal(nodes[:nb], v):
+        raise SurfaceError(
+            f"{surface.name}: TetGen moved or merged the boundary nodes; the surface probably touches itself "
+            "where the checks could not tell (a vertex exactly on another face)"
+        )
     tri_of, bary = _boundary_places(surface, v, tri, owner)
     on_boundary = np.unique(boundary_faces(tets))
     extra = on_boundary[on_boundary >= nb]
