@@ -34,7 +34,7 @@ from .pipeline import read_header_or_none, write_like
 from .plan import SamplingPlan, background_values, check_paste, plan_for
 from .polygon import Polygon
 from .polygon.partition import Partition, check_shapes, read_shape
-from .raster.imageio import check_image_output, read_header, read_image
+from .raster.imageio import check_image_output, check_writes, read_header, read_image
 from .tiled import in_parts, warp_file_tiled
 
 __all__ = [
@@ -376,10 +376,13 @@ def warp_one(
     opts, fmap = plans.opts, plans.fmap
     try:
         header = read_header_or_none(inp) if fmap is not None else None
+        if header is not None:
+            check_writes(out, header.channels, header.dtype, opts.dtype)
         if header is not None and maps is None and in_parts(inp, header, opts.size, None):
             warp_file_tiled(inp, out, fmap.src, fmap.dst, opts, fmap=fmap, header=header)
             return BatchItem(inp, out)
         image = read_image(inp)
+        check_writes(out, image.pixels.shape[2], image.pixels.dtype, opts.dtype)
         shape = opts.size if opts.size is not None else (image.width, image.height)
         check_paste(opts.outside, shape, (image.width, image.height), inp)
         try:  # a frame with other channels than the background's: name the frame
@@ -1099,6 +1102,7 @@ def apply_map_sequence(
         mp, inp, out = task
         try:
             image = read_image(inp)
+            check_writes(out, image.pixels.shape[2], image.pixels.dtype, opts.dtype)
             try:
                 st = os.stat(mp)
                 key = (st.st_dev, st.st_ino, st.st_mtime_ns, image.width, image.height)

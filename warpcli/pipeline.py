@@ -38,6 +38,7 @@ from .raster.imageio import (
     ImageHeader,
     RasterImage,
     check_image_output,
+    check_writes,
     convert_pixels,
     output_format,
     read_header,
@@ -663,6 +664,8 @@ def warp_file(
         for path in later:
             check_image_output(path, inputs=inputs)
         header = header or read_header_or_none(input_path)
+        if header is not None:
+            check_writes(output_path, header.channels, header.dtype, opts.dtype)
         if early is not None and not early.fits(header, opts):
             early.cancel()
             early = None

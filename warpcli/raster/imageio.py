@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 import re
@@ -422,6 +423,53 @@ def check_image_output(path: str | os.PathLike[str], inputs: tuple[str | os.Path
         _oiio_error(oiio)
         ext = os.path.splitext(name)[1] or "(none)"
         raise ImageInputError(f"{name}: unknown output image format for extension {ext}")
+
+
+#: Formats whose writers the tests exercise for every type and channel count a warp writes:
+#: `check_writes` tries the others on a small image before any work.
+_TRUSTED_FORMATS = ("png", "tiff", "openexr", "jpeg")
+
+
+def check_writes(path: str | os.PathLike[str], channels: int, dtype, output_dtype: str | None = None) -> None:
+    """Check before any work that ``path``'s format takes an image of ``channels`` and ``dtype``.
+
+    Some of OpenImageIO's writers take only some images (a ZFILE one channel), or
+    write files their own reader cannot read (JPEG 2000, in some builds): found
+    only once the work was done, that was a write failure (exit 1). A 4 x 4 image
+    of zeros of the same channels and type (``output_dtype``, a `--dtype` name,
+    if given) is written to a temporary directory first, through the same path
+    as the output; the answer is kept for the process.
+
+    Raises
+    ------
+    ImageInputError
+        Naming ``path`` and what went wrong.
+    """
+    fmt = output_format(path)
+    if fmt in _TRUSTED_FORMATS or not fmt:
+        return
+    target = np.dtype(DTYPES[output_dtype]) if output_dtype is not None else np.dtype(dtype)
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    failure = _write_fails(ext, int(channels), target.str)
+    if failure is not None:
+        raise ImageInputError(
+            f"{os.fspath(path)}: OpenImageIO cannot write a {channels}-channel {target.name} image as {fmt} here: {failure}"
+        )
+
+
+@functools.lru_cache(maxsize=64)
+def _write_fails(ext: str, channels: int, dtype: str) -> str | None:
+    """What writing a small image of ``channels`` and ``dtype`` with extension ``ext`` says (None: it works)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="warpcli-probe-") as folder:
+        probe = os.path.join(folder, "probe" + ext)
+        try:
+            write_image(probe, RasterImage(np.zeros((4, 4, channels), dtype=np.dtype(dtype))))
+        except ImageIOError as err:
+            text = str(err).replace(probe + ": ", "").replace(probe, "a test image")
+            return text.removeprefix("cannot write: ")
+    return None
 
 
 def write_image(path: str | os.PathLike[str], image: RasterImage, rows: Iterable[tuple[int, int]] | None = None) -> None:
