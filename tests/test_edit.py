@@ -1197,3 +1197,30 @@ def test_the_redirect_file_opens_the_page(server):
                "Upgrade-Insecure-Requests": "1"}  # fmt: skip
     status, body = request(server, "GET", f"/?token={server.token}", headers=headers)
     assert status == 200 and b"editor.js?token=" in body
+
+
+def test_sigterm_removes_the_redirect_file(tmp_path):
+    # A SIGTERM ends `warp edit` at once (no unwinding, warpcli.cli.run): the private page with the
+    # token stayed in the temporary directory. $BROWSER=true stands in for the browser.
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 16, 12)
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    env = {**os.environ, "TMPDIR": str(temp), "BROWSER": "true"}
+    proc = subprocess.Popen([sys.executable, "-m", "warpcli", "edit", image], env=env, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not list(temp.glob("warp-edit-*/open.html")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert list(temp.glob("warp-edit-*/open.html")), "the page was never written"
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143 and "terminated" in err, err
+    assert not list(temp.glob("warp-edit-*")), "the redirect page was left behind"

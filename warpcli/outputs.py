@@ -43,6 +43,8 @@ PENDING_MARKER = ".warpcli-pending-"
 # Temporary and pending files that exist now, for `remove_temporaries` (a
 # SIGTERM ends the process at once, without unwinding: see `warpcli.cli.run`).
 _live: set[str] = set()
+# Private directories of this process (emptied by the removals above), removed after them.
+_live_dirs: set[str] = set()
 # While a run's pending outputs are renamed into place (all or none), an end
 # asked for by a signal waits until the renames are done.
 _renaming = 0
@@ -106,6 +108,22 @@ def remove_temporaries() -> None:
         except OSError:
             pass
     _live.clear()
+    for name in list(_live_dirs):
+        try:
+            os.rmdir(name)
+        except OSError:
+            pass
+    _live_dirs.clear()
+
+
+def track_temporary(path: str, *, directory: bool = False, keep: bool = True) -> None:
+    """Have `remove_temporaries` remove ``path`` (a file, or an emptied ``directory``) if the process
+    ends at once (SIGTERM); ``keep=False``: not any more (the caller removed it)."""
+    where = _live_dirs if directory else _live
+    if keep:
+        where.add(path)
+    else:
+        where.discard(path)
 
 
 def end_when_consistent(end) -> None:

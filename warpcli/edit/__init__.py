@@ -100,7 +100,11 @@ def serve(
     finally:
         server.shutdown()
         if page is not None:
+            from ..outputs import track_temporary
+
             shutil.rmtree(os.path.dirname(page), ignore_errors=True)
+            track_temporary(page, keep=False)
+            track_temporary(os.path.dirname(page), directory=True, keep=False)
 
 
 def redirect_page(url: str) -> str:
@@ -110,7 +114,8 @@ def redirect_page(url: str) -> str:
     it on its command line (``xdg-open URL``, ``firefox URL``), where every
     local user can read it, token and all. The browser is started with this
     file instead, in a directory only the user can enter (0700), readable by
-    the user alone (0600). `serve` removes the directory when it stops.
+    the user alone (0600). `serve` removes the directory when it stops, and a
+    SIGTERM's end removes it too (`warpcli.outputs.track_temporary`).
 
     Parameters
     ----------
@@ -122,8 +127,13 @@ def redirect_page(url: str) -> str:
     str
         The page's absolute path.
     """
+    from ..outputs import track_temporary
+
     directory = tempfile.mkdtemp(prefix="warp-edit-")  # 0700, a name no other user can take
     path = os.path.join(directory, "open.html")
+    # A SIGTERM ends `warp edit` at once (warpcli.cli.run): the page with the token goes with it.
+    track_temporary(directory, directory=True)
+    track_temporary(path)
     text = _REDIRECT.format(attr=html.escape(url, quote=True), script=json.dumps(url).replace("<", "\\u003c"))
     try:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o600)
