@@ -102,18 +102,13 @@ def remove_temporaries() -> None:
 
     Safe in a signal handler: no lock, no allocation of note.
     """
-    for name in list(_live):
-        try:
-            os.unlink(name)
-        except OSError:
-            pass
-    _live.clear()
-    for name in list(_live_dirs):
-        try:
-            os.rmdir(name)
-        except OSError:
-            pass
-    _live_dirs.clear()
+    for names, remove in ((_live, os.unlink), (_live_dirs, os.rmdir)):  # the files first: that empties the folders
+        for name in list(names):
+            try:
+                remove(name)
+            except OSError:
+                pass
+        names.clear()
 
 
 def track_temporary(path: str, *, directory: bool = False, keep: bool = True) -> None:
