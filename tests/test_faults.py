@@ -334,7 +334,10 @@ def test_formats_that_cannot_be_written_in_strips_are_refused_first(tmp_path):
     results = _strips(tmp_path, 0, 0, formats)
     assert [r[0] for r in results[:-1]] == formats
     for ext, kind, msg in results[:-1]:
-        assert kind == "ImageInputError" and "cannot be written in parts" in msg, (ext, msg)
+        # (This OpenImageIO's JPEG 2000 writer makes files its reader cannot open: refused as a format
+        # that cannot hold the image at all, by `check_writes`, which comes first.)
+        said = "cannot write a 3-channel uint8 image as jpeg2000" if ext == "jp2" else "cannot be written in parts"
+        assert kind == "ImageInputError" and said in msg, (ext, msg)
     assert sorted(os.listdir(tmp_path)) == ["f.json", "in.png"]
 
 

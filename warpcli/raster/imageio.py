@@ -435,10 +435,14 @@ def check_writes(path: str | os.PathLike[str], channels: int, dtype, output_dtyp
 
     Some of OpenImageIO's writers take only some images (a ZFILE one channel), or
     write files their own reader cannot read (JPEG 2000, in some builds): found
-    only once the work was done, that was a write failure (exit 1). A 4 x 4 image
-    of zeros of the same channels and type (``output_dtype``, a `--dtype` name,
-    if given) is written to a temporary directory first, through the same path
-    as the output; the answer is kept for the process.
+    only once the work was done, that was a write failure (exit 1). A 4 x 4 ramp
+    and 4 x 4 noise of the same channels and type (``output_dtype``, a `--dtype`
+    name, if given) are written to a temporary directory first, through the same
+    path as the output, after the ramp as TIFF (if that fails too, the disk is at
+    fault, not the format, and nothing is refused); the format is refused only if
+    neither is written. The answer is kept for the process. A writer that fails
+    on some images and not others (JPEG XL here) still fails at the end, where
+    the written file is read back.
 
     Raises
     ------
@@ -462,14 +466,37 @@ def _write_fails(ext: str, channels: int, dtype: str) -> str | None:
     """What writing a small image of ``channels`` and ``dtype`` with extension ``ext`` says (None: it works)."""
     import tempfile
 
-    with tempfile.TemporaryDirectory(prefix="warpcli-probe-") as folder:
-        probe = os.path.join(folder, "probe" + ext)
-        try:
-            write_image(probe, RasterImage(np.zeros((4, 4, channels), dtype=np.dtype(dtype))))
-        except ImageIOError as err:
-            text = str(err).replace(probe + ": ", "").replace(probe, "a test image")
-            return text.removeprefix("cannot write: ")
-    return None
+    kind = np.dtype(dtype)
+    # Two images, and a format refused only if neither is written: this OpenImageIO's JPEG XL
+    # writer makes files its reader refuses for some images (a constant one, a one-channel 8-bit
+    # ramp, 32-bit noise) and not others; a format that cannot hold the type or channels at all
+    # fails on both.
+    ramp = np.arange(16 * channels, dtype=np.float64).reshape(4, 4, channels) / (16 * channels - 1)
+    noise = np.random.default_rng(0).random((4, 4, channels))
+    images = [from_unit(ramp, kind), from_unit(noise, kind)]
+    try:
+        folder = tempfile.mkdtemp(prefix="warpcli-probe-")
+    except OSError:
+        return None  # no room to try: the real write will say
+    try:
+        try:  # the same image as TIFF, which takes every image: if that fails, the disk does, not the format
+            write_image(os.path.join(folder, "control.tif"), RasterImage(images[0]))
+        except ImageIOError:
+            return None
+        said = None
+        for k, pixels in enumerate(images):
+            probe = os.path.join(folder, f"probe{k}{ext}")
+            try:
+                write_image(probe, RasterImage(pixels))
+                return None
+            except ImageIOError as err:
+                text = str(err).replace(probe + ": ", "").replace(probe, "a test image")
+                said = said or text.removeprefix("cannot write: ")
+        return said
+    finally:
+        import shutil
+
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def write_image(path: str | os.PathLike[str], image: RasterImage, rows: Iterable[tuple[int, int]] | None = None) -> None:
