@@ -213,3 +213,32 @@ def test_corners_are_fancy_indexings_values_and_the_grading_centroids_are_means(
         want = v[t].mean(axis=1)
     assert np.array_equal(np.isnan(c), np.isnan(want))
     assert c[~np.isnan(c)].tobytes() == want[~np.isnan(want)].tobytes()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_meshes_scale_with_the_polygon_exactly_whatever_the_units(seed):
+    # Triangle read a switch's area as its digits and point only: an area below 1e-4, written
+    # as 5e-05, was an area of 5, and a polygon in small units (mm, or 0..1) got a mesh of two
+    # triangles. Scaled by powers of two (exact in floating point, and Triangle's predicates
+    # are exact), the polygon and its area bound give the same mesh, scaled.
+    from nasty import star_like
+
+    from warpcli.maps.fem.mesh import mesh_polygon
+
+    points = star_like(np.random.default_rng(seed), 300.0)
+    base = mesh_polygon(Polygon(points), 40.0, grade=False)
+    assert base.n_triangles > 500
+    for k in (-12, -10, -3, 4):  # areas from 2.4e-6 (below 1e-4: written with an exponent by %g) up
+        s = 2.0**k
+        mesh = mesh_polygon(Polygon(points * s), 40.0 * s * s, grade=False)
+        assert np.array_equal(mesh.triangles, base.triangles), k
+        assert np.array_equal(mesh.vertices, base.vertices * s), k
+
+
+def test_the_switch_numbers_are_decimals_triangle_reads():
+    from warpcli._switches import decimal
+
+    rng = np.random.default_rng(1)
+    for x in np.concatenate([10.0 ** rng.uniform(-40, 20, 200), [1e-4, 9.99e-5, 1.0, 0.1, 123.456]]):
+        text = decimal(float(x))
+        assert set(text) <= set("0123456789.") and float(text) == x, (x, text)

@@ -47,6 +47,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._arrays import median
+from .._switches import decimal
 from ..errors import PolygonError
 from ..options import outline_file
 from .messages import format_number, format_point
@@ -296,7 +297,7 @@ def _steiner_triangles(
     cage_edges = np.hypot(*(sv[seg[:, 1]] - sv[seg[:, 0]]).T)[: n_cage]
     # Level 1: a quality mesh alone (graded by the boundary: fine near the cages, coarse far off); then
     # triangles of at most the median cage edge's square, and a quarter of it.
-    area = "" if level == 1 else f"a{median(cage_edges) ** 2 / 4.0 ** (level - 2):.17g}"
+    area = "" if level == 1 else f"a{decimal(median(cage_edges) ** 2 / 4.0 ** (level - 2))}"
     try:
         t = tr.triangulate({"vertices": sv, "segments": seg, "holes": holes}, f"pq25{area}YYQ")
     except Exception:  # triangle raises bare RuntimeErrors on geometry it cannot take

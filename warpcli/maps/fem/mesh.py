@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from ..._arrays import sorted_unique
 from ..._cached import cached_property
+from ..._switches import decimal
 from ...errors import InputError, MeshingError, PolygonError
 from ...polygon import Polygon
 from ...simplicial import corners
@@ -264,7 +265,7 @@ def mesh_polygon(
         if graded:
             out = _region_graded(triangulate, tri_in, polygon, max_area, reflex, region)  # type: ignore[arg-type]
         else:
-            out = triangulate(tri_in, f"pq{MIN_ANGLE:g}a{max_area:.17g}Q")
+            out = triangulate(tri_in, f"pq{MIN_ANGLE:g}a{decimal(max_area)}Q")
         if len(reflex) and not graded:
             # Size field: edge length growing linearly with the distance to the
             # nearest reflex vertex, from _GRADE_MIN up to the nominal length.
@@ -361,7 +362,7 @@ def _region_graded(triangulate, tri_in: dict, polygon: Polygon, max_area: float,
     """
     h = math.sqrt(4.0 * max_area / math.sqrt(3.0))
     coarse = max(max_area, abs(polygon.signed_area) / 2000.0)
-    out = triangulate(tri_in, f"pq{MIN_ANGLE:g}a{coarse:.17g}Q")
+    out = triangulate(tri_in, f"pq{MIN_ANGLE:g}a{decimal(coarse)}Q")
     lo = np.array(region[:2])
     hi = np.array(region[2:])
     for _ in range(_REGION_PASSES):
