@@ -155,7 +155,9 @@ def warp_points(
         cage mesh's, `warpcli.polygon.partition.read_shape`).
     fmap : BijectiveMap, WarpResult or PolygonTransform, optional
         The map an image was warped with, instead of ``src`` and ``dst``:
-        the points then move exactly as that image's pixels did.
+        the points then move exactly as that image's pixels did (a
+        retouch's result, ``within=``: points outside its outline stay where
+        they are, as the image does there, and count as inside).
     inverse : bool
         Map points of the warped image back to the source.
     options : MapOptions or None
@@ -188,6 +190,11 @@ def warp_points(
     pts = _as_points(points, "points", 2)
     out = fm.inverse(pts) if inverse else fm.forward(pts)
     inside = np.isfinite(out).all(axis=1)
+    if getattr(fmap, "within", None) is not None:
+        # A retouch's result: outside the outline the image is the input's own, and so are the
+        # points (as `warp points --within`).
+        out[~inside] = pts[~inside]
+        return WarpedPoints(out, np.ones(len(pts), dtype=bool))
     out[~inside] = np.nan
     return WarpedPoints(out, inside)
 
@@ -290,7 +297,14 @@ def _source_points(where: Any, size: tuple[int, int] | None) -> NDArray[np.float
         return where.pull.full_points()
     pull = getattr(where, "pull", None)
     if pull is not None and hasattr(pull, "full_points") and size is None:
-        return pull.full_points()  # a WarpResult: the output it was rendered at
+        pts = pull.full_points()  # a WarpResult: the output it was rendered at
+        if getattr(where, "within", None) is not None:
+            # A retouch: outside its outline the output is the input's own pixel (the same size).
+            none = np.isnan(pts[..., 0])
+            j, i = np.nonzero(none)
+            pts[j, i, 0] = i + 0.5
+            pts[j, i, 1] = j + 0.5
+        return pts
     fm = map_of(where)
     if size is None:
         raise InputError("warping labels through a map needs the output size (size=(width, height))")
@@ -327,7 +341,11 @@ def warp_labels(
     background : scalar
         The label of pixels without a pre-image (0: background), also where a
         warp with ``outside="input"`` pasted the warp over its input (the
-        labels are not pasted: ``warp --labels`` refuses that option).
+        labels are not pasted: the input's labels would stay where the
+        polygon moved from; ``warp --labels`` refuses that option). A
+        retouch's result (``within=``) is the exception: its map covers the
+        whole outline, and outside it each pixel keeps its own label, as the
+        image does.
 
     Returns
     -------

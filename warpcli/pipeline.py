@@ -595,9 +595,10 @@ def warp_file(
     stage = progress or (lambda name: None)
     inputs = tuple(p for p in (input_path, src_path, dst_path, opts.map.theta_file, opts.within_file) if p is not None)
     labels = [(label_in, label_out) for label_in, label_out in labels]
-    if labels and opts.outside == "input":
-        given = "--within" if opts.within is not None else "--outside input"
-        raise InputError(f"{os.fspath(labels[0][0])}: labels are warped onto the background, not with {given}")
+    if labels and opts.outside == "input" and opts.within is None:
+        # (A retouch's map covers its whole outline, and outside it each pixel keeps its own label:
+        # `warp_labels`. A paste over the input would keep the labels where the polygon moved from.)
+        raise InputError(f"{os.fspath(labels[0][0])}: labels are warped onto the background, not with --outside input")
     for _, label_out in labels:
         check_labels_format(label_out)
     inputs = (*inputs, *(label_in for label_in, _ in labels))
