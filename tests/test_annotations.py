@@ -131,12 +131,46 @@ def test_boxes_partly_or_wholly_outside():
     out = warp_boxes(boxes, src, dst)
     assert out.inside.tolist() == [True, False, False]
     assert np.isfinite(out.boxes[:2]).all() and np.isnan(out.boxes[2]).all()
-    # The box is the bounds of the outline's points that have an image.
+    # The box holds the outline's points that have an image.
     ok = np.isfinite(out.outlines[1, :, 0])
-    np.testing.assert_array_equal(out.boxes[1], np.r_[out.outlines[1, ok].min(0), out.outlines[1, ok].max(0)])
+    assert (out.boxes[1, :2] <= out.outlines[1, ok].min(0)).all() and (out.boxes[1, 2:] >= out.outlines[1, ok].max(0)).all()
     outline = box_outlines(boxes[:1], 4)
     assert outline.shape == (1, 16, 2)
     np.testing.assert_array_equal(outline[0, [0, 4, 8, 12]], [[60, 60], [70, 60], [70, 70], [60, 70]])
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_box_crossing_the_polygon_is_the_bounds_of_the_image_of_its_part_inside(seed):
+    # The image of a box is that of its part inside SRC. Reference, independent of the boxes' code:
+    # a dense grid of the box's points inside SRC (even-odd test written here), mapped one by one.
+    # It used to be the outline's part alone: a box round the whole polygon was NaN, and one
+    # crossing an edge missed the edge's image (the bounds of a mask warped alike disagreed).
+    src, dst = _pair(seed)
+    fmap = BijectiveMap.between(Polygon(src), Polygon(dst))
+    rng = np.random.default_rng(seed)
+    lo, hi = src.min(axis=0), src.max(axis=0)
+    boxes = [np.r_[lo - 5, hi + 5]]  # round the whole polygon
+    while len(boxes) < 8:
+        a, b = rng.uniform(lo - 20, hi + 20, (2, 2))
+        boxes.append(np.r_[np.minimum(a, b), np.maximum(a, b)])
+    out = warp_boxes(np.array(boxes), fmap=fmap, samples=64)
+    np.testing.assert_allclose(out.boxes[0], np.r_[dst.min(axis=0), dst.max(axis=0)], rtol=0, atol=1e-6)
+    size = float(np.ptp(dst, axis=0).max())
+    for k, box in enumerate(boxes):
+        xs = np.linspace(box[0], box[2], 160)
+        ys = np.linspace(box[1], box[3], 160)
+        grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+        grid = grid[_inside(src, grid)]
+        if len(grid) == 0:
+            continue
+        mapped = fmap.forward(grid)
+        mapped = mapped[np.isfinite(mapped[:, 0])]
+        ref = np.r_[mapped.min(axis=0), mapped.max(axis=0)]
+        got = out.boxes[k]
+        assert np.isfinite(got).all(), (k, box)
+        # (The outline is sampled, 64 points an edge: where it bulges between them, a little short.)
+        assert (got[:2] <= ref[:2] + 1e-3 * size).all() and (got[2:] >= ref[2:] - 1e-3 * size).all(), (k, got, ref)
+        assert np.abs(got - ref).max() < 0.02 * size, (k, got, ref)
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.int8, np.uint16, np.int32, np.uint32, np.int64, np.uint64, bool])

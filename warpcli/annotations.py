@@ -262,8 +262,12 @@ def warp_boxes(
     -------
     WarpedBoxes
         The bounding boxes, the mapped outlines, and which boxes lay wholly
-        inside the polygon (a box partly outside gets the bounding box of
-        the part of its outline that has an image).
+        inside the polygon. A box partly outside gets the bounding box of
+        the image of its part inside the polygon: its outline there, and the
+        polygon's edges inside the box, which go exactly onto the other
+        polygon's edges (a box round the whole polygon gets the other
+        polygon's bounding box; a cage mesh's map: the outline's part alone).
+        A box with no point in the polygon is NaN.
 
     Examples
     --------
@@ -279,9 +283,51 @@ def warp_boxes(
     ok = np.isfinite(moved[..., 0])
     lo = np.where(ok[..., None], moved, np.inf).min(axis=1)
     hi = np.where(ok[..., None], moved, -np.inf).max(axis=1)
+    edge_lo, edge_hi = _boundary_in_boxes(fm, _as_points(boxes, "boxes", 4), inverse)
+    lo, hi = np.minimum(lo, edge_lo), np.maximum(hi, edge_hi)
     out = np.concatenate([lo, hi], axis=1)
-    out[~ok.any(axis=1)] = np.nan
+    out[~np.isfinite(out).all(axis=1)] = np.nan
     return WarpedBoxes(out, moved, ok.all(axis=1))
+
+
+def _boundary_in_boxes(fm: Any, boxes: NDArray[np.float64], inverse: bool) -> tuple[NDArray, NDArray]:
+    """The bounding boxes (lo, hi: (K, 2), inf where none) of the images of the parts of the
+    polygon's edges inside each box.
+
+    The image of a box is that of its part inside the polygon, whose outline is the box's outline
+    inside the polygon (sampled by `warp_boxes`) and the polygon's edges inside the box. An edge
+    goes onto the other polygon's edge, a straight segment, monotonically: the image of the part
+    from t0 to t1 is the segment between the images of t0 and t1, exact. (Cage meshes: none.)
+    """
+    k = len(boxes)
+    lo, hi = np.full((k, 2), np.inf), np.full((k, 2), -np.inf)
+    poly = getattr(fm, "dst" if inverse else "src", None)
+    along = getattr(fm, "inverse_boundary" if inverse else "forward_boundary", None)
+    if not isinstance(poly, Polygon) or along is None:
+        return lo, hi
+    a = poly.points
+    d = np.roll(a, -1, axis=0) - a
+    edge = np.arange(len(a))
+    for b in range(k):
+        x0, y0, x1, y1 = boxes[b]
+        # Liang-Barsky: each edge's parameters inside the box.
+        enter, leave = np.zeros(len(a)), np.ones(len(a))
+        keep = np.ones(len(a), dtype=bool)
+        for p, q in ((-d[:, 0], a[:, 0] - x0), (d[:, 0], x1 - a[:, 0]), (-d[:, 1], a[:, 1] - y0), (d[:, 1], y1 - a[:, 1])):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = q / p
+            keep &= ~((p == 0) & (q < 0))
+            enter = np.where(p < 0, np.maximum(enter, r), enter)
+            leave = np.where(p > 0, np.minimum(leave, r), leave)
+        keep &= enter <= leave
+        if not keep.any():
+            continue
+        e = edge[keep]
+        ends = along(np.concatenate([e, e]), np.concatenate([enter[keep], leave[keep]]))
+        ends = ends[np.isfinite(ends).all(axis=1)]
+        if len(ends):
+            lo[b], hi[b] = ends.min(axis=0), ends.max(axis=0)
+    return lo, hi
 
 
 def _source_points(where: Any, size: tuple[int, int] | None) -> NDArray[np.float64]:

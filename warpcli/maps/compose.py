@@ -199,6 +199,10 @@ class BijectiveMap(ComposedMap):
         """Elements (triangles, or samples) where either map flips: 0 for a bijection."""
         return sum(c.flipped for c in self.certificates())
 
+    def forward_boundary(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
+        """The exact boundary map: the target point of parameter t on source edge i."""
+        return self.phi1.boundary_from_theta(edge, self.phi0.to_theta_parameter(edge, t))
+
     def inverse_boundary(self, edge: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
         """The exact boundary map backwards: the source point of parameter t on target edge i."""
         return self.phi0.boundary_from_theta(edge, self.phi1.to_theta_parameter(edge, t))
