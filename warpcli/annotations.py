@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import InputError
 from .maps.cage import map_between
 from .maps.compose import BijectiveMap
-from .options import MapOptions
+from .options import MapOptions, check_size
 from .polygon import Polygon
 from .polygon.partition import Partition, read_shape
 
@@ -354,7 +354,7 @@ def _source_points(where: Any, size: tuple[int, int] | None) -> NDArray[np.float
     fm = map_of(where)
     if size is None:
         raise InputError("warping labels through a map needs the output size (size=(width, height))")
-    width, height = (int(v) for v in size)
+    width, height = check_size(size)
     return fm.pull_back(width, height, jacobian=False).full_points()
 
 

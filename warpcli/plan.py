@@ -321,8 +321,9 @@ class SamplingPlan:
 
         Parameters
         ----------
-        pixels : (H, W, C) ndarray
-            The input image.
+        pixels : (H, W, C) or (H, W) array_like
+            The input image (an (H, W) one is rendered as (H, W, 1), as
+            `warpcli.pipeline.warp_image` does).
         alpha_channel : int or None
             Its alpha channel: colour is resampled premultiplied.
         associated_alpha : bool
@@ -338,6 +339,7 @@ class SamplingPlan:
             If the background does not fit the image's channels, or with
             ``outside="input"`` the output's size is not the input's.
         """
+        pixels = _as_image(pixels)
         bg = self.background_values(pixels)
         if self.outside == "input":
             from .composite import paste_over
@@ -379,6 +381,7 @@ class SamplingPlan:
         """
         if self.outside != "background":
             raise ValueError("render_rows pastes nothing: outside must be 'background'")
+        pixels = _as_image(pixels)
         bg = self.background_values(pixels)
         # Straight colour premultiplied (or an unusual type converted) once, not for every band.
         working = working_copy(pixels, interp=self.interp, alpha_channel=alpha_channel, associated_alpha=associated_alpha)
@@ -425,6 +428,17 @@ def _as_background(background: float | ArrayLike) -> tuple[float, ...]:
     if bg.size == 0:
         raise InputError("background needs at least one value")
     return tuple(float(v) for v in bg)
+
+
+def _as_image(pixels: ArrayLike) -> NDArray:
+    """An image as (H, W, C): an (H, W) one gets one channel; anything else of two sides or
+    channels, or not numbers, is an `InputError`."""
+    px = np.asarray(pixels)
+    if px.ndim == 2:
+        px = px[:, :, None]
+    if px.ndim != 3 or 0 in px.shape or px.dtype.kind not in "uifb":
+        raise InputError(f"image must be a non-empty (H, W) or (H, W, C) array of numbers, got shape {px.shape}, dtype {px.dtype}")
+    return px
 
 
 def background_values(background: float | ArrayLike, pixels: NDArray) -> NDArray[np.float64]:

@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import FoldOverError, InputError
 from ..grid import inside_polygon, window
 from ..mapping import Certificate, Mapped, as_points
-from ..options import MapOptions
+from ..options import MapOptions, check_size
 from ..polygon import Polygon
 from ..polygon.partition import Partition, check_shapes, validate_pair
 from .compose import BijectiveMap, PullBack, Region, build_map
@@ -237,6 +237,7 @@ class CageMap:
         method counts outside), a neighbour's, which agrees there. Arguments
         and result as `BijectiveMap.pull_back`, plus the face per pixel.
         """
+        width, height = check_size((width, height))
         return _gather(self.face_maps, self.dst_mesh, width, height, jacobian, rows)
 
     def inverse_grid(self, width: int, height: int) -> NDArray[np.float64]:
@@ -245,6 +246,7 @@ class CageMap:
 
     def forward_grid(self, width: int, height: int) -> NDArray[np.float64]:
         """`forward` at every pixel centre of a ``width`` x ``height`` source image: (H, W, 2), NaN outside."""
+        width, height = check_size((width, height))
         return _gather(self._reversed(), self.src_mesh, width, height, False, None).full_points()
 
     def _reversed(self) -> tuple[BijectiveMap, ...]:

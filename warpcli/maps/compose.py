@@ -17,7 +17,7 @@ from .._native import Kernels, parallel
 from ..cores import budget
 from ..errors import InputError
 from ..grid import inside_polygon, window
-from ..options import MapOptions
+from ..options import MapOptions, check_size
 from ..polygon import Polygon, check_pair
 from ..mapping import Certificate, ComposedMap
 from .base import ThetaMap
@@ -129,7 +129,7 @@ class BijectiveMap(ComposedMap):
 
         Parameters
         ----------
-        src, dst : Polygon
+        src, dst : Polygon or (n, 2) array_like
             Corresponding polygons: vertex i of ``src`` goes to vertex i of ``dst``.
         options : MapOptions or None
             How to build it; the defaults otherwise.
@@ -233,6 +233,7 @@ class BijectiveMap(ComposedMap):
         -------
         PullBack
         """
+        width, height = check_size((width, height))
         return _through_theta(self.phi1, self.phi0, width, height, jacobian, rows)
 
     def inverse_grid(self, width: int, height: int) -> NDArray[np.float64]:
@@ -253,6 +254,7 @@ class BijectiveMap(ComposedMap):
         (height, width, 2) ndarray of float
             Target point of each source pixel centre; NaN outside the source.
         """
+        width, height = check_size((width, height))
         return _through_theta(self.phi0, self.phi1, width, height, False).full_points()
 
     def describe(self) -> dict:
@@ -495,7 +497,7 @@ def build_map(
 
     Parameters
     ----------
-    src, dst : Polygon
+    src, dst : Polygon or (n, 2) array_like
         Corresponding polygons (vertex i of ``src`` goes to vertex i of ``dst``).
     options : MapOptions or None
         The method and Theta strategy by name, and their parameters.
@@ -521,6 +523,8 @@ def build_map(
         If, with ``options.check``, either map is not certified one-to-one.
     """
     opts = options or MapOptions()
+    src = src if isinstance(src, Polygon) else Polygon(np.asarray(src, dtype=np.float64), name="src")
+    dst = dst if isinstance(dst, Polygon) else Polygon(np.asarray(dst, dtype=np.float64), name="dst")
     check_pair(src, dst)
     theta = theta_for(src, dst, opts)
     result = _build_onto(src, dst, theta, opts, regions)
