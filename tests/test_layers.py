@@ -49,7 +49,7 @@ LAYERS = [
     ("base", {
         "base": (
             "errors", "files", "budget", "capture", "outputs", "grid", "boundary", "polygon", "mapping",
-            "simplicial", "distortion", "options", "raster.dtypes", "_native", "_elf", "_jit", "_fork", "_cached", "_extensions", "_arrays", "cores",
+            "simplicial", "distortion", "options", "raster.dtypes", "_native", "_elf", "_jit", "_fork", "_cached", "_extensions", "_arrays", "_switches", "cores",
         ),
     }),
     # Maps see points and Jacobians, raster sees pixels: neither knows the other.
