@@ -194,8 +194,10 @@ def test_oversized_and_unbounded_bodies_refused_unread(server, tmp_path):
             "Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\n".encode()
         )
         assert sock.recv(4096).startswith(b"HTTP/1.1 411")
-    assert request(server, "POST", "/api/save", b"{}", dict(headers, **{"Content-Length": "-5"}))[0] == 413
-    assert request(server, "POST", "/api/save", b"{}", dict(headers, **{"Content-Length": "x"}))[0] == 411
+    # A Content-Length is digits alone (int() would take a sign, underscores, spaces round it).
+    for bad in ("-5", "x", "+2", "2_0", "1e1", "0x1"):
+        assert request(server, "POST", "/api/save", b"{}", dict(headers, **{"Content-Length": bad}))[0] == 400, bad
+    assert request(server, "POST", "/api/save", b"{}", dict(headers, **{"Content-Length": "9" * 40}))[0] == 413
     assert request(server, "POST", "/api/save", b"[" * 100_000, headers)[0] == 400
     assert request(server, "POST", "/api/save", b"[1, 2]", headers)[0] == 400
     # Over 1 MB of JSON: refused from its Content-Length alone, answered before the body is sent
@@ -218,8 +220,11 @@ def test_oversized_and_unbounded_bodies_refused_unread(server, tmp_path):
 
 @pytest.mark.parametrize(
     "name",
-    ["../x.json", "/tmp/x.json", "sub/x.json", ".hidden.json", "x.png", "..", "a\\b.json", "x\n.json", "", 7],
-)
+    [
+        "../x.json", "/tmp/x.json", "sub/x.json", ".hidden.json", "x.png", "..", "a\\b.json", "x\n.json", "", 7,
+        "x\x7f.json", "evil\u202egpj.json", " x.json", "x.json ", "a\u200bb.json", "x\x85.json",
+    ],
+)  # fmt: skip
 def test_save_names_only_plain_json_files_in_the_image_directory(server, tmp_path, name):
     before = snapshot_dir(str(tmp_path))
     status, body = json_post(server, "/api/save", {"src": SQUARE, "dst": MOVED, "dst_name": name})
@@ -1199,7 +1204,8 @@ def test_the_redirect_file_opens_the_page(server):
     assert status == 200 and b"editor.js?token=" in body
 
 
-def test_sigterm_removes_the_redirect_file(tmp_path):
+@pytest.mark.parametrize(("signame", "code", "said"), [("SIGTERM", 143, "terminated"), ("SIGHUP", 129, "hung up")])
+def test_sigterm_removes_the_redirect_file(tmp_path, signame, code, said):
     # A SIGTERM ends `warp edit` at once (no unwinding, warpcli.cli.run): the private page with the
     # token stayed in the temporary directory. $BROWSER=true stands in for the browser.
     import signal
@@ -1218,9 +1224,79 @@ def test_sigterm_removes_the_redirect_file(tmp_path):
         while not list(temp.glob("warp-edit-*/open.html")) and time.monotonic() < deadline:
             time.sleep(0.05)
         assert list(temp.glob("warp-edit-*/open.html")), "the page was never written"
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(getattr(signal, signame))
         _, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
-    assert proc.returncode == 143 and "terminated" in err, err
+    assert proc.returncode == code and said in err, err
     assert not list(temp.glob("warp-edit-*")), "the redirect page was left behind"
+
+
+@pytest.mark.parametrize("method", ["TRACE", "CONNECT", "BREW"])
+def test_methods_the_server_has_no_use_for_get_json_with_the_security_headers(server, method):
+    # TRACE had the standard library's 501 HTML page, without the security headers.
+    from warpcli.edit.server import SECURITY_HEADERS
+
+    conn = http.client.HTTPConnection("127.0.0.1", server.port, timeout=30)
+    conn.putrequest(method, "/", skip_host=True, skip_accept_encoding=True)
+    conn.putheader("Host", f"127.0.0.1:{server.port}")
+    conn.endheaders()
+    response = conn.getresponse()
+    body = response.read()
+    conn.close()
+    assert response.status in (405, 501)
+    assert response.getheader("Content-Type") == "application/json" and "error" in json.loads(body)
+    for key, value in SECURITY_HEADERS.items():
+        assert response.getheader(key) == value, key
+
+
+# --- the polygon files the page starts from, and what a save keeps of them --------------------------------
+
+
+def test_a_target_file_the_page_cannot_show_is_refused_at_start(tmp_path):
+    # It used to be ignored (no source file: the page started empty) or replaced by a copy of the
+    # source (another vertex count), and a save then overwrote it unseen.
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 64, 48)
+    dst = tmp_path / "picture.dst.json"
+    dst.write_text(json.dumps(SQUARE))
+    with pytest.raises(WarpError, match="exists, but .*picture.src.json does not"):
+        EditSession(EditPaths.defaults(image))
+    (tmp_path / "picture.src.json").write_text(json.dumps([[8, 8], [56, 8], [56, 40], [32, 46], [8, 40]]))
+    with pytest.raises(WarpError, match="has 4 vertices, but .* has 5"):
+        EditSession(EditPaths.defaults(image))
+    assert json.loads(dst.read_text()) == SQUARE
+    (tmp_path / "picture.src.json").write_text(json.dumps(MOVED))
+    assert EditSession(EditPaths.defaults(image)).state()["dst"] == SQUARE
+
+
+def test_a_save_keeps_everything_a_labelme_or_geojson_file_held(tmp_path):
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 64, 48)
+    labelme = {
+        "version": "5.2.1", "imagePath": "picture.png", "flags": {"x": True},
+        "shapes": [
+            {"label": "box", "shape_type": "rectangle", "points": [[1, 1], [5, 5]]},
+            {"label": "face", "shape_type": "polygon", "points": SQUARE, "group_id": 3},
+            {"label": "eye", "shape_type": "point", "points": [[9, 9]]},
+        ],
+    }  # fmt: skip
+    geojson = {"type": "Feature", "properties": {"name": "face", "id": 7},
+               "geometry": {"type": "Polygon", "coordinates": [SQUARE + [SQUARE[0]]]}}  # fmt: skip
+    (tmp_path / "a.json").write_text(json.dumps(labelme))
+    (tmp_path / "b.json").write_text(json.dumps(geojson))
+    session = EditSession(EditPaths.defaults(image, src=str(tmp_path / "a.json"), dst=str(tmp_path / "b.json")))
+    session.save({"src": MOVED, "dst": MOVED})
+    a = json.loads((tmp_path / "a.json").read_text())
+    b = json.loads((tmp_path / "b.json").read_text())
+    want = dict(labelme, shapes=[labelme["shapes"][0], dict(labelme["shapes"][1], points=MOVED), labelme["shapes"][2]])
+    assert a == json.loads(json.dumps(want))
+    assert b == dict(geojson, geometry={"type": "Polygon", "coordinates": [MOVED + [MOVED[0]]]})
+    from warpcli.polygon.formats import read_polygon
+
+    assert read_polygon(tmp_path / "a.json").points.tolist() == MOVED
+    # A file there that holds no one polygon is not replaced.
+    (tmp_path / "notes.json").write_text('{"todo": "keep me"}')
+    with pytest.raises(WarpError, match="holds no one polygon a save can update"):
+        session.save({"src": MOVED, "dst": MOVED, "dst_name": "notes.json"})
+    assert json.loads((tmp_path / "notes.json").read_text()) == {"todo": "keep me"}

@@ -224,6 +224,16 @@ def test_load_polygon_files_on_the_page(tmp_path, chromium_browser):
         page.wait_for_function("() => window.warpEditor.lastError !== ''")
         assert page.locator("#error").text_content().startswith("c.json: ")
         np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.dst"), pts * 0.8 + 10)
+        # A target with another vertex count is refused: it used to replace the source with its copy.
+        (tmp_path / "d.json").write_text(json.dumps(octagon(100, 80, 60, 50)[:6]))
+        page.set_input_files("#load-dst", str(tmp_path / "d.json"))
+        page.wait_for_function("() => window.warpEditor.lastError.startsWith('d.json: has 6 vertices')")
+        np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.src"), pts)
+        np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.dst"), pts * 0.8 + 10)
+        # Keys after a click on a checkbox still reach the editor (Ctrl+Z undoes the last load).
+        page.click("#grid")
+        page.keyboard.press("Control+z")
+        page.wait_for_function(f"() => window.warpEditor.dst[0][0] === {float(pts[0][0])}")
         assert page.page_errors == []
 
 

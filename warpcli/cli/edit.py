@@ -6,11 +6,11 @@ import dataclasses
 
 import click
 
-from .exits import EXIT_CODES
+from .exits import EDIT_EXIT_CODES
 from .options import CONTEXT, interp_option, map_options, quiet_option
 
 
-@click.command("edit", context_settings=CONTEXT, epilog=EXIT_CODES)
+@click.command("edit", context_settings=CONTEXT, epilog=EDIT_EXIT_CODES)
 @click.argument("image_path", metavar="IMAGE", type=click.Path(dir_okay=False))
 @click.option("--src", "src_path", type=click.Path(dir_okay=False), help="Source polygon file: loaded if it exists; saved there.  [default: IMAGE_STEM.src.json]")
 @click.option("--dst", "dst_path", type=click.Path(dir_okay=False), help="Target polygon file: loaded if it exists; saved there.  [default: IMAGE_STEM.dst.json]")

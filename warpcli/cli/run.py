@@ -11,7 +11,7 @@ import click
 from ..capture import stderr_apart, stderr_fd
 from ..errors import WarpError
 from ..outputs import end_when_consistent, remove_temporaries
-from .exits import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, exit_code
+from .exits import EXIT_BAD_INPUT, EXIT_HUNG_UP, EXIT_INTERRUPTED, EXIT_OK, EXIT_TERMINATED, exit_code
 from .group import DefaultGroup, LazyCommands
 from .options import CONTEXT
 
@@ -38,7 +38,8 @@ def _kill_children() -> None:
 
 
 def _terminate(signum, frame):
-    """End the run now: temporary and pending files removed, one line, exit 143.
+    """End the run now: temporary and pending files removed, one line, exit 143 (SIGHUP, a closed
+    terminal: 129, the same end).
 
     Raising an exception here, to unwind like Ctrl-C, is not safe: SIGTERM
     can arrive while a module is imported (OpenImageIO's nanobind module
@@ -53,14 +54,18 @@ def _terminate(signum, frame):
     outputs being renamed into place finish first, so that a run leaves all
     of them or none.
     """
+    import signal
+
+    hung_up = signum == getattr(signal, "SIGHUP", None)
+
     def end():
         _kill_children()
         remove_temporaries()
         try:
             # Not plain 2: a C library's output may be being captured right now (warpcli.capture).
-            os.write(stderr_fd(), b"warp: terminated\n")
+            os.write(stderr_fd(), b"warp: hung up\n" if hung_up else b"warp: terminated\n")
         finally:
-            os._exit(EXIT_TERMINATED)
+            os._exit(EXIT_HUNG_UP if hung_up else EXIT_TERMINATED)
 
     end_when_consistent(end)
 
@@ -74,6 +79,8 @@ def main(argv: list[str] | None = None) -> int:
     # written to temporary files and renamed at the end, and unwinding removes them.
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _terminate)
+        if hasattr(signal, "SIGHUP"):  # the terminal closed: the same end (its default left every file behind)
+            signal.signal(signal.SIGHUP, _terminate)
     # Nothing but warpcli's own lines on stderr: numpy's and other libraries'
     # warnings are not for the user of a command-line tool.
     warnings.simplefilter("ignore")

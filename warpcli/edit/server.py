@@ -446,11 +446,14 @@ def _handler(server: EditServer) -> type[BaseHTTPRequestHandler]:
                 return self.fail("404 not found")
             if "chunked" in self.headers.get("Transfer-Encoding", "").lower():
                 return self.fail("411 length required")
-            try:
-                length = int(self.headers.get("Content-Length", ""))
-            except ValueError:
+            given = self.headers.get("Content-Length", "").strip()
+            if not given:
                 return self.fail("411 length required")
-            if length < 0 or length > MAX_BODY:
+            # Digits alone (RFC 9110): int() would also take "+284", "2_84" or " -1".
+            if not (given.isascii() and given.isdigit()):
+                return self.fail("400 bad request", "Content-Length must be digits")
+            length = int(given) if len(given) <= 12 else MAX_BODY + 1
+            if length > MAX_BODY:
                 return self.fail("413 body too large")
             if self.headers.get("Content-Type", "").split(";")[0].strip() != "application/json":
                 return self.fail("415 JSON only")
@@ -495,6 +498,16 @@ def _handler(server: EditServer) -> type[BaseHTTPRequestHandler]:
         def do_PUT(self) -> None:  # noqa: N802
             self.fail("405 method not allowed")
 
-        do_DELETE = do_PATCH = do_OPTIONS = do_PUT
+        do_DELETE = do_PATCH = do_OPTIONS = do_TRACE = do_CONNECT = do_PUT
+
+        def send_error(self, code: int, message: str | None = None, explain: str | None = None) -> None:
+            """The standard library's own errors (a bad request line, a method it has no ``do_`` for,
+            a header too long) as every other answer: JSON, with the security headers, then closed."""
+            reason = message or self.responses.get(code, ("error",))[0]
+            self.close_connection = True
+            try:
+                self.send(code, json.dumps({"error": reason}).encode(), "application/json", reason)
+            except OSError:
+                pass
 
     return Handler

@@ -81,7 +81,9 @@ class EditPaths:
         ------
         InputError
             If ``name`` is not a plain file name (a directory part, ``..``, a
-            hidden name, a control character) with one of ``extensions``.
+            hidden name, spaces at either end, a control or format character
+            such as DEL or a right-to-left override, which show a name other
+            than the one written) with one of ``extensions``.
         """
         if name is None or name == "" or name == os.path.basename(default):
             return default
@@ -89,12 +91,20 @@ class EditPaths:
             raise InputError("a file name must be a text of at most 255 characters")
         if (
             name != os.path.basename(name) or "/" in name or "\\" in name or name.startswith(".")
-            or any(ord(c) < 32 for c in name)
+            or name != name.strip() or any(_hidden_character(c) for c in name)
         ):  # fmt: skip
             raise InputError(f"{name!r}: give a file name alone; files are saved in the image's directory {self.directory}")
         if not name.lower().endswith(extensions):
             raise InputError(f"{name}: the name must end in {' or '.join(extensions)}")
         return os.path.join(self.directory, name)
+
+
+def _hidden_character(c: str) -> bool:
+    """A character that is not seen as itself in a file name: controls (C0, DEL, C1) and Unicode
+    format characters (bidirectional overrides, zero-width joiners)."""
+    import unicodedata
+
+    return ord(c) < 32 or 0x7F <= ord(c) < 0xA0 or unicodedata.category(c) in ("Cf", "Cc", "Zl", "Zp")
 
 
 def rotated_start(src: Polygon, dst: Polygon) -> int:
@@ -173,9 +183,30 @@ class EditSession:
         self.png = encode_png(self.preview.pixels)
         self.mapper = PreviewMapper()
         self.initial = {side: self._existing(path) for side, path in (("src", paths.src), ("dst", paths.dst))}
+        self._check_initial()
         # The polygons last checked, by side: in a drag one side stays the same and is not checked again.
         self._checked: dict[str, tuple[tuple, Polygon]] = {}
         self._in_preview: dict[str, tuple[Polygon, Polygon]] = {}
+
+    def _check_initial(self) -> None:
+        """Refuse polygon files the page cannot start from: it would show neither, and a save would replace them.
+
+        The page draws the source first and starts the target as its copy: a
+        target file without a source file, or one with another vertex count
+        (which `warp` refuses too), cannot be shown, and saving would
+        overwrite it unseen.
+        """
+        src, dst = self.initial["src"], self.initial["dst"]
+        if dst is not None and src is None:
+            raise InputError(
+                f"{self.paths.dst}: exists, but {self.paths.src} does not: the page starts from the source polygon, "
+                "and a save would replace this file unseen; give its source with --src, or another --dst"
+            )
+        if src is not None and dst is not None and len(src) != len(dst):
+            raise PolygonError(
+                f"{self.paths.dst}: has {len(dst)} vertices, but {self.paths.src} has {len(src)}: vertex i of one goes "
+                "onto vertex i of the other (give --dst another name to start the target from the source)"
+            )
 
     @staticmethod
     def _existing(path: str) -> list | None:
@@ -456,14 +487,14 @@ class EditSession:
             if self.initial["dst" if side == "src" else "src"] is not None and RunInputs((other,)).find(path) is not None:
                 raise InputError(f"{path}: would overwrite {other}, the other polygon's file; give each polygon its own file")
             check_output_path(path, inputs=RunInputs(self.inputs))
-        return _SavePlan(src_path, dst_path, output, src, dst, options, command)
+        texts = tuple(_file_text(path, polygon) for path, polygon in ((src_path, src), (dst_path, dst)))
+        return _SavePlan(src_path, dst_path, output, src, dst, options, command, texts)
 
     @staticmethod
     def _write(plan: _SavePlan) -> None:
         """Write the two polygon files of a checked save, both or neither."""
         with PendingOutputs() as pending:
-            for path, polygon in ((plan.src_path, plan.src), (plan.dst_path, plan.dst)):
-                text = json.dumps({"points": polygon.points.tolist()}, indent=1) + "\n"
+            for (path, _), text in zip(plan.files(), plan.texts):
                 write_checked(pending.path(path), text.encode(), path)
 
     def command(self, options: WarpOptions, src_path: str, dst_path: str, output: str) -> str:
@@ -482,6 +513,34 @@ class _SavePlan:
     dst: Polygon
     options: WarpOptions
     command: str
+    texts: tuple[str, str] = ("", "")
+
+    def files(self) -> tuple[tuple[str, Polygon], tuple[str, Polygon]]:
+        return (self.src_path, self.src), (self.dst_path, self.dst)
+
+
+def _file_text(path: str, polygon: Polygon) -> str:
+    """What saving ``polygon`` to ``path`` writes: a new file ``{"points": ...}``; a polygon file
+    there already (plain, labelme, GeoJSON) keeps everything but its polygon's vertices
+    (`warpcli.polygon.formats.with_points`). A file there that holds no one polygon is not
+    replaced: a save would lose what it holds.
+
+    Raises
+    ------
+    PolygonError
+        If ``path`` holds something else.
+    """
+    from ..polygon.formats import read_document, with_points
+
+    points = polygon.points.tolist()
+    if not os.path.lexists(path):
+        return json.dumps({"points": points}, indent=1) + "\n"
+    try:
+        name, doc = read_document(path)
+        doc = with_points(doc, points, name)
+    except PolygonError as err:
+        raise PolygonError(f"{path}: exists and holds no one polygon a save can update ({err}); choose another name") from None
+    return json.dumps(doc, indent=1, ensure_ascii=False) + "\n"
 
 
 def _image_extensions(paths: EditPaths) -> tuple[str, ...]:

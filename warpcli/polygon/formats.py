@@ -182,6 +182,41 @@ def points_of(doc: object, name: str, label: str | None) -> object:
     )
 
 
+def with_points(doc: object, points: list, name: str) -> object:
+    """``doc``, a parsed polygon document holding one polygon, with that polygon's vertices
+    replaced by ``points``: everything else kept (a labelme file's other shapes, labels and image
+    path; a GeoJSON feature's properties; other members of a ``{"points": ...}`` object).
+
+    The writer's twin of `points_of` (without a label): a file saved over keeps what it held.
+
+    Raises
+    ------
+    PolygonError
+        If ``doc`` is not a document `points_of` reads one polygon from (as its messages say).
+    """
+    import copy
+
+    points_of(doc, name, None)  # one polygon there, or the reader's message
+    points = [list(map(float, p)) for p in points]
+    if isinstance(doc, list):
+        return points
+    out = copy.deepcopy(doc)
+    if "shapes" in out:
+        shape = next(s for s in out["shapes"] if isinstance(s, dict) and s.get("shape_type", "polygon") == "polygon")
+        shape["points"] = points
+        return out
+    if out.get("type") in ("Polygon", "Feature", "FeatureCollection", "MultiPolygon"):
+        geometry = out
+        if geometry.get("type") == "FeatureCollection":
+            geometry = next(f for f in geometry["features"] if isinstance(f, dict))
+        if geometry.get("type") == "Feature":
+            geometry = geometry["geometry"]
+        geometry["coordinates"] = [points + [points[0]]]
+        return out
+    out["points"] = points
+    return out
+
+
 def _unlabelled(points: object, name: str, label: str | None) -> object:
     if label is not None:
         raise PolygonError(f"{name}: holds a single polygon with no labels, but label {label!r} was asked for")

@@ -358,6 +358,11 @@ async function loadFile(side, input) {
   try {
     const result = await (await call("/api/load", { name: file.name, text: await file.text() })).json();
     if (!result.ok) { showError(result.error); return result; }
+    if (side === "dst" && editor.closed && editor.src.length && editor.src.length !== result.points.length) {
+      // The target goes with the source vertex for vertex: another count would replace the source.
+      showError(`${file.name}: has ${result.points.length} vertices, but the source has ${editor.src.length}; load a target with as many, or load its source first`);
+      return result;
+    }
     remember();
     if (side === "src") {
       editor.src = result.points;
@@ -447,7 +452,9 @@ async function start() {
   editor.save = () => saveOrExport("/api/save", "saving");
   editor.export = () => saveOrExport("/api/export", "exporting");
   document.addEventListener("keydown", (e) => {
-    if (e.target.tagName === "INPUT") return;
+    // Text fields keep their own keys; a checkbox, a file button or a menu clicked last does not take them.
+    const t = e.target;
+    if (t.tagName === "TEXTAREA" || (t.tagName === "INPUT" && !["checkbox", "radio", "button", "file", "range"].includes(t.type))) return;
     if ((e.ctrlKey || e.metaKey) && e.key.toLowerCase() === "z") { e.preventDefault(); e.shiftKey ? redo() : undo(); }
     else if ((e.ctrlKey || e.metaKey) && e.key.toLowerCase() === "y") { e.preventDefault(); redo(); }
     else if (e.key === "Enter") closePolygon();
