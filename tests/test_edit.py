@@ -1300,3 +1300,29 @@ def test_a_save_keeps_everything_a_labelme_or_geojson_file_held(tmp_path):
     with pytest.raises(WarpError, match="holds no one polygon a save can update"):
         session.save({"src": MOVED, "dst": MOVED, "dst_name": "notes.json"})
     assert json.loads((tmp_path / "notes.json").read_text()) == {"todo": "keep me"}
+
+
+def test_ctrl_c_during_an_export_leaves_no_pending_file(tmp_path, monkeypatch):
+    # Ctrl-C stops the server while a request's thread still writes an export: the thread dies
+    # with the process, and its pending files stayed beside the image. serve() removes every
+    # file warpcli.outputs tracks when it stops.
+    from warpcli import edit
+    from warpcli.outputs import PendingOutputs
+
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 16, 12)
+    seen = {}
+
+    def serve_forever(self):
+        pending = PendingOutputs().__enter__()  # an export in the middle of its writes
+        path = pending.path(str(tmp_path / "picture.warped.png"))
+        with open(path, "wb") as fh:
+            fh.write(b"half an image")
+        seen["path"] = path
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(edit.EditServer, "serve_forever", serve_forever)
+    with pytest.raises(KeyboardInterrupt):
+        edit.serve(image, browser=False)
+    assert os.path.basename(seen["path"]).startswith(".") and not os.path.exists(seen["path"])
+    assert sorted(os.listdir(tmp_path)) == ["picture.png"]

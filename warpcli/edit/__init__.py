@@ -99,6 +99,13 @@ def serve(
         server.serve_forever()
     finally:
         server.shutdown()
+        # Ctrl-C in the middle of an export: the request's thread dies with the process, its pending
+        # and temporary files would stay beside the image (warpcli.outputs tracks every one).
+        from .._fork import kill_children
+        from ..outputs import remove_temporaries
+
+        kill_children()
+        remove_temporaries()
         if page is not None:
             from ..outputs import track_temporary
 
