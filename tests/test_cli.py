@@ -633,7 +633,7 @@ def test_grid_may_not_overwrite_an_input_or_the_output(files, capsys):
     assert main(argv(files, "--grid", files.image)) == 2
     assert main(argv(files, "--grid", files.out)) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 2 and "overwrite" in err[0] and "two outputs" in err[1]
+    assert len(err) == 2 and "overwrite" in err[0] and "is the same file as the output" in err[1]
     assert sorted(os.listdir(files.dir)) == before
 
 

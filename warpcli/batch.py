@@ -29,7 +29,7 @@ from .files import check_regular_file
 from .maps.cage import map_between
 from .maps.compose import BijectiveMap
 from .options import WarpOptions, outline_file, resolve_options
-from .outputs import RunInputs
+from .outputs import RunInputs, check_distinct
 from .pipeline import read_header_or_none, write_like
 from .plan import SamplingPlan, background_values, check_paste, plan_for
 from .polygon import Polygon
@@ -625,6 +625,12 @@ def warp_sequence(
         for extra in maps.paths(f) if maps is not None else ():
             if extra is not None:
                 check_image_output(extra, inputs=inputs)
+    # Every file the run writes against every other, as files, not as patterns: out.#.exr and
+    # --save-map out.%04d.exr are the same files; o.@.exr's frame 11 is o.1@.exr's map of frame 1.
+    check_distinct(
+        (what, path) for (f, _), (_, out) in zip(ins, outs)
+        for what, path in (("frame", out), *zip(("map", "forward map"), maps.paths(f) if maps is not None else ()))
+    )  # fmt: skip
     src_keys = read_animated(src_path, src_label)
     dst_keys = read_animated(dst_path, dst_label)
     # Frames whose image is missing fail without a map, and without their polygons:

@@ -17,10 +17,10 @@ import contextlib
 import errno
 import os
 import stat
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from types import TracebackType
 
-from .errors import ImageInputError, ImageIOError, WarpError
+from .errors import ImageInputError, ImageIOError, InputError, WarpError
 from .files import file_kind, format_bytes
 
 __all__ = [
@@ -109,6 +109,37 @@ def remove_temporaries() -> None:
             except OSError:
                 pass
         names.clear()
+
+
+def check_distinct(outputs: Iterable[tuple[str, str | os.PathLike[str] | None]]) -> None:
+    """Refuse two outputs of one run that are one file: the same path however written (``./a`` and
+    ``a``, a link to a folder, a ``#`` and a ``%04d`` pattern's same frame), or two names of one
+    existing file (a hard link). ``outputs``: (what, path) pairs; None paths are skipped.
+
+    Raises
+    ------
+    InputError
+        Naming the second path, what it is, and the first.
+    """
+    seen: dict[str, tuple[str, str]] = {}
+    files: dict[tuple[int, int], tuple[str, str]] = {}
+    for what, path in outputs:
+        if path is None or os.fspath(path) == "-":
+            continue
+        name = os.fspath(path)
+        key = os.path.normcase(os.path.realpath(name))
+        first = seen.get(key)
+        if first is None:
+            try:
+                st = os.stat(name)
+            except OSError:
+                st = None
+            first = files.get((st.st_dev, st.st_ino)) if st is not None else None
+            if st is not None and first is None:
+                files[(st.st_dev, st.st_ino)] = (what, name)
+        if first is not None:
+            raise InputError(f"{name}: the {what} is the same file as the {first[0]} {first[1]}; one would overwrite the other")
+        seen[key] = (what, name)
 
 
 def track_temporary(path: str, *, directory: bool = False, keep: bool = True) -> None:

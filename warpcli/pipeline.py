@@ -30,7 +30,7 @@ from .keyframes import read_shape_at
 from .maps.cage import map_between
 from .maps.compose import BijectiveMap, PullBack, children_at_once
 from .options import WarpOptions, resolve_options
-from .outputs import PendingOutputs, check_output_path, write_checked
+from .outputs import PendingOutputs, check_distinct, check_output_path, write_checked
 from .plan import SamplingPlan, background_values, check_paste, plan_for, warn_if_outside
 from .polygon import Polygon
 from .polygon.partition import Partition, check_shapes
@@ -620,11 +620,12 @@ def warp_file(
     for path in (save_map, save_forward_map):
         if path is not None:
             check_stmap_path(path)
-    outputs = [
-        os.path.abspath(os.fspath(p)) for p in (output_path, *extra, report_path, save_theta) if p not in (None, "-")
-    ]
-    if len(set(outputs)) != len(outputs):
-        raise InputError(f"{os.fspath(output_path)}: the same path is given for two outputs")
+    check_distinct([
+        ("output", output_path), ("--grid output", grid_path), ("--heatmap output", heatmap_path),
+        ("--save-map output", save_map), ("--save-forward-map output", save_forward_map),
+        *(("--labels output", label_out) for _, label_out in labels), ("--report output", report_path),
+        ("--save-theta output", save_theta),
+    ])  # fmt: skip
     pair = None
     if opts.within is not None:
         if save_theta is not None:
