@@ -557,6 +557,30 @@ def _child(fn: Callable[..., Any], args: tuple, fd: int) -> None:
         os._exit(code)
 
 
+def die_with_parent(parent: int | None = None) -> None:
+    """Have the kernel kill this process when its parent ends (Linux: ``PR_SET_PDEATHSIG``).
+
+    A parent ended at once (SIGTERM's end, `kill -9`, a closed terminal)
+    kills the children it knows of (`kill_children`), but not those of its
+    children, nor the workers a process pool spawned; orphaned, they went on
+    writing frames and then waited for ever, holding the run's stderr open.
+    ``parent``: the pid the parent had when it started this process (if it
+    ended before the request took effect, this process ends now). Elsewhere
+    than Linux: nothing.
+    """
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if parent is not None and os.getppid() != parent:
+        os._exit(0)
+
+
 def _child_setup() -> KeptRecords:
     _close_inherited()
     # The parent's SIGTERM handler (`warpcli.cli.run`) removes the parent's temporary files and

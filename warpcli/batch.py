@@ -993,13 +993,18 @@ def _in_processes(units, pairs, opts, maps, width, on_item, missing) -> list[Bat
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
-    from ._fork import replay
+    from ._fork import die_with_parent, replay
     from .cores import explicit
 
     level = logging.getLogger("warpcli").getEffectiveLevel()
     filters = list(warnings.filters)
     # Spawned, not forked: OpenImageIO's and OpenEXR's thread pools do not survive a fork.
-    pool = ProcessPoolExecutor(max_workers=width, mp_context=multiprocessing.get_context("spawn"))
+    # Each worker dies with this process: a SIGTERM's end (warpcli.cli.run) kills only the children
+    # it forked, and orphaned workers went on writing frames, then waited for ever.
+    pool = ProcessPoolExecutor(
+        max_workers=width, mp_context=multiprocessing.get_context("spawn"), initializer=die_with_parent,
+        initargs=(os.getpid(),),
+    )  # fmt: skip
     items: list[BatchItem] = []
     try:
         futures = [pool.submit(_warp_run_in_worker, *_pair_of(u, pairs, missing), u, opts, maps, level, filters,
