@@ -145,6 +145,14 @@ def _multi(path, kind):
                 buf.set_deep_value(x, y, 0, 1, 0, 1.0)
         assert buf.write(str(path)), buf.geterror()
         return str(path)
+    if kind == "window":  # an autocropped render: 16 x 8 of data at (3, 2) in a 24 x 12 display window
+        spec = oiio.ImageSpec(16, 8, 3, "half")
+        spec.x, spec.y, spec.full_x, spec.full_y, spec.full_width, spec.full_height = 3, 2, 0, 0, 24, 12
+        out = oiio.ImageOutput.create(str(path))
+        assert out.open(str(path), spec), out.geterror()
+        out.write_image(np.zeros((8, 16, 3), np.float16))
+        out.close()
+        return str(path)
     specs = [oiio.ImageSpec(16, 8, 3, "half"), oiio.ImageSpec(16, 8, 1, "half")]
     out = oiio.ImageOutput.create(str(path))
     assert out.open(str(path), specs), out.geterror()
@@ -155,7 +163,9 @@ def _multi(path, kind):
     return str(path)
 
 
-@pytest.mark.parametrize("kind, ext", [("parts", "exr"), ("parts", "tif"), ("deep", "exr"), ("one", "exr"), ("one", "tif")])
+@pytest.mark.parametrize(
+    "kind, ext", [("parts", "exr"), ("parts", "tif"), ("deep", "exr"), ("window", "exr"), ("one", "exr"), ("one", "tif")]
+)
 @pytest.mark.parametrize("tiled", [False, True])
 def test_what_a_warp_leaves_out_of_a_file_is_said_once(tmp_path, capfd, kind, ext, tiled):
     # Parts and pages after the first, and deep samples, do not reach the output: a warning says so,
@@ -164,7 +174,10 @@ def test_what_a_warp_leaves_out_of_a_file_is_said_once(tmp_path, capfd, kind, ex
     full = write_polygon(tmp_path / "full.json", [[0, 0], [16, 0], [16, 8], [0, 8]])
     assert main([inp, str(tmp_path / "out.exr"), "--src", full, "--dst", full] + (["--tiled"] if tiled else [])) == 0
     said = [line for line in capfd.readouterr().err.splitlines() if inp in line]
-    expected = {"parts": "only its first subimage", "deep": "deep samples are flattened"}.get(kind)
+    expected = {
+        "parts": "only its first subimage", "deep": "deep samples are flattened",
+        "window": "data window (16 x 8 at (3, 2)) is not its display window (24 x 12 at (0, 0))",
+    }.get(kind)  # fmt: skip
     assert len(said) == (1 if expected else 0), said
     assert expected is None or expected in said[0]
 

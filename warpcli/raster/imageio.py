@@ -275,7 +275,9 @@ _WARNED_LEFT: set[str] = set()
 
 def _say_what_is_left(inp, spec, name: str) -> None:
     """Warn, once per file, that only its first subimage is warped (a multi-part OpenEXR, a
-    multi-page TIFF) and that deep data is flattened: nothing of a file is dropped unsaid."""
+    multi-page TIFF), that deep data is flattened, and that a data window other than the display
+    window (an autocropped or overscan render) is taken as the image: nothing of a file is dropped
+    or moved unsaid."""
     with c_stderr():
         more = inp.seek_subimage(1, 0)
     inp.geterror()
@@ -284,6 +286,14 @@ def _say_what_is_left(inp, spec, name: str) -> None:
         left.append("only its first subimage (part, page) is warped, the others are not written")
     if spec.deep:
         left.append("its deep samples are flattened into one value per pixel")
+    window = (spec.x, spec.y, spec.width, spec.height)
+    display = (spec.full_x, spec.full_y, spec.full_width, spec.full_height)
+    if spec.full_width > 0 and spec.full_height > 0 and window != display:
+        left.append(
+            f"its data window ({spec.width} x {spec.height} at ({spec.x}, {spec.y})) is not its display window "
+            f"({spec.full_width} x {spec.full_height} at ({spec.full_x}, {spec.full_y})): the polygons are taken in the "
+            "data window's pixels, from its top-left corner, and the output's display window is its data window"
+        )
     if left and name not in _WARNED_LEFT:
         _WARNED_LEFT.add(name)
         _log.warning("%s: %s", name, "; ".join(left))
