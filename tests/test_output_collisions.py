@@ -67,3 +67,31 @@ def test_single_warp_outputs_through_a_link_or_dot_are_one_file(shot):
     # Different files: written.
     code, err = run_cli(base + [str(shot / "out/o.png"), "--save-map", str(shot / "out/m.exr")])
     assert code == 0, err
+
+
+@pytest.mark.parametrize("failing", [1, 2])
+def test_a_sequence_frame_that_fails_keeps_no_map(shot, monkeypatch, failing):
+    # A frame's map was renamed into place before its image was rendered: a frame whose image
+    # failed kept its STMap, and a pipeline checking for the map took the frame as done. The run's
+    # maps are written by its first frame and linked by the others: a failing first frame's maps
+    # go, and the next frame writes them anew.
+    from warpcli import batch
+    from warpcli.batch import FrameMaps, warp_sequence
+    from warpcli.errors import ImageIOError
+
+    real = batch.write_like
+
+    def write_like(out, *args, **kwargs):
+        if os.path.basename(out) == f"o.{failing:04d}.png":
+            raise ImageIOError(f"{out}: cannot write: no room")
+        return real(out, *args, **kwargs)
+
+    monkeypatch.setattr(batch, "write_like", write_like)
+    items = warp_sequence(
+        str(shot / "in/p.#.png"), str(shot / "out/o.#.png"), [1, 2, 3], shot / "a.json", shot / "b.json",
+        maps=FrameMaps(inverse=str(shot / "out/m.#.exr"), forward=str(shot / "out/f.#.exr")), jobs=1,
+    )  # fmt: skip
+    assert [item.error is not None for item in items] == [f == failing for f in (1, 2, 3)]
+    written = sorted(os.listdir(shot / "out"))
+    want = sorted(f"{kind}.{f:04d}.{ext}" for f in (1, 2, 3) if f != failing for kind, ext in (("o", "png"), ("m", "exr"), ("f", "exr")))
+    assert written == want

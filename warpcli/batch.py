@@ -13,6 +13,7 @@ the GIL, so threads would take turns.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import math
@@ -320,6 +321,8 @@ class RunMaps:
         key = (tuple(in_size), tuple(plan.size))
         with self.lock:  # one thread writes a run's map; the others wait, then link to it
             first = self.written.get(key)
+            if first is not None and any(p is not None and not os.path.exists(p) for p in first):
+                first = None  # its frame failed, and its maps went with it (`discard`): written anew
             if first is None:
                 if paths[0] is not None:
                     save_stmap(paths[0], plan.whole_points(), in_size, kind="inverse", t_up=self.maps.t_up)
@@ -328,9 +331,20 @@ class RunMaps:
                     save_stmap(paths[1], fwd, plan.size, kind="forward", t_up=self.maps.t_up)
                 self.written[key] = paths
                 return
-        for target, source in zip(paths, first):
-            if target is not None and os.path.abspath(target) != os.path.abspath(source):
-                link_or_copy(source, target)
+            for target, source in zip(paths, first):
+                if target is not None and os.path.abspath(target) != os.path.abspath(source):
+                    link_or_copy(source, target)
+
+    def discard(self, frame: int) -> None:
+        """Remove the maps of ``frame``, whose image failed: a frame's outputs succeed or fail together.
+
+        (Other frames' maps are their own names, links or copies: they stay.)
+        """
+        with self.lock:
+            for path in self.maps.paths(frame):
+                if path is not None:
+                    with contextlib.suppress(OSError):
+                        os.unlink(path)
 
 
 def link_or_copy(source: str, target: str) -> None:
@@ -392,8 +406,13 @@ def warp_one(
         plan = plans.get(shape)
         if maps is not None:
             maps.save(frame, fmap, plan, (image.width, image.height))
-        px = plan.render(image.pixels, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha)
-        write_like(out, image, px, opts.dtype, opts.compression)
+        try:
+            px = plan.render(image.pixels, alpha_channel=image.alpha_channel, associated_alpha=image.associated_alpha)
+            write_like(out, image, px, opts.dtype, opts.compression)
+        except BaseException:
+            if maps is not None:  # a frame's outputs succeed or fail together: no map without its image
+                maps.discard(frame)
+            raise
         return BatchItem(inp, out)
     except WarpError as err:
         # Without its traceback: that holds this frame, and so the plans and
