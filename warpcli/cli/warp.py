@@ -119,7 +119,7 @@ single_outputs = collected(
 @click.option("--out-dir", type=click.Path(file_okay=False), help="Batch: every path is an INPUT, written to DIR/NAME with one map.")
 @click.option("--scheduler", metavar="ADDRESS|local", help="Batch: run on a Dask cluster (tcp://host:8786), or 'local' for a LocalCluster of --jobs processes (default: the cores this process may use); the map is built here once and shipped; a scheduler silent for 10 s (WARPCLI_DASK_TIMEOUT) is an error. Needs warpcli[dask].")
 @jobs_option("batch images and sequence frames warped N at a time (threads sharing a map; for animated polygons, processes building the next maps), the kernels on N threads")
-@click.option("--out-name", default="{name}", show_default=True, help="Batch output file name: {name}, {stem}, {ext} of the input (the extension picks the format).")
+@click.option("--out-name", default="{name}", show_default=True, help="Batch output file name: {name}, {stem}, {ext} of the input ({ext} with its dot: {stem}_warped{ext}; the extension picks the format).")
 @resample_options
 @map_options
 @single_outputs
