@@ -9,7 +9,8 @@ import shlex
 import numpy as np
 import pytest
 from edit_helpers import (
-    browser, drag, open_editor, place_polygon, preview_pixels, served, skip_reason, wait_idle, write_smooth_image,
+    browser, drag, open_editor, place_polygon, preview_pixels, screen_point, served, skip_reason, wait_idle,
+    write_smooth_image,
 )  # fmt: skip
 
 from warpcli import warp_image
@@ -266,4 +267,37 @@ def test_within_control_preview_is_the_within_warp(tmp_path, chromium_browser):
             print(f"within {within}: mean {diff.mean():.3f}, p99 {np.percentile(diff, 99):.1f}, max {diff.max()}")
             assert diff.mean() <= MEAN_TOLERANCE and np.percentile(diff, 99) <= P99_TOLERANCE
             assert (shown[:, :, 3] == 255).all()  # the whole image: the input outside the outline
+        assert page.page_errors == []
+
+
+def test_a_click_that_moves_nothing_is_no_undo_step(tmp_path, chromium_browser):
+    # Each click on a vertex pushed an undo step that did nothing, and dropped the redo history;
+    # Ctrl+Z in the middle of a drag restored a state the drag then went on editing.
+    image = str(tmp_path / "picture.png")
+    write_smooth_image(image, 320, 240)
+    with served(image) as server:
+        page = open_editor(chromium_browser, server)
+        points = octagon(160, 120, 90, 70)
+        place_polygon(page, points)
+        wait_idle(page, 0)
+        steps = page.evaluate("() => window.warpEditor.past.length")
+        target = np.array(page.evaluate("() => window.warpEditor.dst"))
+        for _ in range(3):
+            page.mouse.click(*screen_point(page, "dst", target[2]))
+        assert page.evaluate("() => window.warpEditor.past.length") == steps
+        # A drag is one step; Ctrl+Z mid-drag is ignored, and the drag's result stays.
+        x, y = screen_point(page, "dst", target[2])
+        page.mouse.move(x, y)
+        page.mouse.down()
+        page.mouse.move(x + 20, y + 10, steps=4)
+        page.keyboard.press("Control+z")
+        page.mouse.move(x + 30, y + 20, steps=4)
+        page.mouse.up()
+        assert page.evaluate("() => window.warpEditor.past.length") == steps + 1
+        moved = np.array(page.evaluate("() => window.warpEditor.dst"))
+        assert np.abs(moved[2] - target[2]).max() > 5
+        page.keyboard.press("Control+z")
+        np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.dst"), target)
+        page.keyboard.press("Control+y")
+        np.testing.assert_array_equal(page.evaluate("() => window.warpEditor.dst"), moved)
         assert page.page_errors == []

@@ -100,8 +100,8 @@ function onDown(side, event) {
     if (i < 0) { remember(); editor.src.push(p); changed(); return; }
   }
   if (i >= 0 && (editor.closed || side === "src")) {
-    remember();
-    drag = { side, index: i, moved: false };
+    // The undo step is taken at the first move: a click on a vertex that does not move it is no step.
+    drag = { side, index: i, moved: false, before: snapshot() };
     svg.setPointerCapture(event.pointerId);
   }
 }
@@ -109,6 +109,7 @@ function onDown(side, event) {
 function onMove(side, event) {
   if (!drag || drag.side !== side) return;
   const p = toImage(event.currentTarget, event);
+  if (!drag.moved) { editor.past.push(drag.before); editor.future = []; updateButtons(); }
   (side === "src" ? editor.src : editor.dst)[drag.index] = p;
   drag.moved = true;
   changed(event.timeStamp);
@@ -455,6 +456,7 @@ async function start() {
     // Text fields keep their own keys; a checkbox, a file button or a menu clicked last does not take them.
     const t = e.target;
     if (t.tagName === "TEXTAREA" || (t.tagName === "INPUT" && !["checkbox", "radio", "button", "file", "range"].includes(t.type))) return;
+    if (drag) return;  // mid-drag, an undo would restore a state the drag then goes on editing
     if ((e.ctrlKey || e.metaKey) && e.key.toLowerCase() === "z") { e.preventDefault(); e.shiftKey ? redo() : undo(); }
     else if ((e.ctrlKey || e.metaKey) && e.key.toLowerCase() === "y") { e.preventDefault(); redo(); }
     else if (e.key === "Enter") closePolygon();
