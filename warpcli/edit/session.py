@@ -234,7 +234,8 @@ class EditSession:
             "help": {"method": {k: v.help for k, v in METHODS.items()}, "theta": {k: v.help for k, v in THETAS.items()}},
             "options": self.page_options(self.options),
             "names": {"src": self.paths.src, "dst": self.paths.dst, "output": self.paths.output},
-            "directory": os.path.dirname(self.paths.image) or os.curdir,  # as the user named it
+            # Where the page's names are saved: the folder itself (".", the server's folder, means nothing in a browser).
+            "directory": os.path.abspath(os.path.dirname(self.paths.image) or os.curdir),
         }
 
     @staticmethod
