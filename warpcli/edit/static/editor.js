@@ -299,6 +299,11 @@ function render() {
   gl.clearColor(0, 0, 0, 0);
   gl.clear(gl.COLOR_BUFFER_BIT);
   gl.uniform2f(gl.getUniformLocation(program, "u_size"), preview.width, preview.height);
+  // The filter the page chose, as far as the GPU has it: nearest, else (linear, cubic) bilinear.
+  const filter = editor.options.interp === "nearest" ? gl.NEAREST : gl.LINEAR;
+  gl.bindTexture(gl.TEXTURE_2D, texture);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, filter);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, filter);
   if (!editor.closed) return;
   // Within an outline the input is kept outside it (and the mesh covers the whole outline).
   if (editor.options.outside === "input" || editor.options.within) drawBuffer(quadBuffer, 6, false, 0);
