@@ -405,11 +405,14 @@ function setupWithin(given) {
   const update = () => {
     margin.hidden = kind.value !== "margin";
     editor.options = Object.assign({}, editor.options, { within: withinValue() });
-    $("outside").disabled = editor.options.within !== null;  // within keeps the input outside the outline
+    // Within keeps the input outside the outline: the menu shows it, and gives back its own choice after.
+    $("outside").disabled = editor.options.within !== null;
+    $("outside").value = editor.options.within !== null ? "input" : editor.options.outside;
     changed();
   };
   margin.hidden = kind.value !== "margin";
   $("outside").disabled = given !== null;
+  if (given !== null) $("outside").value = "input";
   kind.addEventListener("change", update);
   margin.addEventListener("change", update);
 }
