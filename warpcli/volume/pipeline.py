@@ -137,7 +137,7 @@ def build_tet_map(
     after (in the last round), and how many nodes moved; the map keeps the
     harmonic values (`TetMap.harmonic`) when any moved.
     """
-    from .untangle import inverted
+    from .untangle import MAX_INVERTED, inverted
 
     timings = {} if timings is None else timings
     h = auto_edge(cage, voxel, region) if edge is None else float(edge)
@@ -165,17 +165,22 @@ def build_tet_map(
         if len(done.moved):
             harmonic, values = values, done.values
         timings["untangle"] = timings.get("untangle", 0.0) + time.perf_counter() - t2
-        if done.inverted_after == 0 or round_ == REPAIR_ROUNDS:
+        # A map that folds at large (untangling skipped it: more than MAX_INVERTED) is not mended by a few splits.
+        if done.inverted_after == 0 or round_ == REPAIR_ROUNDS or done.inverted_before > MAX_INVERTED:
             break
         edges = repair_edges(mesh, inverted(values, mesh.tets))
         if not len(edges):
             break
         t3 = time.perf_counter()
+        applied: list[bool] = []
+        new_mesh = split_simplices(mesh, list(edges), applied)
+        if not any(applied):
+            break
         # The next solve starts from this one's, the new nodes at their edges' midpoints.
         solved = values if harmonic is None else harmonic
-        start = np.concatenate([solved, solved[edges].mean(axis=1)])
-        mesh = split_simplices(mesh, list(edges))
-        repaired += len(edges)
+        start = np.concatenate([solved, solved[edges[np.array(applied)]].mean(axis=1)])
+        mesh = new_mesh
+        repaired += int(sum(applied))
         timings["mesh"] = timings.get("mesh", 0.0) + time.perf_counter() - t3
     if untangle:
         info["untangle"]["repaired_edges"] = repaired

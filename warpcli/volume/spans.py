@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from ..polygon.predicates import orient3d_sign
 from .tetmesh import TetMesh
 
 #: The six edges of a tetrahedron, as pairs of its corners.
@@ -131,13 +132,16 @@ def flat_spans(mesh: TetMesh, nodes: NDArray[np.int64], planes: NDArray[np.int64
     return edges.astype(np.int64), tris.astype(np.int64)
 
 
-def split_simplices(mesh: TetMesh, simplices: list[NDArray[np.int64]]) -> TetMesh:
+def split_simplices(mesh: TetMesh, simplices: list[NDArray[np.int64]], applied: list[bool] | None = None) -> TetMesh:
     """Split each interior simplex (an edge or face, in order) at its barycentre, with every tetrahedron round it.
 
     A tetrahedron containing the simplex becomes one tetrahedron per node of
     the simplex, the node replaced by the new one; the pieces keep the
-    orientation (the new node lies in the simplex). The new nodes are
-    interior nodes, numbered after the mesh's; the boundary is unchanged.
+    orientation (the new node lies in the simplex), checked exactly: a split
+    whose rounded barycentre would leave a piece flat (a sliver) is left out
+    (``applied``, if given, is extended with whether each simplex was split).
+    The new nodes are interior nodes, numbered after the mesh's, in the order
+    of the simplices split; the boundary is unchanged.
     """
     if not simplices:
         return mesh
@@ -156,13 +160,29 @@ def split_simplices(mesh: TetMesh, simplices: list[NDArray[np.int64]]) -> TetMes
     def row(t: int) -> list[int]:
         return added[t - m] if t >= m else changed.get(t) or tets[t].tolist()
 
+    def vertex(i: int) -> NDArray[np.float64]:
+        return mesh.vertices[i] if i < n else points[i - n]
+
     for s in simplices:
         s = [int(x) for x in s]
         new = n + len(points)
-        points.append(mesh.vertices[s].mean(axis=0))
-        around = set.intersection(*(incident[x] for x in s))
-        for t in sorted(around):
-            old = row(t)
+        point = mesh.vertices[s].mean(axis=0)
+        around = sorted(set.intersection(*(incident[x] for x in s)))
+        # Each piece keeps the orientation in exact arithmetic; the barycentre is rounded, and on a
+        # sliver a piece can come out flat or inverted (a singular element). Such a split is left out.
+        rows_around = [row(t) for t in around]
+        pieces_all = [[new if x == v else x for x in old] for old in rows_around for v in s]
+        corners = [np.array([point if x == new else vertex(x) for x in piece]) for piece in pieces_all]
+        if corners:
+            stack = np.stack(corners)
+            if not (orient3d_sign(stack[:, 0], stack[:, 1], stack[:, 2], stack[:, 3]) > 0).all():
+                if applied is not None:
+                    applied.append(False)
+                continue
+        if applied is not None:
+            applied.append(True)
+        points.append(point)
+        for t, old in zip(around, rows_around):
             pieces = [[new if x == v else x for x in old] for v in s]
             if t >= m:
                 added[t - m] = pieces[0]
@@ -179,7 +199,8 @@ def split_simplices(mesh: TetMesh, simplices: list[NDArray[np.int64]]) -> TetMes
         out[t] = r
     out = np.concatenate([out, np.array(added, dtype=np.int64).reshape(-1, 4)])
     return TetMesh(
-        np.concatenate([mesh.vertices, np.array(points)]), out, mesh.boundary, mesh.boundary_triangle, mesh.boundary_bary
+        np.concatenate([mesh.vertices, np.array(points, dtype=np.float64).reshape(-1, 3)]), out, mesh.boundary,
+        mesh.boundary_triangle, mesh.boundary_bary,
     )
 
 
@@ -239,10 +260,11 @@ def split_flat_spans(mesh: TetMesh, vertices: NDArray[np.float64], triangles: ND
 
     nodes, planes = node_planes(mesh, vertices, triangles)
     edges, _ = flat_spans(mesh, nodes, planes)
-    mesh = split_simplices(mesh, list(edges))
+    done: list[bool] = []
+    mesh = split_simplices(mesh, list(edges), done)
     # Splitting edges removes every face on them; the faces left are those whose edges are all on the surface.
     _, faces = flat_spans(mesh, nodes, planes)
-    mesh = split_simplices(mesh, list(faces))
+    mesh = split_simplices(mesh, list(faces), done)
     fixed = np.zeros(mesh.n_vertices, dtype=bool)
     fixed[mesh.boundary] = True
     pinned = fixed[mesh.tets].all(axis=1)
@@ -251,8 +273,10 @@ def split_flat_spans(mesh: TetMesh, vertices: NDArray[np.float64], triangles: ND
     bad = np.zeros(mesh.n_tets, dtype=bool)
     bad[pinned] = inverted(images, mesh.tets[pinned])
     more = repair_edges(mesh, bad)
-    mesh = split_simplices(mesh, list(more))
-    return mesh, {"split_edges": int(len(edges) + len(more)), "split_faces": int(len(faces))}
+    mesh = split_simplices(mesh, list(more), done)
+    # (A split left out would leave its span: the certificate counts what it flattens.)
+    edge_done = done[: len(edges)] + done[len(edges) + len(faces):]
+    return mesh, {"split_edges": int(sum(edge_done)), "split_faces": int(sum(done[len(edges) : len(edges) + len(faces)]))}
 
 
 def _skin(mesh: TetMesh, on_boundary: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
