@@ -179,3 +179,44 @@ def test_a_split_whose_rounded_midpoint_would_flatten_a_sliver_is_left_out():
         kept += sum(applied)
         skipped += len(applied) - sum(applied)
     assert kept > 100 and skipped > 5, (kept, skipped)
+
+
+def test_a_tetrahedron_of_boundary_nodes_flat_up_to_rounding_counts_as_folded():
+    # Four images coplanar in exact arithmetic, rounded off their plane (as barycentric combinations
+    # of Theta's vertices are) so that the exact sign says positive: the certificate took it.
+    from warpcli.volume.spans import pinned_flat_or_inverted
+    from warpcli.volume.tetmesh import TetMesh
+    from warpcli.volume.untangle import inverted
+
+    p = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, 1.0]])
+    mesh = TetMesh(p, np.array([[0, 1, 2, 3]]), np.arange(4), np.zeros(4, dtype=np.int64), np.eye(3)[[0, 1, 2, 0]])
+    for z in (1e-17, 0.0, -1e-17, 1e-300):
+        images = np.array([[26.0, 28, 6], [26, 26, 4], [28, 24, 4], [28, 26, 6]])
+        images[3, 2] += z
+        assert pinned_flat_or_inverted(mesh, images).tolist() == [True], z
+    assert not inverted(np.array([[26.0, 28, 6], [26, 26, 4], [28, 24, 4], [28, 26, 6 + 1e-15]]), mesh.tets).any()
+    assert pinned_flat_or_inverted(mesh, p).tolist() == [False]  # a real tetrahedron is not
+    # With a free node it is the solve's to lift, and the exact sign decides.
+    free = TetMesh(p, mesh.tets, np.arange(3), np.zeros(3, dtype=np.int64), np.eye(3))
+    assert pinned_flat_or_inverted(free, np.array([[26.0, 28, 6], [26, 26, 4], [28, 24, 4], [28, 26, 6]])).tolist() == [False]
+
+
+def test_graded_meshing_falls_back_to_the_cages_own_mesh_when_tetgen_fails(monkeypatch):
+    from warpcli.volume import tetmesh
+
+    v, f = box(3, (4.0, 4.0, 4.0), (28.0, 28.0, 28.0))
+    cage = surface_from_arrays((bend(twist(v, 0.2), 0.5) - 16) * 20 + 16, f, "big")
+    region = (np.zeros(3), np.full(3, 32.0))
+    real = tetmesh._tetgen
+
+    def failing(v, tri, max_volume, name, inner=None):
+        if inner is not None:
+            raise tetmesh.MeshingError(f"{name}: TetGen failed (as it did on 12 of 864 graded cages)")
+        return real(v, tri, max_volume, name, inner)
+
+    monkeypatch.setattr(tetmesh, "_tetgen", failing)
+    mesh = tetmesh.mesh_polyhedron(cage, 40.0, region=region)
+    assert mesh.n_tets > 1000
+    for edge in (1e-300, 1e300):
+        with pytest.raises(tetmesh.InputError, match="out of all proportion"):
+            tetmesh.mesh_polyhedron(cage, edge)

@@ -147,6 +147,7 @@ def build_tet_map(
     timings["mesh"] = timings.get("mesh", 0.0) + time.perf_counter() - t0
     repaired = 0
     start = None
+    best = None  # the round that left the fewest tetrahedra inverted: a repair can make things worse
     for round_ in range(REPAIR_ROUNDS + 1):
         t1 = time.perf_counter()
         values, info = solve_dirichlet(mesh, mesh.boundary_values(theta.vertices, cage.triangles), solver, start)
@@ -165,6 +166,8 @@ def build_tet_map(
         if len(done.moved):
             harmonic, values = values, done.values
         timings["untangle"] = timings.get("untangle", 0.0) + time.perf_counter() - t2
+        if best is None or done.inverted_after < best[0]:
+            best = (done.inverted_after, mesh, values, info, harmonic, repaired)
         # A map that folds at large (untangling skipped it: more than MAX_INVERTED) is not mended by a few splits.
         if done.inverted_after == 0 or round_ == REPAIR_ROUNDS or done.inverted_before > MAX_INVERTED:
             break
@@ -182,7 +185,8 @@ def build_tet_map(
         mesh = new_mesh
         repaired += int(sum(applied))
         timings["mesh"] = timings.get("mesh", 0.0) + time.perf_counter() - t3
-    if untangle:
+    if best is not None:
+        _, mesh, values, info, harmonic, repaired = best
         info["untangle"]["repaired_edges"] = repaired
     return TetMap(cage, theta, mesh=mesh, values=values, info=info, harmonic=harmonic)
 

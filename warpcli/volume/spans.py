@@ -256,8 +256,6 @@ def split_flat_spans(mesh: TetMesh, vertices: NDArray[np.float64], triangles: ND
     dict
         ``split_edges``, ``split_faces``: how many were split.
     """
-    from .untangle import inverted
-
     nodes, planes = node_planes(mesh, vertices, triangles)
     edges, _ = flat_spans(mesh, nodes, planes)
     done: list[bool] = []
@@ -265,18 +263,43 @@ def split_flat_spans(mesh: TetMesh, vertices: NDArray[np.float64], triangles: ND
     # Splitting edges removes every face on them; the faces left are those whose edges are all on the surface.
     _, faces = flat_spans(mesh, nodes, planes)
     mesh = split_simplices(mesh, list(faces), done)
-    fixed = np.zeros(mesh.n_vertices, dtype=bool)
-    fixed[mesh.boundary] = True
-    pinned = fixed[mesh.tets].all(axis=1)
     images = np.zeros((mesh.n_vertices, 3))
     images[mesh.boundary] = mesh.boundary_values(vertices, triangles)
-    bad = np.zeros(mesh.n_tets, dtype=bool)
-    bad[pinned] = inverted(images, mesh.tets[pinned])
+    bad = pinned_flat_or_inverted(mesh, images)
     more = repair_edges(mesh, bad)
     mesh = split_simplices(mesh, list(more), done)
     # (A split left out would leave its span: the certificate counts what it flattens.)
     edge_done = done[: len(edges)] + done[len(edges) + len(faces):]
     return mesh, {"split_edges": int(sum(edge_done)), "split_faces": int(sum(done[len(edges) : len(edges) + len(faces)]))}
+
+
+#: A tetrahedron of boundary nodes alone whose image's volume is below this times the cube of its
+#: longest image edge is flat: its nodes' images are rounded barycentric combinations of Theta's
+#: vertices, and four that are coplanar in exact arithmetic (on three faces round a corner of
+#: Theta) come out of the rounding on either side of their plane, half of them "positive".
+PINNED_FLAT = 1e-9
+
+
+def pinned_flat_or_inverted(mesh: TetMesh, values: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Tetrahedra of boundary nodes alone whose image is inverted, or flat up to the rounding of
+    the boundary data (`PINNED_FLAT`): no solve or untangling can move them, and a flat one sends
+    a solid sliver onto a triangle."""
+    from .untangle import inverted
+
+    fixed = np.zeros(mesh.n_vertices, dtype=bool)
+    fixed[mesh.boundary] = True
+    pinned = np.flatnonzero(fixed[mesh.tets].all(axis=1))
+    out = np.zeros(mesh.n_tets, dtype=bool)
+    if not len(pinned):
+        return out
+    t = mesh.tets[pinned]
+    p = values[t]
+    vol = np.abs(np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]))) / 6.0
+    longest = np.zeros(len(t))
+    for i, j in _EDGES:
+        longest = np.maximum(longest, ((p[:, i] - p[:, j]) ** 2).sum(axis=1))
+    out[pinned] = inverted(values, t) | (vol <= PINNED_FLAT * longest**1.5)
+    return out
 
 
 def _skin(mesh: TetMesh, on_boundary: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
