@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shlex
@@ -57,15 +58,22 @@ def chromium_browser():
         yield b
 
 
-def test_draw_drag_preview_undo_save_export(tmp_path, chromium_browser):
+@contextlib.contextmanager
+def octagon_drawn(tmp_path, chromium_browser):
+    """A 320 x 240 image served, the page open, an octagon placed with the mouse and closed on vertex 0."""
     image = str(tmp_path / "picture.png")
     write_smooth_image(image, 320, 240)
     with served(image) as server:
         page = open_editor(chromium_browser, server)
-        # Place the source polygon with the mouse, then close it on vertex 0.
         points = octagon(160, 120, 90, 70)
         place_polygon(page, points)
         wait_idle(page, 0)
+        yield server, page, points
+
+
+def test_draw_drag_preview_undo_save_export(tmp_path, chromium_browser):
+    image = str(tmp_path / "picture.png")
+    with octagon_drawn(tmp_path, chromium_browser) as (server, page, points):
         src = np.array(page.evaluate("() => window.warpEditor.src"))
         np.testing.assert_allclose(src, points, atol=0.6)  # one screen pixel is about 0.5 image pixel
         assert page.evaluate("() => window.warpEditor.closed")
@@ -273,13 +281,7 @@ def test_within_control_preview_is_the_within_warp(tmp_path, chromium_browser):
 def test_a_click_that_moves_nothing_is_no_undo_step(tmp_path, chromium_browser):
     # Each click on a vertex pushed an undo step that did nothing, and dropped the redo history;
     # Ctrl+Z in the middle of a drag restored a state the drag then went on editing.
-    image = str(tmp_path / "picture.png")
-    write_smooth_image(image, 320, 240)
-    with served(image) as server:
-        page = open_editor(chromium_browser, server)
-        points = octagon(160, 120, 90, 70)
-        place_polygon(page, points)
-        wait_idle(page, 0)
+    with octagon_drawn(tmp_path, chromium_browser) as (_, page, _points):
         steps = page.evaluate("() => window.warpEditor.past.length")
         target = np.array(page.evaluate("() => window.warpEditor.dst"))
         for _ in range(3):
