@@ -396,7 +396,8 @@ def warp_one(
             warp_file_tiled(inp, out, fmap.src, fmap.dst, opts, fmap=fmap, header=header)
             return BatchItem(inp, out)
         image = read_image(inp)
-        check_writes(out, image.pixels.shape[2], image.pixels.dtype, opts.dtype)
+        if header is None:  # (checked above from the header where it was read)
+            check_writes(out, image.pixels.shape[2], image.pixels.dtype, opts.dtype)
         shape = opts.size if opts.size is not None else (image.width, image.height)
         check_paste(opts.outside, shape, (image.width, image.height), inp)
         try:  # a frame with other channels than the background's: name the frame

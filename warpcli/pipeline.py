@@ -31,7 +31,7 @@ from .maps.cage import map_between
 from .maps.compose import BijectiveMap, PullBack, children_at_once
 from .options import WarpOptions, resolve_options
 from .outputs import PendingOutputs, check_distinct, check_output_path, write_checked
-from .plan import SamplingPlan, background_values, check_paste, plan_for, warn_if_outside
+from .plan import SamplingPlan, as_image, background_values, check_paste, plan_for, warn_if_outside
 from .polygon import Polygon
 from .polygon.partition import Partition, check_shapes
 from .raster.imageio import (
@@ -231,13 +231,7 @@ def _warp(
     `_RowsMade` that makes it on a thread is appended; the result's pixels are then being made
     when this returns, and are all made once that has been iterated to its end.
     """
-    img = np.asarray(image)
-    if img.ndim == 2:
-        img = img[:, :, None]
-    if img.ndim != 3 or 0 in img.shape:
-        raise InputError(f"image must be a non-empty (H, W) or (H, W, C) array, got shape {img.shape}")
-    if img.dtype.kind not in "uif":
-        raise InputError(f"image must hold numbers, got dtype {img.dtype}")
+    img = as_image(image)
     if opts.within is not None and pair is None:
         from .within import within_pair
 

@@ -35,7 +35,7 @@ from .raster.resample import EdgeCoverage, edge_coverage, resample, working_copy
 if TYPE_CHECKING:
     from .options import WarpOptions
 
-__all__ = ["PlanSource", "SamplingPlan", "background_values", "check_paste", "plan_for", "warn_if_outside"]
+__all__ = ["PlanSource", "SamplingPlan", "as_image", "background_values", "check_paste", "plan_for", "warn_if_outside"]
 
 log = logging.getLogger("warpcli")
 
@@ -339,7 +339,7 @@ class SamplingPlan:
             If the background does not fit the image's channels, or with
             ``outside="input"`` the output's size is not the input's.
         """
-        pixels = _as_image(pixels)
+        pixels = as_image(pixels)
         bg = self.background_values(pixels)
         if self.outside == "input":
             from .composite import paste_over
@@ -381,7 +381,7 @@ class SamplingPlan:
         """
         if self.outside != "background":
             raise ValueError("render_rows pastes nothing: outside must be 'background'")
-        pixels = _as_image(pixels)
+        pixels = as_image(pixels)
         bg = self.background_values(pixels)
         # Straight colour premultiplied (or an unusual type converted) once, not for every band.
         working = working_copy(pixels, interp=self.interp, alpha_channel=alpha_channel, associated_alpha=associated_alpha)
@@ -430,14 +430,17 @@ def _as_background(background: float | ArrayLike) -> tuple[float, ...]:
     return tuple(float(v) for v in bg)
 
 
-def _as_image(pixels: ArrayLike) -> NDArray:
+def as_image(pixels: ArrayLike) -> NDArray:
     """An image as (H, W, C): an (H, W) one gets one channel; anything else of two sides or
-    channels, or not numbers, is an `InputError`."""
+    channels, or not numbers, is an `InputError` (what `warpcli.pipeline.warp_image` and
+    `SamplingPlan.render` take alike)."""
     px = np.asarray(pixels)
     if px.ndim == 2:
         px = px[:, :, None]
-    if px.ndim != 3 or 0 in px.shape or px.dtype.kind not in "uifb":
-        raise InputError(f"image must be a non-empty (H, W) or (H, W, C) array of numbers, got shape {px.shape}, dtype {px.dtype}")
+    if px.ndim != 3 or 0 in px.shape:
+        raise InputError(f"image must be a non-empty (H, W) or (H, W, C) array, got shape {px.shape}")
+    if px.dtype.kind not in "uif":
+        raise InputError(f"image must hold numbers, got dtype {px.dtype}")
     return px
 
 

@@ -97,15 +97,18 @@ def serve(
             else:
                 webbrowser.open(pathlib.Path(page).as_uri())
         server.serve_forever()
-    finally:
-        server.shutdown()
-        # Ctrl-C in the middle of an export: the request's thread dies with the process, its pending
-        # and temporary files would stay beside the image (warpcli.outputs tracks every one).
+    except KeyboardInterrupt:
+        # Ctrl-C, the end of the process: a request's thread in the middle of an export dies with it,
+        # and its pending and temporary files would stay beside the image (warpcli.outputs tracks every
+        # one, the page's too). Only then: a server stopped otherwise leaves the process's other work be.
         from .._fork import kill_children
         from ..outputs import remove_temporaries
 
         kill_children()
         remove_temporaries()
+        raise
+    finally:
+        server.shutdown()
         if page is not None:
             from ..outputs import track_temporary
 

@@ -18,7 +18,6 @@ from . import _kernels
 from .surface import Surface
 from .tetmesh import TetMesh
 from .theta import Theta
-from .untangle import inverted
 
 #: The pull-back works through the output grid in slabs of whole slices of
 #: about this many voxels, so its temporary arrays stay small (about 100
@@ -132,18 +131,17 @@ class TetMap(VolumeThetaMap):
         return TetLocator(self.values, self.mesh.tets, SNAP, self.image_coefficients)
 
     def flipped(self) -> NDArray[np.bool_]:
-        """Tetrahedra whose image is inverted or flat (`warpcli.volume.untangle.inverted`), and
-        those of boundary nodes alone whose image is flat up to the rounding of the boundary data
-        (`warpcli.volume.spans.pinned_flat_or_inverted`: four images coplanar in exact arithmetic
-        can come out positive).
+        """Tetrahedra whose image is inverted or flat, or of boundary nodes alone and flat up to the
+        rounding of the boundary data (`warpcli.volume.spans.folded`: four images coplanar in exact
+        arithmetic can come out positive).
 
         A flat one counts whatever makes it flat: a sliver collapsed onto a
         triangle is a map that is not one-to-one. The mesh is built so that
         no boundary nodes alone make one (`warpcli.volume.spans`).
         """
-        from .spans import pinned_flat_or_inverted
+        from .spans import folded
 
-        return inverted(self.values, self.mesh.tets) | pinned_flat_or_inverted(self.mesh, self.values)
+        return folded(self.mesh, self.values)
 
     def moved(self) -> NDArray[np.int64]:
         """Nodes whose values differ from the harmonic map's (none unless untangled)."""

@@ -14,7 +14,7 @@ from ..outputs import PendingOutputs, write_checked
 from . import _kernels
 from .compose import IdentityMap, TetMap, VolumeMap, VolumeThetaMap
 from .fem import solve_dirichlet
-from .spans import repair_edges, split_flat_spans, split_simplices
+from .spans import folded, repair_edges, split_flat_spans, split_simplices
 from .surface import Surface, check_pair, read_surface
 from .tetmesh import Region, auto_edge, graded_from, mesh_polyhedron
 from .theta import Theta, theta_for
@@ -137,7 +137,8 @@ def build_tet_map(
     after (in the last round), and how many nodes moved; the map keeps the
     harmonic values (`TetMap.harmonic`) when any moved.
     """
-    from .untangle import MAX_INVERTED, inverted
+    from .untangle import MAX_INVERTED
+    from .untangle import untangle as untangle_map
 
     timings = {} if timings is None else timings
     h = auto_edge(cage, voxel, region) if edge is None else float(edge)
@@ -145,33 +146,33 @@ def build_tet_map(
     mesh = mesh_polyhedron(cage, h, grade=grade, region=region)
     mesh, split = split_flat_spans(mesh, theta.vertices, cage.triangles)
     timings["mesh"] = timings.get("mesh", 0.0) + time.perf_counter() - t0
+    # The boundary nodes and their values stay as they are through the splits (new nodes are interior).
+    boundary_values = mesh.boundary_values(theta.vertices, cage.triangles)
+    base = {"edge": h, "graded_from_region": graded_from(cage, region), **split}
     repaired = 0
     start = None
-    best = None  # the round that left the fewest tetrahedra inverted: a repair can make things worse
+    best = None  # the round that left the fewest tetrahedra folded: a repair can make things worse
     for round_ in range(REPAIR_ROUNDS + 1):
         t1 = time.perf_counter()
-        values, info = solve_dirichlet(mesh, mesh.boundary_values(theta.vertices, cage.triangles), solver, start)
+        values, info = solve_dirichlet(mesh, boundary_values, solver, start)
         t2 = time.perf_counter()
         timings["solve"] = timings.get("solve", 0.0) + t2 - t1
         harmonic = None
-        info = {"edge": h, "graded_from_region": graded_from(cage, region), **split, **info}
+        info = {**base, **info}
         if not untangle:
             break
-        from .untangle import untangle as untangle_map
-
-        fixed = np.zeros(mesh.n_vertices, dtype=bool)
-        fixed[mesh.boundary] = True
-        done = untangle_map(values, mesh.tets, fixed)
+        done = untangle_map(values, mesh.tets, mesh.on_boundary)
         info["untangle"] = done.describe()
         if len(done.moved):
             harmonic, values = values, done.values
         timings["untangle"] = timings.get("untangle", 0.0) + time.perf_counter() - t2
-        if best is None or done.inverted_after < best[0]:
-            best = (done.inverted_after, mesh, values, info, harmonic, repaired)
+        bad = folded(mesh, values)  # what the certificate counts (`TetMap.flipped`)
+        if best is None or bad.sum() < best[0]:
+            best = (int(bad.sum()), mesh, values, info, harmonic, repaired)
         # A map that folds at large (untangling skipped it: more than MAX_INVERTED) is not mended by a few splits.
-        if done.inverted_after == 0 or round_ == REPAIR_ROUNDS or done.inverted_before > MAX_INVERTED:
+        if not bad.any() or round_ == REPAIR_ROUNDS or done.inverted_before > MAX_INVERTED:
             break
-        edges = repair_edges(mesh, inverted(values, mesh.tets))
+        edges = repair_edges(mesh, bad)
         if not len(edges):
             break
         t3 = time.perf_counter()

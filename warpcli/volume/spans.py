@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..polygon.predicates import orient3d_sign
-from .tetmesh import TetMesh
+from .tetmesh import TetMesh, tet_volumes
 
 #: The six edges of a tetrahedron, as pairs of its corners.
 _EDGES = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
@@ -98,8 +98,7 @@ def flat_spans(mesh: TetMesh, nodes: NDArray[np.int64], planes: NDArray[np.int64
     when it is not on the mesh's boundary surface.
     """
     tets = mesh.tets
-    on_boundary = np.zeros(mesh.n_vertices, dtype=bool)
-    on_boundary[mesh.boundary] = True
+    on_boundary = mesh.on_boundary
     keys = np.unique(nodes * (int(planes.max(initial=0)) + 1) + planes)
     width = int(planes.max(initial=0)) + 1
     start = np.searchsorted(nodes, np.arange(mesh.n_vertices + 1))
@@ -170,9 +169,9 @@ def split_simplices(mesh: TetMesh, simplices: list[NDArray[np.int64]], applied: 
         around = sorted(set.intersection(*(incident[x] for x in s)))
         # Each piece keeps the orientation in exact arithmetic; the barycentre is rounded, and on a
         # sliver a piece can come out flat or inverted (a singular element). Such a split is left out.
-        rows_around = [row(t) for t in around]
-        pieces_all = [[new if x == v else x for x in old] for old in rows_around for v in s]
-        corners = [np.array([point if x == new else vertex(x) for x in piece]) for piece in pieces_all]
+        # One piece per node of the simplex for each tetrahedron round it, that node replaced.
+        split = [[[new if x == v else x for x in row(t)] for v in s] for t in around]
+        corners = [np.array([point if x == new else vertex(x) for x in piece]) for pieces in split for piece in pieces]
         if corners:
             stack = np.stack(corners)
             if not (orient3d_sign(stack[:, 0], stack[:, 1], stack[:, 2], stack[:, 3]) > 0).all():
@@ -182,8 +181,7 @@ def split_simplices(mesh: TetMesh, simplices: list[NDArray[np.int64]], applied: 
         if applied is not None:
             applied.append(True)
         points.append(point)
-        for t, old in zip(around, rows_around):
-            pieces = [[new if x == v else x for x in old] for v in s]
+        for t, pieces in zip(around, split):
             if t >= m:
                 added[t - m] = pieces[0]
             else:
@@ -215,8 +213,7 @@ def repair_edges(mesh: TetMesh, bad: NDArray[np.bool_]) -> NDArray[np.int64]:
     tets = mesh.tets[bad]
     if not len(tets):
         return np.zeros((0, 2), dtype=np.int64)
-    on_boundary = np.zeros(mesh.n_vertices, dtype=bool)
-    on_boundary[mesh.boundary] = True
+    on_boundary = mesh.on_boundary
     n = mesh.n_vertices
     surface = _edges_of(_skin(mesh, on_boundary)[0])
     surface_codes = surface[:, 0] * n + surface[:, 1]
@@ -258,19 +255,17 @@ def split_flat_spans(mesh: TetMesh, vertices: NDArray[np.float64], triangles: ND
     """
     nodes, planes = node_planes(mesh, vertices, triangles)
     edges, _ = flat_spans(mesh, nodes, planes)
-    done: list[bool] = []
-    mesh = split_simplices(mesh, list(edges), done)
+    edges_done: list[bool] = []
+    faces_done: list[bool] = []
+    mesh = split_simplices(mesh, list(edges), edges_done)
     # Splitting edges removes every face on them; the faces left are those whose edges are all on the surface.
     _, faces = flat_spans(mesh, nodes, planes)
-    mesh = split_simplices(mesh, list(faces), done)
+    mesh = split_simplices(mesh, list(faces), faces_done)
     images = np.zeros((mesh.n_vertices, 3))
     images[mesh.boundary] = mesh.boundary_values(vertices, triangles)
-    bad = pinned_flat_or_inverted(mesh, images)
-    more = repair_edges(mesh, bad)
-    mesh = split_simplices(mesh, list(more), done)
+    mesh = split_simplices(mesh, list(repair_edges(mesh, pinned_flat_or_inverted(mesh, images))), edges_done)
     # (A split left out would leave its span: the certificate counts what it flattens.)
-    edge_done = done[: len(edges)] + done[len(edges) + len(faces):]
-    return mesh, {"split_edges": int(sum(edge_done)), "split_faces": int(sum(done[len(edges) : len(edges) + len(faces)]))}
+    return mesh, {"split_edges": int(sum(edges_done)), "split_faces": int(sum(faces_done))}
 
 
 #: A tetrahedron of boundary nodes alone whose image's volume is below this times the cube of its
@@ -286,20 +281,27 @@ def pinned_flat_or_inverted(mesh: TetMesh, values: NDArray[np.float64]) -> NDArr
     a solid sliver onto a triangle."""
     from .untangle import inverted
 
-    fixed = np.zeros(mesh.n_vertices, dtype=bool)
-    fixed[mesh.boundary] = True
-    pinned = np.flatnonzero(fixed[mesh.tets].all(axis=1))
+    pinned = np.flatnonzero(mesh.on_boundary[mesh.tets].all(axis=1))
     out = np.zeros(mesh.n_tets, dtype=bool)
     if not len(pinned):
         return out
     t = mesh.tets[pinned]
     p = values[t]
-    vol = np.abs(np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]))) / 6.0
     longest = np.zeros(len(t))
     for i, j in _EDGES:
         longest = np.maximum(longest, ((p[:, i] - p[:, j]) ** 2).sum(axis=1))
-    out[pinned] = inverted(values, t) | (vol <= PINNED_FLAT * longest**1.5)
+    out[pinned] = inverted(values, t) | (np.abs(tet_volumes(values, t)) <= PINNED_FLAT * longest**1.5)
     return out
+
+
+def folded(mesh: TetMesh, values: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """The tetrahedra a map with ``values`` at the nodes does not take one-to-one: inverted or flat
+    (`warpcli.volume.untangle.inverted`, exact), or of boundary nodes alone and flat up to the
+    rounding of the boundary data (`pinned_flat_or_inverted`). The certificate's count
+    (`warpcli.volume.compose.TetMap.flipped`) and what the repair rounds mend."""
+    from .untangle import inverted
+
+    return inverted(values, mesh.tets) | pinned_flat_or_inverted(mesh, values)
 
 
 def _skin(mesh: TetMesh, on_boundary: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:

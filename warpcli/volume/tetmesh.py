@@ -110,6 +110,13 @@ class TetMesh:
     def n_tets(self) -> int:
         return len(self.tets)
 
+    @property
+    def on_boundary(self) -> NDArray[np.bool_]:
+        """(N,) bool: the nodes on the surface (the fixed nodes of every map of the mesh)."""
+        out = np.zeros(self.n_vertices, dtype=bool)
+        out[self.boundary] = True
+        return out
+
     def boundary_values(self, theta: NDArray[np.float64], triangles: NDArray[np.int64]) -> NDArray[np.float64]:
         """The boundary data onto ``theta`` (vertex positions with the cage's ``triangles``)."""
         corners = theta[triangles[self.boundary_triangle]]  # (B, 3, 3)
